@@ -1,0 +1,5 @@
+import sys
+
+from langpref.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Trajectory datasets: generation in the simulator, storage on disk, splits."""

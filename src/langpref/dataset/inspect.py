@@ -1,0 +1,53 @@
+"""Describe a dataset: sizes, splits, feature ranges, correlations and success rate (`langpref inspect`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from langpref.dataset.storage import load_dataset
+
+
+def describe(root: str | Path) -> dict[str, Any]:
+    ds = load_dataset(root)
+    feats = ds.features
+    corr = np.corrcoef(feats.T) if len(feats) > 1 else np.eye(feats.shape[1])
+    corr = np.nan_to_num(corr)  # a constant feature has no correlation
+    return {
+        "path": str(ds.root),
+        "env": ds.env,
+        "schema_version": ds.meta.schema_version,
+        "num_trajectories": len(ds),
+        "horizon": ds.meta.horizon,
+        "obs_dim": ds.meta.obs_dim,
+        "action_dim": ds.meta.action_dim,
+        "splits": {name: len(idx) for name, idx in ds.meta.splits.items()},
+        "success_rate": float(ds.success.mean()),
+        "features": {
+            name: {"min": float(col.min()), "max": float(col.max()), "mean": float(col.mean()), "std": float(col.std())}
+            for name, col in zip(ds.feature_names, feats.T)
+        },
+        "feature_names": ds.feature_names,
+        "feature_correlation": [[round(float(v), 4) for v in row] for row in corr],
+        "max_abs_off_diagonal_correlation": float(np.max(np.abs(corr - np.diag(np.diag(corr))))) if len(corr) > 1 else 0.0,
+    }
+
+
+def format_description(d: dict[str, Any]) -> str:
+    lines = [
+        f"{d['path']}: {d['env']} dataset, {d['num_trajectories']} trajectories x {d['horizon']} steps "
+        f"(obs {d['obs_dim']}, action {d['action_dim']})",
+        "splits: " + ", ".join(f"{k} {v}" for k, v in d["splits"].items()),
+        f"task success: {d['success_rate']:.1%}",
+        f"{'feature':<20}{'min':>9}{'max':>9}{'mean':>9}{'std':>9}",
+    ]
+    for name, s in d["features"].items():
+        lines.append(f"{name:<20}{s['min']:>9.3f}{s['max']:>9.3f}{s['mean']:>9.3f}{s['std']:>9.3f}")
+    lines.append("feature correlation:")
+    names = d["feature_names"]
+    for name, row in zip(names, d["feature_correlation"]):
+        lines.append(f"  {name:<20}" + "".join(f"{v:>7.2f}" for v in row))
+    lines.append(f"largest |off-diagonal correlation|: {d['max_abs_off_diagonal_correlation']:.2f}")
+    return "\n".join(lines)

