@@ -1,0 +1,51 @@
+"""Shared test setup: headless rendering, one torch thread, and a tiny synthetic dataset without a simulator."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+
+from dataclasses import asdict  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+try:
+    import torch
+
+    torch.set_num_threads(1)
+except ImportError:  # pragma: no cover
+    pass
+
+
+def write_synthetic_dataset(root: Path, n: int = 12, horizon: int = 20, env: str = "metaworld", seed: int = 0) -> Path:
+    """A dataset in the real on-disk format whose features are the means of the first observation dims."""
+    from langpref.dataset.generate import assign_splits
+    from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
+    from langpref.envs import get_spec
+
+    spec = get_spec(env)
+    rng = np.random.default_rng(seed)
+    nf = len(spec.features)
+    feats = np.zeros((n, nf))
+    for i in range(n):
+        obs = rng.normal(size=(horizon, spec.obs_dim)).astype(np.float32) * 0.1 + rng.normal(size=spec.obs_dim)
+        step_features = obs[:, :nf].copy()
+        traj = Trajectory(i, obs, rng.normal(size=(horizon, spec.action_dim)).astype(np.float32), step_features,
+                          np.zeros((horizon, 3)), np.zeros((horizon, 3)), bool(i % 2), i, {"i": i})
+        save_trajectory(root, traj)
+        feats[i] = traj.features
+    meta = DatasetMeta(env, horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim, list(spec.features),
+                       assign_splits(env, n, seed), n)
+    write_meta(root, meta, feats)
+    return root
+
+
+@pytest.fixture
+def synthetic_dataset(tmp_path: Path) -> Path:
+    return write_synthetic_dataset(tmp_path / "synthetic")

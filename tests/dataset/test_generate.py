@@ -1,0 +1,56 @@
+import numpy as np
+import pytest
+
+from langpref.dataset.generate import GenerateConfig, assign_splits, generate, split_sizes
+from langpref.dataset.inspect import describe
+from langpref.dataset.storage import load_dataset
+from langpref.errors import LangprefError
+
+
+def test_default_split_sizes_are_the_papers():
+    assert split_sizes("metaworld", 324) == {"train": 260, "val": 32, "test": 32}
+    assert split_sizes("robosuite", 448) == {"train": 359, "val": 44, "test": 45}
+    small = split_sizes("metaworld", 40)
+    assert small == {"train": 32, "val": 4, "test": 4}
+
+
+def test_splits_partition_the_indices():
+    splits = assign_splits("metaworld", 50, seed=3)
+    everything = sorted(i for idx in splits.values() for i in idx)
+    assert everything == list(range(50))
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    root = tmp_path_factory.mktemp("gen")
+    cfg = dict(env="metaworld", num_trajectories=6, horizon=60, seed=5)
+    generate(GenerateConfig(out=root / "one", workers=1, **cfg))
+    generate(GenerateConfig(out=root / "two", workers=2, **cfg))
+    return root
+
+
+def test_same_seed_same_dataset_whatever_the_workers(tiny):
+    a, b = load_dataset(tiny / "one"), load_dataset(tiny / "two")
+    np.testing.assert_array_equal(a.features, b.features)
+    assert a.meta.splits == b.meta.splits
+    for i in range(len(a)):
+        ta, tb = a.load(i), b.load(i)
+        np.testing.assert_array_equal(ta.observations, tb.observations)
+        np.testing.assert_array_equal(ta.qpos, tb.qpos)
+        assert ta.controller_params == tb.controller_params and ta.seed == tb.seed
+
+
+def test_dataset_content(tiny):
+    ds = load_dataset(tiny / "one")
+    t = ds.load(0)
+    assert t.observations.shape == (60, 39) and t.actions.shape == (60, 4) and t.qpos.shape[0] == 60
+    assert np.isfinite(ds.features).all()
+    assert len({tuple(ds.load(i).controller_params.values()) for i in range(len(ds))}) == len(ds)
+    d = describe(tiny / "one")
+    assert d["num_trajectories"] == 6 and d["splits"] == {"train": 4, "val": 1, "test": 1}
+    assert len(d["feature_correlation"]) == 3 and set(d["features"]["speed"]) == {"min", "max", "mean", "std"}
+
+
+def test_refuses_to_overwrite(tiny):
+    with pytest.raises(LangprefError, match="--force"):
+        generate(GenerateConfig(env="metaworld", out=tiny / "one", num_trajectories=6, horizon=60, seed=5))
