@@ -69,6 +69,190 @@ def cmd_demo(args: argparse.Namespace) -> None:
     run_demo(Path(args.out), workers=args.workers)
 
 
+# ---- latent-space commands (train, evaluate, embed, visualize, utterances, experiment alignment) ------------------
+
+
+def _train_config(args: argparse.Namespace):
+    from langpref.model.config import ModelConfig, TrainConfig
+
+    d = TrainConfig()
+    model = ModelConfig(lang_model=args.lang_model, latent_dim=args.latent_dim, max_length=args.max_length)
+    return TrainConfig(
+        data=str(args.data), out=str(args.out), model=model, utterances=args.utterances, extend_bank=args.extend_bank,
+        freeze_language=args.freeze_language, seed=args.seed, device=args.device, force=args.force,
+        stage1_epochs=d.stage1_epochs if args.epochs is None else args.epochs,
+        stage1_batch_size=d.stage1_batch_size if args.batch_size is None else args.batch_size,
+        stage2_epochs=d.stage2_epochs if args.finetune_epochs is None else args.finetune_epochs,
+        stage2_batch_size=d.stage2_batch_size if args.finetune_batch_size is None else args.finetune_batch_size,
+        stage2_phrasings_per_step=args.phrasings_per_step, stage1_lr=args.lr, stage2_lm_lr=args.lm_lr,
+        patience=args.patience, norm_a=args.norm_a, norm_b=args.norm_b, tie_fraction=args.tie_fraction,
+    )
+
+
+def cmd_train(args: argparse.Namespace) -> None:
+    from langpref.model.train import train
+
+    result = train(_train_config(args), progress=True)
+    r = result.results
+    summary = {"out": str(result.out), "best_val_accuracy": r["best_val_accuracy"], "stages": r["stages"],
+               "epochs": len(result.history), "wall_s": r["wall_s"], "samples_per_s": r["samples_per_s"],
+               "train_pairs": r["train_pairs"], "device": r["device"]}
+    _emit(summary, args.json, lambda s: f"wrote {s['out']}: validation accuracy {s['best_val_accuracy']:.3f} after "
+          f"{s['stages']} stage(s), {s['epochs']} epochs, {s['wall_s']:.0f} s")
+
+
+def _load(args: argparse.Namespace, with_data: bool = True):
+    from langpref.dataset.storage import load_dataset
+    from langpref.model.checkpoint import load_model
+    from langpref.model.train import resolve_device
+
+    dataset = load_dataset(args.data) if with_data else None
+    return load_model(args.model, device=resolve_device(getattr(args, "device", "cpu")), dataset=dataset), dataset
+
+
+def cmd_evaluate(args: argparse.Namespace) -> None:
+    from langpref.language.pairs import phrasings_from_bank, phrasings_from_mapping
+    from langpref.model.evaluate import evaluate_split
+
+    model, dataset = _load(args)
+    if args.utterances:
+        from langpref.language.bank import load_user_utterances
+
+        mapping = load_user_utterances(args.utterances, dataset.env)
+        phrasings = phrasings_from_mapping(mapping, dataset.feature_names, require_all=False,
+                                           source=str(args.utterances))
+    else:
+        from langpref.language.bank import load_bank
+
+        phrasings = phrasings_from_bank(load_bank(dataset.env), args.split, dataset.feature_names)
+    out = evaluate_split(model, dataset, args.split, phrasings)
+    out["utterances"] = str(args.utterances) if args.utterances else f"bank:{args.split}"
+    _emit(out, args.json, lambda o: f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
+          f"{o['utterances']}); " + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items()))
+
+
+def cmd_embed(args: argparse.Namespace) -> None:
+    from langpref.model.evaluate import embed_text
+
+    model, _ = _load(args, with_data=False)
+    out = embed_text(model, args.text)
+    _emit(out, args.json, lambda o: f"{o['feature']}/{o['direction']} (confidence {o['confidence']:.2f}, "
+          f"cosine {o['cosine']:.2f})")
+
+
+def cmd_visualize(args: argparse.Namespace) -> None:
+    from langpref.model.visualize import visualize
+
+    model, dataset = _load(args)
+    out = visualize(model, dataset, args.out, split=args.split)
+    _emit(out, args.json, lambda o: f"wrote {o['out']} ({o['num_trajectories']} trajectories)")
+
+
+def cmd_utterances(args: argparse.Namespace) -> None:
+    from langpref.language.bank import load_bank
+
+    _emit(load_bank(args.env).merged(), args.json)
+
+
+def cmd_experiment_alignment(args: argparse.Namespace) -> None:
+    from langpref.experiments.alignment import alignment_table, run_alignment_experiment
+
+    data = args.data or Path("data") / args.env
+    out = args.out or Path("results") / "alignment" / args.env
+    summary = run_alignment_experiment(args.env, data, out, force=args.force)
+    _emit(summary, args.json, lambda s: alignment_table([s]) + f"\n(wrote {out}/alignment.md and alignment.json)")
+
+
+def _register_latent_commands(sub) -> None:
+    from langpref.model.config import DEFAULT_LANG_MODEL, ModelConfig, TrainConfig
+
+    d, m = TrainConfig(), ModelConfig()
+    p = sub.add_parser("train", help="learn the shared latent space of trajectories and language",
+                       description="Stage 1 trains the trajectory encoder and a language head with the language model "
+                       "frozen; stage 2 co-finetunes the transformer (paper Sec. 4.1). Keeps the epoch with the best "
+                       "validation accuracy, stops early, writes a checkpoint directory with a training curve.")
+    p.add_argument("--data", required=True, type=Path, help="dataset directory (`langpref generate`)")
+    p.add_argument("--out", required=True, type=Path, help="checkpoint directory to create")
+    p.add_argument("--lang-model", default=DEFAULT_LANG_MODEL, metavar="NAME_OR_PATH",
+                   help=f"Hugging Face encoder: {DEFAULT_LANG_MODEL} (offline, default), a hub name such as t5-small "
+                   "(its encoder), or a local directory")
+    p.add_argument("--freeze-language", action="store_true", help="stop after stage 1 (language model frozen)")
+    p.add_argument("--utterances", type=Path, default=None,
+                   help="utterance file (DESIGN.md schema) to train with instead of the bank's train split")
+    p.add_argument("--extend-bank", action="store_true", help="with --utterances: add the file to the bank's train "
+                   "split instead of replacing it")
+    p.add_argument("--epochs", type=int, default=None, help=f"most epochs of stage 1 (default {d.stage1_epochs})")
+    p.add_argument("--finetune-epochs", type=int, default=None,
+                   help=f"most epochs of stage 2 (default {d.stage2_epochs}; 0 = --freeze-language)")
+    p.add_argument("--batch-size", type=int, default=None, help=f"pairs per step, stage 1 (default {d.stage1_batch_size})")
+    p.add_argument("--finetune-batch-size", type=int, default=None,
+                   help=f"pairs per step, stage 2 (default {d.stage2_batch_size})")
+    p.add_argument("--phrasings-per-step", type=int, default=d.stage2_phrasings_per_step,
+                   help="distinct utterances through the transformer per stage-2 step (default %(default)s)")
+    p.add_argument("--lr", type=float, default=d.stage1_lr, help="stage-1 learning rate (default %(default)s)")
+    p.add_argument("--lm-lr", type=float, default=d.stage2_lm_lr,
+                   help="stage-2 learning rate of the transformer (default %(default)s)")
+    p.add_argument("--latent-dim", type=int, default=m.latent_dim, help="D, size of phi and psi (default %(default)s)")
+    p.add_argument("--max-length", type=int, default=m.max_length, help="tokens per utterance (default %(default)s)")
+    p.add_argument("--patience", type=int, default=d.patience,
+                   help="early stopping: epochs without a better validation accuracy (default %(default)s; 0 = off)")
+    p.add_argument("--norm-a", type=float, default=d.norm_a, help="a of L_norm, hinge on |phi| (default %(default)s)")
+    p.add_argument("--norm-b", type=float, default=d.norm_b, help="b of L_norm, (|psi|-1)^2 (default %(default)s)")
+    p.add_argument("--tie-fraction", type=float, default=d.tie_fraction,
+                   help="a feature differs when |delta| > this times its train std (default %(default)s)")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda when available")
+    p.add_argument("--seed", type=int, default=0, help="the same seed gives the same model on CPU")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("evaluate", help="alignment accuracy of a model on a split (paper Sec. 5.1)",
+                       description="Over every ordered pair of the split's trajectories, every feature that differs "
+                       "(beyond the model's tie threshold) and every phrasing of it in the direction taking A to B: the "
+                       "share with psi_l . (phi_B - phi_A) > 0.")
+    p.add_argument("--model", required=True, type=Path, help="checkpoint directory (`langpref train`)")
+    p.add_argument("--data", required=True, type=Path, help="dataset directory")
+    p.add_argument("--split", default="test", choices=("train", "val", "test"), help="default %(default)s")
+    p.add_argument("--utterances", type=Path, default=None,
+                   help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("embed", help="which feature and direction the model reads into a sentence",
+                       description="Nearest bank meaning by cosine: the mean psi of each feature/direction's training "
+                       "phrasings; confidence is a softmax over the cosines at temperature 0.1.")
+    p.add_argument("--model", required=True, type=Path, help="checkpoint directory")
+    p.add_argument("text", help="free-form feedback, e.g. \"you're way too slow\"")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_embed)
+
+    p = sub.add_parser("visualize", help="draw the latent space: phi by PCA per feature, language directions as arrows")
+    p.add_argument("--model", required=True, type=Path, help="checkpoint directory")
+    p.add_argument("--data", required=True, type=Path, help="dataset directory")
+    p.add_argument("--out", required=True, type=Path, help="image to write (.png, .pdf, .svg)")
+    p.add_argument("--split", default=None, choices=("train", "val", "test"), help="default: every trajectory")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_visualize)
+
+    p = sub.add_parser("utterances", help="print the shipped utterance bank of an env (all splits merged)")
+    p.add_argument("--env", required=True, choices=ENVS)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_utterances)
+
+    p = sub.add_parser("experiment", help="the paper's experiments, one command each")
+    exp = p.add_subparsers(dest="experiment", required=True, metavar="EXPERIMENT")
+    p = exp.add_parser("alignment", help="Appendix C: test accuracy, co-finetuned vs frozen language model",
+                       description="Trains once (the frozen model is stage 1 of the co-finetuned one), evaluates both "
+                       "on the test split with the bank's test phrasings, writes alignment.md/.json.")
+    p.add_argument("--env", required=True, choices=ENVS)
+    p.add_argument("--data", type=Path, default=None, help="dataset directory (default data/ENV)")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default results/alignment/ENV)")
+    p.add_argument("--force", action="store_true", help="overwrite models already in --out")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_experiment_alignment)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="langpref",
@@ -113,6 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     # ---- latent-space commands register below (train, evaluate, embed, utterances, visualize) ----
+    _register_latent_commands(sub)
 
     return parser
 
