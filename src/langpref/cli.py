@@ -44,6 +44,8 @@ def cmd_generate(args: argparse.Namespace) -> None:
         workers=args.workers,
         seed=args.seed,
         force=args.force,
+        backend=args.backend,
+        ray_address=args.ray_address,
     )
     summary = generate(cfg)
     _emit(summary, args.json, lambda s: f"wrote {s['num_trajectories']} trajectories to {s['out']} "
@@ -86,6 +88,7 @@ def _train_config(args: argparse.Namespace):
         stage2_batch_size=d.stage2_batch_size if args.finetune_batch_size is None else args.finetune_batch_size,
         stage2_phrasings_per_step=args.phrasings_per_step, stage1_lr=args.lr, stage2_lm_lr=args.lm_lr,
         patience=args.patience, norm_a=args.norm_a, norm_b=args.norm_b, tie_fraction=args.tie_fraction,
+        time_samples=args.time_samples,
     )
 
 
@@ -200,6 +203,8 @@ def _register_latent_commands(sub) -> None:
     p.add_argument("--norm-b", type=float, default=d.norm_b, help="b of L_norm, (|psi|-1)^2 (default %(default)s)")
     p.add_argument("--tie-fraction", type=float, default=d.tie_fraction,
                    help="a feature differs when |delta| > this times its train std (default %(default)s)")
+    p.add_argument("--time-samples", type=int, default=d.time_samples,
+                   help="time steps per trajectory per training step, stratified (default %(default)s; 0 = all)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda when available")
     p.add_argument("--seed", type=int, default=0, help="the same seed gives the same model on CPU")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
@@ -253,6 +258,174 @@ def _register_latent_commands(sub) -> None:
     p.set_defaults(func=cmd_experiment_alignment)
 
 
+# ---- latent-space uses (improve, learn-reward, experiment improve|reward|ablation) ---------------------------------
+
+
+def _human_config(args: argparse.Namespace):
+    from langpref.feedback.humans import HumanConfig
+
+    return HumanConfig(temperature=args.temperature, phrasing_split=args.phrasing_split,
+                       rationality=getattr(args, "rationality", HumanConfig.rationality))
+
+
+def _reward_config(args: argparse.Namespace):
+    from langpref.reward import RewardConfig
+
+    return RewardConfig(model=args.reward_model, weight_decay=args.weight_decay, loss=args.loss,
+                        num_negatives=args.num_negatives, negatives=args.negatives)
+
+
+def _space(args: argparse.Namespace):
+    from langpref.feedback.space import load_space
+
+    return load_space(args.data, args.model, perfect=args.perfect_latent)
+
+
+def cmd_improve(args: argparse.Namespace) -> None:
+    from langpref.improve import ImproveConfig, improve, plot_improvement
+
+    cfg = ImproveConfig(iterations=args.iterations, seeds=args.seeds, seed=args.seed, candidate_split=args.candidates,
+                        strategy=args.strategy, exclude_shown=args.exclude_shown, human=_human_config(args),
+                        reward=_reward_config(args))
+    cfg.validate()
+    result = improve(_space(args), cfg)
+    if args.figure:
+        result["figure"] = str(plot_improvement({args.strategy: result}, args.figure, f"strategy {args.strategy}"))
+    _emit(result, args.json, lambda r: "mean normalised true reward per iteration: "
+          + " ".join(f"{v:.2f}" for v in r["curve"]) + f"\ngain {r['gain']:+.3f} over {r['num_runs']} runs"
+          + (f"; figure {r['figure']}" if "figure" in r else ""))
+
+
+def cmd_learn_reward(args: argparse.Namespace) -> None:
+    from langpref.reward import LearnRewardConfig, learn_reward
+
+    cfg = LearnRewardConfig(feedback=args.feedback, queries=args.queries, humans=args.humans, seeds=args.seeds,
+                            seed=args.seed, query_split=args.query_split, eval_split=args.eval_split,
+                            human=_human_config(args), reward=_reward_config(args))
+    cfg.validate()
+    result = learn_reward(_space(args), cfg)
+    if args.figure:
+        from langpref.experiments.reward import plot_reward_curves
+
+        result["figure"] = str(plot_reward_curves({args.feedback: result}, args.figure, f"{args.feedback} feedback"))
+    _emit(result, args.json, lambda r: f"{r['feedback']} feedback, {r['num_runs']} runs\n"
+          + "cross-entropy per query:        " + " ".join(f"{v:.3f}" for v in r["cross_entropy"]) + "\n"
+          + "true reward of the best, per q: " + " ".join(f"{v:.2f}" for v in r["true_reward_of_best"])
+          + f"\narea under the true-reward curve {r['auc_true_reward']:.3f}; reaches 0.95 after "
+          + f"{r['queries_to_0.95']} queries" + (f"; figure {r['figure']}" if "figure" in r else ""))
+
+
+def cmd_experiment_uses(args: argparse.Namespace) -> None:
+    from langpref.improve import ImproveConfig
+    from langpref.reward import LearnRewardConfig
+
+    kw = dict(env=args.env, data=args.data, model=args.model, out=args.out, perfect=args.perfect_latent,
+              force=args.force)
+    if args.experiment == "improve":
+        from langpref.experiments.improve import run_improve_experiment
+
+        d = ImproveConfig()
+        cfg = ImproveConfig(iterations=args.iterations or d.iterations, seeds=args.seeds or d.seeds)
+        summary = run_improve_experiment(**kw, config=cfg)
+    else:
+        from langpref.experiments.reward import run_ablation_experiment, run_reward_experiment
+
+        d = LearnRewardConfig()
+        cfg = LearnRewardConfig(queries=args.queries or d.queries, humans=args.humans or d.humans,
+                                seeds=args.seeds or d.seeds)
+        run = run_reward_experiment if args.experiment == "reward" else run_ablation_experiment
+        summary = run(**kw, config=cfg)
+    md = Path(summary["figure"]).with_suffix(".md")
+    _emit(summary, args.json, lambda s: md.read_text() + f"\n(wrote {md.parent}/: {md.stem}.json, .png, .md)")
+
+
+def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
+    from langpref.feedback.humans import HumanConfig
+    from langpref.reward import LOSSES, MODELS, NEGATIVES, RewardConfig
+
+    h, r = HumanConfig(), RewardConfig()
+    p.add_argument("--model", type=Path, default=None, help="checkpoint directory (`langpref train`)")
+    p.add_argument("--data", required=True, type=Path, help="dataset directory (`langpref generate`)")
+    p.add_argument("--perfect-latent", action="store_true",
+                   help="ORACLE: use phi = normalised features and psi = +-e_f instead of a model (an upper bound)")
+    p.add_argument("--seed", type=int, default=0, help="the same seed gives the same numbers (default 0)")
+    p.add_argument("--temperature", type=float, default=h.temperature,
+                   help="language human's softmax temperature over features, Eq. 10 (default %(default)s)")
+    p.add_argument("--phrasing-split", choices=("train", "val", "test"), default=h.phrasing_split,
+                   help="bank split the language human phrases its feedback from (default %(default)s)")
+    if reward:
+        p.add_argument("--rationality", type=float, default=h.rationality,
+                       help="comparison human's beta in sigmoid(beta (R_A - R_B)), Eq. 11 (default %(default)s)")
+    p.add_argument("--loss", choices=LOSSES, default=r.loss,
+                   help="language reward loss: L_Explicit + L_Implicit, or one alone (default %(default)s)")
+    p.add_argument("--num-negatives", type=int, default=r.num_negatives,
+                   help="k, other utterances per language query in L_Implicit (default %(default)s)")
+    p.add_argument("--negatives", choices=NEGATIVES, default=r.negatives,
+                   help="implicit negatives: other meanings than the model reads in l, or any other text "
+                   "(default %(default)s)")
+    p.add_argument("--reward-model", choices=MODELS, default=r.model,
+                   help="r_xi on phi: linear (the authors') or a one-hidden-layer MLP (default %(default)s)")
+    p.add_argument("--weight-decay", type=float, default=r.weight_decay,
+                   help="L2 penalty on r_xi's parameters (default %(default)s)")
+    p.add_argument("--figure", type=Path, default=None, help="also draw the curve(s) into this PNG")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _register_latent_use_commands(sub) -> None:
+    p = sub.add_parser("improve", help="iterative trajectory improvement with a synthetic language human (Eq. 4)",
+                       description="From a random trajectory of the candidate split, N rounds of synthetic language "
+                       "feedback, each followed by the argmax of Eq. 4's cosine objective over the candidates "
+                       "(strategy paper) or of the reward learned from all feedback so far (strategy history). "
+                       "Reports the mean normalised true reward per iteration (0 = worst, 1 = best candidate).")
+    _add_use_options(p, reward=False)
+    p.add_argument("--iterations", type=int, default=15, help="N, feedback rounds per run (default %(default)s)")
+    p.add_argument("--seeds", type=int, default=100, help="runs, each a new human and start (default %(default)s)")
+    p.add_argument("--strategy", choices=("paper", "history"), default="paper",
+                   help="paper: Eq. 4 on the last feedback; history: reward learned from all feedback so far")
+    p.add_argument("--candidates", choices=("train", "val", "test"), default="test",
+                   help="split searched by the argmax (default %(default)s)")
+    p.add_argument("--exclude-shown", action="store_true", help="history: never show a trajectory twice")
+    p.set_defaults(func=cmd_improve)
+
+    p = sub.add_parser("learn-reward", help="reward learning from synthetic language feedback or comparisons",
+                       description="Each query shows one train trajectory (language: the human says how to improve "
+                       "it; L_Explicit + L_Implicit, Eq. 5-9) or a random train pair (comparison: Bradley-Terry). "
+                       "After every query, r_xi is refit on all feedback so far and scored on the test split.")
+    _add_use_options(p, reward=True)
+    p.add_argument("--feedback", required=True, choices=("language", "comparison"))
+    p.add_argument("--queries", type=int, default=40, help="Q, queries per run (default %(default)s)")
+    p.add_argument("--humans", type=int, default=3, help="synthetic humans (default %(default)s)")
+    p.add_argument("--seeds", type=int, default=3, help="runs per human (default %(default)s)")
+    p.add_argument("--query-split", choices=("train", "val", "test"), default="train", help="default %(default)s")
+    p.add_argument("--eval-split", choices=("train", "val", "test"), default="test", help="default %(default)s")
+    p.set_defaults(func=cmd_learn_reward)
+
+    exp_parser = sub.choices.get("experiment") or sub.add_parser("experiment", help="the paper's experiments")
+    exp = next((a for a in exp_parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    if exp is None:
+        exp = exp_parser.add_subparsers(dest="experiment", required=True, metavar="EXPERIMENT")
+    for name, text in (("improve", "Fig. 4: iterative improvement, paper and history strategies, 100 seeds"),
+                       ("reward", "Fig. 5: reward learning, language vs comparisons, 3 humans x 3 seeds, Q = 40"),
+                       ("ablation", "Fig. 6: language reward loss, explicit + implicit vs each alone")):
+        p = exp.add_parser(name, help=text, description=text + ". Writes NAME.json, NAME.png and NAME.md (a "
+                           "section for docs/results.md); an interrupted run resumes without redoing finished seeds.")
+        p.add_argument("--env", required=True, choices=ENVS)
+        p.add_argument("--data", type=Path, default=None, help="dataset directory (default data/ENV)")
+        p.add_argument("--model", type=Path, default=None, help="checkpoint directory (default models/ENV)")
+        p.add_argument("--perfect-latent", action="store_true", help="ORACLE latent space instead of a model")
+        p.add_argument("--out", type=Path, default=None,
+                       help=f"output directory (default results/{name}/ENV, or ENV-perfect)")
+        p.add_argument("--seeds", type=int, default=None, help="override the paper's seeds (100 / 3 per human)")
+        if name == "improve":
+            p.add_argument("--iterations", type=int, default=None, help="override N = 15")
+        else:
+            p.add_argument("--humans", type=int, default=None, help="override the 3 synthetic humans")
+            p.add_argument("--queries", type=int, default=None, help="override Q = 40")
+        p.add_argument("--force", action="store_true", help="discard finished runs in --out and start over")
+        p.add_argument("--json", action="store_true", help="print one JSON object")
+        p.set_defaults(func=cmd_experiment_uses)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="langpref",
@@ -272,6 +445,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=None, help="parallel worker processes (default: all cores)")
     p.add_argument("--seed", type=int, default=0, help="the same seed gives the same dataset, whatever --workers")
     p.add_argument("--force", action="store_true", help="overwrite an existing dataset in --out")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local worker processes (default) or Ray tasks (pip install 'langpref[ray]')")
+    p.add_argument("--ray-address", default=None,
+                   help="with --backend ray: join this cluster (auto, HOST:PORT); default a local Ray instance")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_generate)
 
@@ -298,6 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     # ---- latent-space commands register below (train, evaluate, embed, utterances, visualize) ----
     _register_latent_commands(sub)
+    _register_latent_use_commands(sub)
 
     return parser
 

@@ -12,7 +12,6 @@ independently, so the dataset is identical whatever the number of workers.
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import os
 import shutil
 import time
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from langpref.backends import run_jobs
 from langpref.dataset.storage import (
     SPLITS,
     DatasetMeta,
@@ -52,6 +52,10 @@ class GenerateConfig:
     """Master seed: the same seed gives the same dataset."""
     force: bool = False
     """Overwrite an existing dataset."""
+    backend: str = "local"
+    """Where the rollouts run: local worker processes, or Ray tasks (one per chunk of trajectories)."""
+    ray_address: str | None = None
+    """With --backend ray: a running cluster to join (e.g. auto or HOST:6379); default a local instance."""
 
     def resolved(self) -> "GenerateConfig":
         spec = get_spec(self.env)
@@ -63,6 +67,8 @@ class GenerateConfig:
             workers=self.workers or os.cpu_count() or 1,
             seed=self.seed,
             force=self.force,
+            backend=self.backend,
+            ray_address=self.ray_address,
         )
         if cfg.num_trajectories < 3:
             raise LangprefError("--num-trajectories must be at least 3 (one per split)")
@@ -139,25 +145,22 @@ def rollout(env: Any, module: Any, unit: np.ndarray, traj_seed: int, horizon: in
     )
 
 
-# ---- worker processes ---------------------------------------------------------------------------------------------
-
-_WORKER: dict[str, Any] = {}
+# ---- parallel rollouts ---------------------------------------------------------------------------------------------
 
 
-def _init_worker(env_name: str, horizon: int) -> None:
+def _make_worker_env(env_name: str, horizon: int) -> tuple[Any, Any]:
     import warnings
 
     warnings.filterwarnings("ignore")
     os.environ.setdefault("MUJOCO_GL", "egl")
     module = env_module(env_name)
-    _WORKER.update(env=module.make(horizon), module=module, horizon=horizon)
+    return module, module.make(horizon)
 
 
-def _run_one(job: tuple[Path, int, np.ndarray, int]) -> tuple[int, np.ndarray, bool]:
-    root, index, unit, traj_seed = job
-    traj = rollout(_WORKER["env"], _WORKER["module"], unit, traj_seed, _WORKER["horizon"], index)
-    save_trajectory(root, traj)
-    return index, traj.features, traj.success
+def _rollout_job(state: tuple[Any, Any], job: tuple[int, np.ndarray, int, int]) -> Trajectory:
+    module, env = state
+    index, unit, traj_seed, horizon = job
+    return rollout(env, module, unit, traj_seed, horizon, index)
 
 
 def _prepare_out(cfg: GenerateConfig) -> None:
@@ -202,29 +205,18 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
     for i in range(n):
         done = _finished(cfg, i)
         if done is None:
-            jobs.append((cfg.out, i, units[i], trajectory_seed(cfg.seed, i)))
+            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon))
         else:
             features[i], success[i] = done
     start = time.time()
     bar = tqdm(total=n, initial=n - len(jobs), desc=f"generate {cfg.env}", unit="traj", dynamic_ncols=True)
-    if jobs:
-        workers = min(cfg.workers, len(jobs))
-        if workers == 1:
-            _init_worker(cfg.env, cfg.horizon)
-            results = map(_run_one, jobs)
-        else:
-            pool = mp.get_context("spawn").Pool(workers, _init_worker, (cfg.env, cfg.horizon))
-            results = pool.imap_unordered(_run_one, jobs)
-        try:
-            for index, feats, ok in results:
-                features[index], success[index] = feats, ok
-                bar.update(1)
-                bar.set_postfix(success=f"{success.sum() / bar.n:.0%}")
-        finally:
-            if workers > 1:
-                pool.terminate()
-            else:
-                _WORKER.pop("env").close()
+    results = run_jobs(_rollout_job, jobs, setup=_make_worker_env, setup_args=(cfg.env, cfg.horizon),
+                       backend=cfg.backend, workers=cfg.workers, ray_address=cfg.ray_address, chunk=4)
+    for traj in results:
+        save_trajectory(cfg.out, traj)  # one file per trajectory, written as it arrives: a rerun skips it
+        features[traj.index], success[traj.index] = traj.features, traj.success
+        bar.update(1)
+        bar.set_postfix(success=f"{success.sum() / bar.n:.0%}")
     bar.close()
     wall = time.time() - start
     meta = DatasetMeta(
@@ -236,9 +228,10 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
         splits=assign_splits(cfg.env, n, cfg.seed),
         num_trajectories=n,
         config={**cfg.identity(), "generator": "latin-hypercube waypoint controllers", "wall_s": round(wall, 1),
-                "workers": cfg.workers, "success_rate": float(success.mean())},
+                "workers": cfg.workers, "backend": cfg.backend,
+                "success_rate": float(success.mean())},
     )
     write_meta(cfg.out, meta, features)
     return {"out": str(cfg.out), "env": cfg.env, "num_trajectories": n, "horizon": cfg.horizon,
             "success_rate": float(success.mean()), "wall_s": wall, "workers": cfg.workers,
-            "steps_per_s": len(jobs) * cfg.horizon / wall if jobs else None}
+            "backend": cfg.backend, "steps_per_s": len(jobs) * cfg.horizon / wall if jobs else None}
