@@ -37,13 +37,21 @@ def raw_steps_per_s(env_name: str, steps: int) -> float:
     return rate
 
 
-def generator_steps_per_s(env_name: str, n: int, horizon: int, workers: int) -> float:
+def generator_steps_per_s(env_name: str, n: int, horizon: int, workers: int, backend: str = "local") -> float:
     from langpref.dataset.generate import GenerateConfig, generate
 
     with tempfile.TemporaryDirectory() as tmp:
         s = generate(GenerateConfig(env=env_name, out=Path(tmp) / "d", num_trajectories=n, horizon=horizon,
-                                    workers=workers))
+                                    workers=workers, backend=backend))
     return s["steps_per_s"]
+
+
+def ray_init_seconds(workers: int) -> float:
+    from langpref.backends import init_ray
+
+    start = time.perf_counter()
+    init_ray(None, workers)
+    return time.perf_counter() - start
 
 
 def default_dataset_wall(env_name: str, out: Path) -> dict:
@@ -70,9 +78,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--envs", nargs="+", default=["metaworld", "robosuite"])
     p.add_argument("--default-datasets", action="store_true",
                    help="also time a full default dataset per env (writes data/ENV; robosuite takes ~20-40 min)")
+    p.add_argument("--no-ray", dest="ray", action="store_false", help="skip the Ray backend comparison")
     args = p.parse_args(argv)
     today = dt.date.today().isoformat()
-    rows = []
+    rows, ray_rows = [], []
+    ray_init = ray_init_seconds(2) if args.ray else None
     for env_name in args.envs:
         horizon = 500
         raw = raw_steps_per_s(env_name, 2000 if env_name == "metaworld" else 500)
@@ -80,6 +90,9 @@ def main(argv: list[str] | None = None) -> None:
         one = generator_steps_per_s(env_name, n1, horizon, 1)
         two = generator_steps_per_s(env_name, 2 * n1, horizon, 2)
         rows.append((env_name, raw, one, one / raw, two, two / one))
+        if args.ray:
+            ray_two = generator_steps_per_s(env_name, 2 * n1, horizon, 2, backend="ray")
+            ray_rows.append((env_name, two, ray_two, 1 - ray_two / two))
         print(json.dumps({"env": env_name, "raw_steps_per_s": raw, "generator_1_worker": one,
                           "generator_2_workers": two}), flush=True)
     table = [
@@ -92,6 +105,14 @@ def main(argv: list[str] | None = None) -> None:
     for env_name, raw, one, ratio, two, speedup in rows:
         table.append(f"| {env_name} | {raw:.0f} | {one:.0f} | {ratio:.2f} | {two:.0f} | {speedup:.2f}x |")
     write_section("generator-throughput", "\n".join(table))
+    if args.ray:
+        lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`), 2 workers, horizon 500. Ray was "
+                 f"started once before timing (a local instance took {ray_init:.1f} s to start; that one-off cost "
+                 "is not in the rates).\n",
+                 "| env | local processes (steps/s) | Ray tasks (steps/s) | Ray overhead (target < 15%) |",
+                 "|---|---|---|---|"]
+        lines += [f"| {e} | {loc:.0f} | {r:.0f} | {ovh:.1%} |" for e, loc, r, ovh in ray_rows]
+        write_section("ray-overhead", "\n".join(lines))
     if args.default_datasets:
         lines = [f"Measured {today} with `python -m langpref.bench --default-datasets` (all cores).\n",
                  "| env | trajectories | wall time | task success | largest abs off-diagonal feature correlation |",

@@ -1,0 +1,140 @@
+"""`langpref experiment improve --env ENV`: the paper's Fig. 4 (iterative improvement, N = 15, 100 seeds), with the
+history strategy beside the paper's.
+
+Writes into the output directory (default `results/improve/ENV`): `improve.json` (both curves and the config),
+`improve.png` (mean +- std per iteration, dashed optimum), `improve.md` (a section for docs/results.md) and
+`runs.json`, the finished runs. Interrupted, it resumes: a finished seed is not rerun. `RunCache` is shared with the
+reward-learning experiments.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import os
+import sys
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import Any
+
+from langpref.errors import LangprefError
+
+PAPER_FIG4 = ("Fig. 4 (no numbers printed): in both envs the true reward rises consistently over 15 iterations but "
+              "stays below the dashed average optimum, because each step uses only the last feedback and can loop "
+              "between good, non-optimal trajectories.")
+
+
+class RunCache:
+    """Finished runs of an experiment, keyed by name, saved atomically after each; tied to one configuration."""
+
+    def __init__(self, path: Path, config: dict[str, Any], force: bool = False):
+        self.path = Path(path)
+        self.key = hashlib.sha256(json.dumps(config, sort_keys=True, default=str).encode()).hexdigest()[:16]
+        self.runs: dict[str, Any] = {}
+        if self.path.is_file() and not force:
+            try:
+                saved = json.loads(self.path.read_text())
+            except (json.JSONDecodeError, UnicodeDecodeError):
+                raise LangprefError(f"{self.path} is corrupt; delete it or pass --force to start over") from None
+            if saved.get("config_key") != self.key:
+                raise LangprefError(f"{self.path} holds runs made with another configuration; pass --force to start "
+                                    "over or choose another --out")
+            self.runs = saved.get("runs", {})
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.runs
+
+    def put(self, name: str, value: Any) -> None:
+        self.runs[name] = value
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(f".{self.path.name}.tmp-{os.getpid()}")
+        tmp.write_text(json.dumps({"config_key": self.key, "runs": self.runs}))
+        tmp.replace(self.path)
+
+
+def default_paths(kind: str, env: str, data: str | Path | None, model: str | Path | None, out: str | Path | None,
+                  perfect: bool) -> tuple[Path, Path | None, Path]:
+    """data/ENV, models/ENV and results/KIND/ENV (results/KIND/ENV-perfect for the oracle space) unless given."""
+    data = Path(data) if data else Path("data") / env
+    model = None if perfect else (Path(model) if model else Path("models") / env)
+    out = Path(out) if out else Path("results") / kind / (f"{env}-perfect" if perfect else env)
+    return data, model, out
+
+
+def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path, extra: str = "") -> str:
+    where = "--perfect-latent" if model is None else f"--model {model}"
+    return f"langpref experiment {kind} --env {env} --data {data} {where} --out {out}{extra}"
+
+
+def figure_link(figure: str | Path) -> str:
+    """A figure's path as seen from docs/results.md (relative paths are relative to the repository root)."""
+    figure = Path(figure)
+    return str(figure) if figure.is_absolute() else f"../{figure.as_posix()}"
+
+
+def _fmt(values: list[float], at: list[int]) -> str:
+    return " | ".join(f"{values[i]:.3f}" for i in at)
+
+
+def improve_markdown(summary: dict[str, Any]) -> str:
+    env, strategies = summary["env"], summary["strategies"]
+    n = len(next(iter(strategies.values()))["curve"]) - 1
+    at = sorted({0, 1, n // 3, 2 * n // 3, n})
+    lines = [
+        f"### Iterative improvement, {env}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
+        "",
+        f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['seeds']} seeds, candidates: "
+        f"{summary['candidate_split']} split). Mean normalised true reward (0 = worst, 1 = best candidate) of the "
+        "trajectory shown at each iteration, std in the figure.",
+        "",
+        "| strategy | " + " | ".join(f"it. {i}" for i in at) + " | gain 0 to N |",
+        "|---|" + "---|" * (len(at) + 1),
+    ]
+    for name, res in strategies.items():
+        lines.append(f"| {name} | {_fmt(res['curve'], at)} | {res['gain']:+.3f} |")
+    lines += ["", f"![improvement {env}]({figure_link(summary['figure'])})", "", f"Paper: {PAPER_FIG4}"]
+    return "\n".join(lines) + "\n"
+
+
+def run_improve_experiment(env: str, data: str | Path | None = None, model: str | Path | None = None,
+                           out: str | Path | None = None, *, perfect: bool = False, config=None,
+                           strategies: tuple[str, ...] = ("paper", "history"), force: bool = False,
+                           progress: bool = True) -> dict[str, Any]:
+    """Both strategies with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and markdown."""
+    from tqdm import tqdm
+
+    from langpref.feedback.space import load_space
+    from langpref.improve import ImproveConfig, ImprovementRun, human_weights, plot_improvement, run_improvement
+    from langpref.improve import summarise as summarise_runs
+
+    data, model, out = default_paths("improve", env, data, model, out, perfect)
+    space = load_space(data, model, env=env, perfect=perfect)
+    base = config or ImproveConfig()
+    cfgs = {s: replace(base, strategy=s) for s in strategies}
+    cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
+                     force=force)
+    results = {}
+    for name, cfg in cfgs.items():
+        cfg.validate()
+        runs = []
+        for s in tqdm(range(cfg.seeds), desc=f"improve {env} {name}", disable=not progress, file=sys.stderr):
+            key = f"{name}/{s}"
+            if key not in cache:
+                w = human_weights(len(space.feature_names), cfg.seed, s)
+                cache.put(key, asdict(run_improvement(space, w, cfg, (cfg.seed, s))))
+            runs.append(ImprovementRun(**cache.runs[key]))
+        results[name] = {**summarise_runs(runs), "config": asdict(cfg)}
+    figure = plot_improvement({f"{n} ({'Eq. 4' if n == 'paper' else 'feedback history'})": r
+                               for n, r in results.items()}, out / "improve.png",
+                              f"Iterative improvement, {env}" + (" (perfect latent)" if perfect else ""))
+    summary = {
+        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
+        "space": space.description, "seeds": base.seeds, "iterations": base.iterations,
+        "candidate_split": base.candidate_split, "strategies": results, "figure": str(figure),
+        "paper": PAPER_FIG4, "command": command_line("improve", env, data, model, out),
+        "date": datetime.date.today().isoformat(),
+    }
+    (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "improve.md").write_text(improve_markdown(summary))
+    return summary

@@ -1,0 +1,166 @@
+"""`langpref experiment reward|ablation --env ENV`: the paper's Fig. 5 (reward learning from language vs comparisons)
+and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic humans x 3 seeds, Q = 40 queries.
+
+Each writes into its output directory (default `results/reward/ENV`, `results/ablation/ENV`): `NAME.json` (curves
+per method, summaries, the targets checked, the config), `NAME.png` (two panels: (a) cross-entropy, (b) normalised
+true reward of r_xi's best test trajectory; mean with a +-std band), `NAME.md` (a section for docs/results.md) and
+`runs.json` (finished runs; an interrupted experiment resumes without rerunning them).
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import sys
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from langpref.experiments.improve import RunCache, command_line, default_paths, figure_link
+
+PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
+              "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
+              "fewer queries with language, especially in Meta-World.")
+PAPER_FIG6 = ("Fig. 6 (no numbers printed): L_Explicit + L_Implicit beats each alone on both metrics.")
+
+
+def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
+    """Fig. 5/6 analogue: (a) cross-entropy and (b) normalised true reward of the best test trajectory per query."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for ax, key, label in ((axes[0], "cross_entropy", "(a) cross-entropy CE(P_w, P_xi)"),
+                           (axes[1], "true_reward_of_best", "(b) true reward of the best test trajectory")):
+        for name, res in results.items():
+            mean, std = np.array(res[key]), np.array(res[f"{key}_std"])
+            x = np.arange(len(mean))
+            ax.plot(x, mean, label=name)
+            ax.fill_between(x, mean - std, mean + std, alpha=0.2)
+        ax.set_xlabel("queries")
+        ax.set_title(label, fontsize=10)
+        ax.legend(fontsize=8)
+    axes[1].set_ylim(-0.05, 1.05)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out, perfect: bool, force: bool,
+                 progress: bool) -> tuple[dict[str, dict], Any, Path, Path | None, Path]:
+    """Run every (method, human, seed) not yet in the cache; the summary of each method."""
+    from tqdm import tqdm
+
+    from langpref.feedback.space import load_space
+    from langpref.reward import Curves, human_weights, run_reward_learning, summarise
+
+    data, model, out = default_paths(kind, env, data, model, out, perfect)
+    space = load_space(data, model, env=env, perfect=perfect)
+    cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
+                     force=force)
+    results = {}
+    for name, cfg in methods.items():
+        cfg.validate()
+        runs = []
+        todo = [(h, s) for h in range(cfg.humans) for s in range(cfg.seeds)]
+        for h, s in tqdm(todo, desc=f"{kind} {env} {name}", disable=not progress, file=sys.stderr):
+            key = f"{name}/{h}/{s}"
+            if key not in cache:
+                w = human_weights(len(space.feature_names), cfg.seed, h)
+                cache.put(key, asdict(run_reward_learning(space, w, cfg, (cfg.seed, h, s))))
+            runs.append(Curves(**cache.runs[key]))
+        results[name] = {**summarise(runs), "config": asdict(cfg)}
+    return results, space, data, model, out
+
+
+def _table(results: dict[str, dict], at: list[int]) -> list[str]:
+    lines = ["| method | " + " | ".join(f"CE q={q}" for q in at) + " | " + " | ".join(f"best q={q}" for q in at)
+             + " | AUC best | queries to 0.95 |", "|---|" + "---|" * (2 * len(at) + 2)]
+    for name, r in results.items():
+        ce = " | ".join(f"{r['cross_entropy'][q]:.3f}" for q in at)
+        best = " | ".join(f"{r['true_reward_of_best'][q]:.3f}" for q in at)
+        reached = r["queries_to_0.95"]
+        lines.append(f"| {name} | {ce} | {best} | {r['auc_true_reward']:.3f} | "
+                     f"{reached if reached is not None else 'not reached'} |")
+    return lines
+
+
+def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
+    q = len(next(iter(summary["methods"].values()))["cross_entropy"]) - 1
+    at = sorted({x for x in (0, 1, 5, 10, q // 2, q) if x <= q})
+    lines = [f"### {title}, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""), "",
+             f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
+             f"{summary['seeds']} seeds, Q = {q}; metrics on the test split). CE: cross-entropy to the human's P_w "
+             "over all test pairs; best: normalised true reward of the test trajectory r_xi ranks first; AUC: the "
+             "mean of the best curve over query counts 0..Q.", ""]
+    lines += _table(summary["methods"], at)
+    lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items()),
+              "", f"![{title} {summary['env']}]({figure_link(summary['figure'])})", "", f"Paper: {paper}"]
+    return "\n".join(lines) + "\n"
+
+
+def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets,
+            extra: str = "") -> dict[str, Any]:
+    figure = plot_reward_curves(results, out / f"{kind}.png",
+                                f"{title}, {env}" + (" (perfect latent)" if model is None else ""))
+    summary = {
+        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
+        "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries,
+        "methods": results, "targets": targets, "figure": str(figure), "paper": paper,
+        "command": command_line(kind, env, data, model, out, extra), "date": datetime.date.today().isoformat(),
+    }
+    (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / f"{kind}.md").write_text(_markdown(title, summary, paper))
+    return summary
+
+
+def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
+                          force: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Language (L_Explicit + L_Implicit) vs comparisons with the paper's settings (or `config`, a
+    `LearnRewardConfig` whose feedback is replaced); writes reward.json/.png/.md."""
+    from langpref.reward import LearnRewardConfig
+
+    base = config or LearnRewardConfig()
+    methods = {"language": replace(base, feedback="language"), "comparison": replace(base, feedback="comparison")}
+    results, space, data, model, out = _run_methods("reward", env, methods, data, model, out, perfect, force,
+                                                    progress)
+    lang, comp = results["language"], results["comparison"]
+    lq, cq = lang["queries_to_0.95"], comp["queries_to_0.95"]
+    targets = {
+        "language CE < comparison CE at every query count 1..Q": bool(
+            np.all(np.array(lang["cross_entropy"][1:]) < np.array(comp["cross_entropy"][1:]))),
+        "language AUC of true reward > comparison": lang["auc_true_reward"] > comp["auc_true_reward"],
+        "language reaches 0.95 in fewer queries": lq is not None and (cq is None or lq < cq),
+    }
+    return _finish("reward", "Reward learning: language vs comparisons", PAPER_FIG5, env, results, space, data,
+                   model, out, base, targets)
+
+
+def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
+                            force: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Language feedback with L_Explicit + L_Implicit, L_Explicit alone and L_Implicit alone; writes
+    ablation.json/.png/.md."""
+    from langpref.reward import LearnRewardConfig
+
+    base = replace(config or LearnRewardConfig(), feedback="language")
+    methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit",
+                                                                                         "implicit")}
+    results, space, data, model, out = _run_methods("ablation", env, methods, data, model, out, perfect, force,
+                                                    progress)
+    b, e, i = results["both"], results["explicit"], results["implicit"]
+    targets = {
+        "both has a higher AUC of true reward than explicit and implicit alone":
+            b["auc_true_reward"] > max(e["auc_true_reward"], i["auc_true_reward"]),
+        "both has a lower mean cross-entropy (AUC) than explicit and implicit alone":
+            b["auc_cross_entropy"] < min(e["auc_cross_entropy"], i["auc_cross_entropy"]),
+    }
+    return _finish("ablation", "Ablation of the language reward loss", PAPER_FIG6, env, results, space, data, model,
+                   out, base, targets)

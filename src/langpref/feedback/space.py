@@ -1,0 +1,256 @@
+"""The world a simulated feedback session runs in, as plain arrays: features, embeddings, phrasings.
+
+    space = build_latent_space(model, dataset)            # phi from the trained model, psi of the bank's phrasings
+    space = perfect_latent_space(dataset)                 # oracle: phi = (normalised features, 3), psi = (+-e_f, 0)
+
+`theta` holds every trajectory's features normalised with the train split's mean and standard deviation (so a true
+reward R = w . theta weighs features in units of their spread). `phi` holds the trajectory embeddings and each
+`PhraseTable` the embeddings psi of one split of the utterance bank. The algorithms in `langpref.improve` and
+`langpref.reward` only see `phi` and `psi`; the synthetic humans only see `theta` and the phrasings.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from langpref.errors import LangprefError
+from langpref.language.bank import DIRECTIONS, Bank, load_bank
+
+Encoder = Callable[[Sequence[str]], np.ndarray]
+
+
+def _as_numpy(x) -> np.ndarray:
+    """A float64 numpy array from a numpy array or a torch tensor (without importing torch)."""
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()
+    return np.asarray(x, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class FeatureScale:
+    """Per-feature mean and standard deviation (of the train split) used to normalise features."""
+
+    mean: np.ndarray
+    std: np.ndarray
+
+    @classmethod
+    def fit(cls, features: np.ndarray) -> FeatureScale:
+        feats = np.asarray(features, dtype=np.float64)
+        if feats.ndim != 2 or len(feats) < 2:
+            raise LangprefError(f"need at least 2 trajectories to normalise features, got {feats.shape}")
+        std = feats.std(axis=0)
+        return cls(feats.mean(axis=0), np.where(std > 1e-12, std, 1.0))
+
+    def __call__(self, features: np.ndarray) -> np.ndarray:
+        return (np.asarray(features, dtype=np.float64) - self.mean) / self.std
+
+
+@dataclass(frozen=True)
+class PhraseTable:
+    """The phrasings of one bank split: text, meaning (feature index, direction index 0 = increase) and psi."""
+
+    texts: tuple[str, ...]
+    feature: np.ndarray
+    direction: np.ndarray
+    psi: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.texts)
+        if n == 0:
+            raise LangprefError("a phrase table needs at least one phrasing")
+        if len(self.feature) != n or len(self.direction) != n or len(self.psi) != n:
+            raise LangprefError(f"phrase table of {n} texts has {len(self.feature)} features, "
+                                f"{len(self.direction)} directions and {len(self.psi)} embeddings")
+
+    def __len__(self) -> int:
+        return len(self.texts)
+
+    @property
+    def group(self) -> np.ndarray:
+        """Meaning id of each phrasing: 2 * feature + direction."""
+        return 2 * self.feature + self.direction
+
+    def rows(self, feature: int, direction: int) -> np.ndarray:
+        """Row indices of the phrasings of one (feature, direction)."""
+        return np.flatnonzero((self.feature == feature) & (self.direction == direction))
+
+
+def phrase_table(bank: Bank, split: str, feature_names: Sequence[str], encode: Encoder) -> PhraseTable:
+    """Every phrasing of `split` of the bank, in the bank's order, embedded with `encode`."""
+    entries = bank.all_of_split(split)
+    missing = sorted({f for _, f, _ in entries} - set(feature_names))
+    if missing:
+        raise LangprefError(f"the {bank.env} bank has features {missing} the dataset lacks ({list(feature_names)})")
+    texts = tuple(t for t, _, _ in entries)
+    psi = _as_numpy(encode(list(texts)))
+    if psi.shape[0] != len(texts):
+        raise LangprefError(f"the language encoder returned {psi.shape[0]} embeddings for {len(texts)} texts")
+    return PhraseTable(
+        texts=texts,
+        feature=np.array([list(feature_names).index(f) for _, f, _ in entries], dtype=np.int64),
+        direction=np.array([DIRECTIONS.index(d) for _, _, d in entries], dtype=np.int64),
+        psi=psi,
+    )
+
+
+@dataclass(frozen=True)
+class LatentSpace:
+    """Everything a simulated session needs, for every trajectory of a dataset (rows in dataset order)."""
+
+    env: str
+    feature_names: tuple[str, ...]
+    theta: np.ndarray
+    """(N, F) features normalised with the train split's statistics; the synthetic humans' view."""
+    phi: np.ndarray
+    """(N, D) trajectory embeddings; the methods' view."""
+    splits: dict[str, tuple[int, ...]]
+    phrases: dict[str, PhraseTable]
+    """Bank split name -> its phrasings with psi."""
+    encode: Encoder | None = field(default=None, compare=False)
+    """Embeds free-form text not in a table (e.g. a study participant's); None when only the tables exist."""
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if self.theta.ndim != 2 or self.phi.ndim != 2 or len(self.theta) != len(self.phi):
+            raise LangprefError(f"features {self.theta.shape} and embeddings {self.phi.shape} do not match")
+        if self.theta.shape[1] != len(self.feature_names):
+            raise LangprefError(f"{self.theta.shape[1]} feature columns for features {list(self.feature_names)}")
+        for name, table in self.phrases.items():
+            if table.psi.shape[1] != self.phi.shape[1]:
+                raise LangprefError(f"psi of bank split {name!r} has dimension {table.psi.shape[1]}, "
+                                    f"phi has {self.phi.shape[1]}")
+
+    @property
+    def dim(self) -> int:
+        return int(self.phi.shape[1])
+
+    def split(self, name: str) -> np.ndarray:
+        if name not in self.splits:
+            raise LangprefError(f"the dataset has no split {name!r}; it has {', '.join(self.splits)}")
+        rows = np.asarray(self.splits[name], dtype=np.int64)
+        if len(rows) < 2:
+            raise LangprefError(f"split {name!r} has {len(rows)} trajectories; at least 2 are needed")
+        return rows
+
+    def table(self, split: str) -> PhraseTable:
+        if split not in self.phrases:
+            raise LangprefError(f"no phrasings of bank split {split!r} were embedded; have {', '.join(self.phrases)}")
+        return self.phrases[split]
+
+    def psi_of(self, text: str) -> np.ndarray:
+        """psi of an utterance: looked up in the embedded tables, else embedded with `encode`."""
+        for table in self.phrases.values():
+            if text in table.texts:
+                return table.psi[table.texts.index(text)]
+        if self.encode is None:
+            raise LangprefError(f"no embedding for {text!r}: it is in no embedded bank split and no encoder is set")
+        return _as_numpy(self.encode([text]))[0]
+
+
+def _normalised_theta(dataset) -> np.ndarray:
+    feats = np.asarray(dataset.features, dtype=np.float64)
+    return FeatureScale.fit(feats[dataset.split("train")])(feats)
+
+
+def build_latent_space(model, dataset, bank_splits: Sequence[str] = ("test", "train"), name: str = "a model"
+                       ) -> LatentSpace:
+    """phi of every trajectory of `dataset` and psi of the bank's phrasings of `bank_splits`, from a trained model.
+
+    Fails with one line when the model was trained on another env or observation layout than the dataset.
+    """
+    model.check_dataset(dataset)
+    bank = load_bank(dataset.env)
+    phi = _as_numpy(model.encode_dataset(dataset, None))
+    tables = {s: phrase_table(bank, s, dataset.feature_names, model.encode_texts) for s in dict.fromkeys(bank_splits)}
+    return LatentSpace(dataset.env, tuple(dataset.feature_names), _normalised_theta(dataset), phi,
+                       {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables,
+                       encode=lambda texts: _as_numpy(model.encode_texts(list(texts))),
+                       description=f"{name} on {dataset.root}")
+
+
+def perfect_encoder(feature_names: Sequence[str], bank: Bank, scale: float = 1.0) -> Encoder:
+    """An oracle language encoder: any phrasing of feature f maps to +scale e_f (increase) or -scale e_f."""
+    meaning = {}
+    for split in ("train", "val", "test"):
+        for text, f, d in bank.all_of_split(split):
+            meaning[text] = (list(feature_names).index(f), 1.0 if d == "increase" else -1.0)
+
+    def encode(texts: Sequence[str]) -> np.ndarray:
+        out = np.zeros((len(texts), len(feature_names)))
+        for i, text in enumerate(texts):
+            if text not in meaning:
+                raise LangprefError(f"the perfect encoder only knows the bank's phrasings, not {text!r}")
+            f, sign = meaning[text]
+            out[i, f] = sign * scale
+        return out
+
+    return encode
+
+
+def perfect_latent_space(dataset, bank_splits: Sequence[str] = ("test", "train"), scale: float = 1.0,
+                         offset: float = 3.0) -> LatentSpace:
+    """An ideal latent space (an oracle upper bound, not a learned model): phi = (normalised features, offset),
+    psi = (+-scale e_f, 0). The constant last coordinate keeps |phi| away from 0, where Eq. 4's cosine would
+    blow up; it cancels in every difference of embeddings."""
+    bank = load_bank(dataset.env)
+    theta = _normalised_theta(dataset)
+    base = perfect_encoder(dataset.feature_names, bank, scale)
+
+    def encode(texts: Sequence[str]) -> np.ndarray:
+        psi = base(texts)
+        return np.concatenate([psi, np.zeros((len(psi), 1))], axis=1)
+
+    tables = {s: phrase_table(bank, s, dataset.feature_names, encode) for s in dict.fromkeys(bank_splits)}
+    phi = np.concatenate([theta, np.full((len(theta), 1), float(offset))], axis=1)
+    return LatentSpace(dataset.env, tuple(dataset.feature_names), theta, phi,
+                       {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables, encode=encode,
+                       description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}")
+
+
+def load_space(data: str | Path, model: str | Path | None = None, *, env: str | None = None,
+               perfect: bool = False, bank_splits: Sequence[str] = ("test", "train")) -> LatentSpace:
+    """Open a dataset and the latent space a command runs in: the trained `model`'s, or with `perfect` the oracle
+    `perfect_latent_space` (labelled as such). Fails with one line when the model's env differs from the data's."""
+    from langpref.dataset.storage import load_dataset
+
+    dataset = load_dataset(data, env=env)
+    if perfect:
+        return perfect_latent_space(dataset, bank_splits)
+    if model is None:
+        raise LangprefError("give --model MODEL (a `langpref train` checkpoint) or --perfect-latent (the oracle space)")
+    from langpref.model.checkpoint import load_model
+
+    return build_latent_space(load_model(model, dataset=dataset), dataset, bank_splits, name=f"model {model}")
+
+
+def toy_latent_space(env: str = "metaworld", n: int = 60, dim: int | None = None, seed: int = 0,
+                     offset: float = 3.0) -> LatentSpace:
+    """A hand-built space without any dataset or model, for tests and benchmarks: theta ~ N(0, 1) per feature,
+    splits of 60/20/20%, and the perfect latent geometry of `perfect_latent_space`, isometrically embedded into
+    `dim` dimensions by a random orthonormal map when `dim` is given (so sizes match a trained model's D)."""
+    bank = load_bank(env)
+    names = bank.features
+    rng = np.random.default_rng(seed)
+    theta = rng.standard_normal((n, len(names)))
+    k = len(names) + 1
+    dim = k if dim is None else int(dim)
+    if dim < k:
+        raise LangprefError(f"a toy space of {env} needs dim >= {k}, got {dim}")
+    basis = np.linalg.qr(rng.standard_normal((dim, k)))[0].T  # (k, dim), orthonormal rows
+    base = perfect_encoder(names, bank)
+
+    def encode(texts: Sequence[str]) -> np.ndarray:
+        return np.concatenate([base(texts), np.zeros((len(texts), 1))], axis=1) @ basis
+
+    phi = np.concatenate([theta, np.full((n, 1), float(offset))], axis=1) @ basis
+    order = rng.permutation(n)
+    a, b = int(0.6 * n), int(0.8 * n)
+    splits = {"train": tuple(sorted(order[:a].tolist())), "val": tuple(sorted(order[a:b].tolist())),
+              "test": tuple(sorted(order[b:].tolist()))}
+    tables = {s: phrase_table(bank, s, names, encode) for s in ("test", "train")}
+    return LatentSpace(env, tuple(names), theta, phi, splits, tables, encode=encode,
+                       description=f"toy latent space ({env}, n={n}, dim={dim}, seed={seed})")

@@ -1,0 +1,342 @@
+"""Reward learning from comparative language feedback (paper Eq. 5-9) and the comparison baseline, with metrics.
+
+r_xi is a function of the frozen trajectory embedding phi. Every piece of feedback becomes weighted Bradley-Terry
+pairs (winner embedding, loser embedding):
+
+- language feedback l_i about tau_i: the imagined improvement phi_i + psi_l beats phi_i (L_Explicit, Eq. 7), and beats
+  phi_i + psi_l~ for k other utterances l~ of the robot's own pool (L_Implicit, Eq. 9). The pool is a split of the
+  bank (default `train`, the phrasings the model was trained on); by default the negatives are drawn among pool
+  utterances of *other meanings* than the one the model reads l_i as (nearest meaning prototype by cosine: the
+  model's reading, never the synthetic human's label), so a paraphrase of l_i is never a negative.
+- a comparison: the preferred trajectory's phi beats the other's (Bradley-Terry, Eq. 11).
+
+L = (1/n) sum_i [explicit_i + (1/k) sum_j implicit_ij] + (weight_decay / 2) |xi|^2, n the queries so far. After
+every query the model is refit on all feedback so far with full-batch L-BFGS, warm-started from the last fit. The
+default r_xi is linear, r = xi . phi, as in the authors' code; then the loss is convex and the L2 term makes its
+minimum unique, so the result does not depend on optimiser details; `model="mlp"` gives a small network instead.
+With a linear r, r(phi + psi_l) - r(phi) = xi . psi_l: what language teaches does not depend on the shown trajectory.
+
+Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged over all its unordered pairs, and
+`reward_of_best`, the normalised true reward (0 worst, 1 best of the split) of the trajectory r_xi ranks first
+(averaged over ties, so a constant r_xi scores the split's mean).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from langpref.errors import LangprefError
+from langpref.feedback.humans import ComparisonHuman, HumanConfig, LanguageHuman, sample_weights, true_reward
+from langpref.feedback.space import LatentSpace
+from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
+
+LOSSES = ("both", "explicit", "implicit")
+NEGATIVES = ("other_meaning", "any")
+MODELS = ("linear", "mlp")
+
+
+@dataclass
+class RewardConfig:
+    """The reward model r_xi and how it is fit."""
+
+    model: str = "linear"
+    """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units)."""
+    hidden: int = 32
+    """Hidden units of the `mlp` model."""
+    weight_decay: float = 0.5
+    """L2 penalty (weight_decay / 2) |xi|^2 added to the mean loss over queries. It fixes the reward's scale, which
+    language feedback alone leaves open (its explicit pairs are separable), and so matters for the cross-entropy;
+    0.5 was chosen on the perfect latent space and one trained Meta-World model, the same for both methods."""
+    loss: str = "both"
+    """`both` (L_Explicit + L_Implicit, Eq. 9), `explicit` or `implicit` (the ablation)."""
+    num_negatives: int = 20
+    """k, other utterances per language query for L_Implicit."""
+    negatives: str = "other_meaning"
+    """`other_meaning`: negatives of other (feature, direction) meanings than the model's reading of l;
+    `any`: any pool utterance with another text (the paper's wording)."""
+    negative_split: str = "train"
+    """Bank split the robot draws implicit negatives from."""
+    max_iter: int = 100
+    """L-BFGS iterations per refit."""
+
+    def validate(self) -> None:
+        if self.model not in MODELS:
+            raise LangprefError(f"unknown reward model {self.model!r}: choose one of {', '.join(MODELS)}")
+        if self.loss not in LOSSES:
+            raise LangprefError(f"unknown loss {self.loss!r}: choose one of {', '.join(LOSSES)}")
+        if self.negatives not in NEGATIVES:
+            raise LangprefError(f"unknown negatives {self.negatives!r}: choose one of {', '.join(NEGATIVES)}")
+        if self.num_negatives < 1 and self.loss != "explicit":
+            raise LangprefError(f"num_negatives (k) must be >= 1 for L_Implicit, got {self.num_negatives}")
+        if self.weight_decay < 0 or self.hidden < 1 or self.max_iter < 1:
+            raise LangprefError("weight_decay must be >= 0, hidden and max_iter >= 1")
+
+
+@dataclass
+class PairBatch:
+    """Bradley-Terry pairs of one query: winners[j] is preferred to losers[j] with weight weights[j]."""
+
+    winners: np.ndarray
+    losers: np.ndarray
+    weights: np.ndarray
+
+
+def _prototypes(psi: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    groups = np.unique(group)
+    protos = np.stack([psi[group == g].mean(axis=0) for g in groups])
+    return groups, protos / np.maximum(np.linalg.norm(protos, axis=1, keepdims=True), 1e-12)
+
+
+def read_meaning(space: LatentSpace, psi: np.ndarray, split: str = "train") -> int:
+    """The meaning (2 * feature + direction) whose mean psi in `split` is closest in cosine to `psi`."""
+    table = space.table(split)
+    groups, protos = _prototypes(table.psi, table.group)
+    return int(groups[np.argmax(protos @ (psi / max(float(np.linalg.norm(psi)), 1e-12)))])
+
+
+def language_pairs(space: LatentSpace, answer: LanguageAnswer, cfg: RewardConfig,
+                   rng: np.random.Generator) -> PairBatch:
+    """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read)."""
+    phi = space.phi[answer.query.shown]
+    psi = space.psi_of(answer.text)
+    hat = phi + psi
+    winners, losers, weights = [], [], []
+    if cfg.loss in ("both", "explicit"):
+        winners.append(hat)
+        losers.append(phi)
+        weights.append(1.0)
+    if cfg.loss in ("both", "implicit"):
+        pool = space.table(cfg.negative_split)
+        if cfg.negatives == "other_meaning":
+            allowed = np.flatnonzero(pool.group != read_meaning(space, psi, cfg.negative_split))
+        else:
+            allowed = np.array([i for i, t in enumerate(pool.texts) if t != answer.text], dtype=np.int64)
+        if len(allowed) == 0:
+            raise LangprefError(f"bank split {cfg.negative_split!r} has no utterance to use as an implicit negative")
+        chosen = rng.choice(allowed, size=min(cfg.num_negatives, len(allowed)), replace=False)
+        for j in chosen:
+            winners.append(hat)
+            losers.append(phi + pool.psi[j])
+            weights.append(1.0 / len(chosen))
+    return PairBatch(np.array(winners), np.array(losers), np.array(weights))
+
+
+def comparison_pairs(space: LatentSpace, answer: ComparisonAnswer) -> PairBatch:
+    """The one Bradley-Terry pair of a comparison: preferred beats rejected."""
+    return PairBatch(space.phi[[answer.preferred]], space.phi[[answer.rejected]], np.ones(1))
+
+
+class RewardLearner:
+    """r_xi on phi, refit on all pairs so far after every query (`add` then `fit`)."""
+
+    def __init__(self, dim: int, cfg: RewardConfig | None = None, seed: int = 0):
+        import torch
+
+        self.cfg = cfg or RewardConfig()
+        self.cfg.validate()
+        self._torch = torch
+        gen = torch.Generator().manual_seed(int(seed))
+        if self.cfg.model == "linear":
+            self.params = [torch.zeros(dim, dtype=torch.float64, requires_grad=True)]
+        else:
+            h = self.cfg.hidden
+            self.params = [(torch.randn(dim, h, generator=gen, dtype=torch.float64) / dim ** 0.5).requires_grad_(),
+                           torch.zeros(h, dtype=torch.float64, requires_grad=True),
+                           (torch.randn(h, generator=gen, dtype=torch.float64) / h ** 0.5).requires_grad_()]
+        self.batches: list[PairBatch] = []
+        self._data: tuple | None = None
+
+    @property
+    def num_queries(self) -> int:
+        return len(self.batches)
+
+    def _reward(self, x):
+        if self.cfg.model == "linear":
+            return x @ self.params[0]
+        w1, b1, w2 = self.params
+        return self._torch.relu(x @ w1 + b1) @ w2
+
+    def add(self, batch: PairBatch) -> None:
+        self.batches.append(batch)
+        self._data = None
+
+    def loss(self):
+        """The mean Bradley-Terry loss over queries plus the L2 term, as a torch scalar."""
+        torch = self._torch
+        if self._data is None:
+            w = np.concatenate([b.weights for b in self.batches]) / max(len(self.batches), 1)
+            self._data = tuple(torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)) for a in (
+                np.concatenate([b.winners for b in self.batches]),
+                np.concatenate([b.losers for b in self.batches]), w))
+        win, lose, weight = self._data
+        margin = self._reward(win) - self._reward(lose)
+        reg = sum((p * p).sum() for p in self.params)
+        return (weight * torch.nn.functional.softplus(-margin)).sum() + 0.5 * self.cfg.weight_decay * reg
+
+    def fit(self) -> None:
+        if not self.batches:
+            return
+        torch = self._torch
+        opt = torch.optim.LBFGS(self.params, lr=1.0, max_iter=self.cfg.max_iter, tolerance_grad=1e-9,
+                                tolerance_change=1e-12, history_size=20, line_search_fn="strong_wolfe")
+
+        def closure():
+            opt.zero_grad()
+            value = self.loss()
+            value.backward()
+            return value
+
+        opt.step(closure)
+
+    def predict(self, phi: np.ndarray) -> np.ndarray:
+        with self._torch.no_grad():
+            return self._reward(self._torch.from_numpy(np.asarray(phi, dtype=np.float64))).numpy().copy()
+
+
+# ---- metrics ------------------------------------------------------------------------------------------------------
+
+
+def _log_sigmoid(z: np.ndarray) -> np.ndarray:
+    return -np.logaddexp(0.0, -z)
+
+
+def cross_entropy(true_values: np.ndarray, learned_values: np.ndarray, rationality: float = 1.0) -> float:
+    """CE(P_w, P_xi) averaged over all unordered pairs (i < j): P_w = sigmoid(rationality (R_i - R_j)) and
+    P_xi = sigmoid(r_i - r_j)."""
+    R = np.asarray(true_values, dtype=np.float64)
+    r = np.asarray(learned_values, dtype=np.float64)
+    if R.shape != r.shape or R.ndim != 1 or len(R) < 2:
+        raise LangprefError(f"cross-entropy needs two equal vectors of >= 2 rewards, got {R.shape} and {r.shape}")
+    i, j = np.triu_indices(len(R), k=1)
+    p = 0.5 * (1.0 + np.tanh(0.5 * rationality * (R[i] - R[j])))
+    d = r[i] - r[j]
+    return float(np.mean(-(p * _log_sigmoid(d) + (1.0 - p) * _log_sigmoid(-d))))
+
+
+def reward_of_best(true_values: np.ndarray, learned_values: np.ndarray) -> float:
+    """Normalised true reward (0 worst, 1 best of the set) of the trajectory ranked first by the learned reward;
+    ties share the rank, so the mean over the tied trajectories."""
+    R = np.asarray(true_values, dtype=np.float64)
+    r = np.asarray(learned_values, dtype=np.float64)
+    top = r >= r.max() - 1e-9 * max(1.0, abs(float(r.max())))
+    return float(((R[top] - R.min()) / max(float(R.max() - R.min()), 1e-12)).mean())
+
+
+@dataclass
+class Curves:
+    """Metrics after 0, 1, ..., Q queries."""
+
+    cross_entropy: list[float] = field(default_factory=list)
+    true_reward_of_best: list[float] = field(default_factory=list)
+
+    def record(self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray,
+               rationality: float) -> None:
+        r = learner.predict(space.phi[eval_rows])
+        self.cross_entropy.append(cross_entropy(R_eval, r, rationality))
+        self.true_reward_of_best.append(reward_of_best(R_eval, r))
+
+
+# ---- simulated sessions (`langpref learn-reward`) -----------------------------------------------------------------
+
+FEEDBACK = ("language", "comparison")
+
+
+@dataclass
+class LearnRewardConfig:
+    """`langpref learn-reward`: synthetic humans x seeds, Q queries each, metrics after every query."""
+
+    feedback: str = "language"
+    """`language` (one trajectory shown, comparative feedback) or `comparison` (a pair shown, one choice)."""
+    queries: int = 40
+    """Q, queries per run."""
+    humans: int = 3
+    """Synthetic humans (reward weights w), drawn from `seed`."""
+    seeds: int = 3
+    """Runs per human (query draws, answer noise, negatives)."""
+    seed: int = 0
+    query_split: str = "train"
+    """Trajectories shown in queries; the language human's tau* is the best of this split."""
+    eval_split: str = "test"
+    """Split of the metrics."""
+    human: HumanConfig = field(default_factory=HumanConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+
+    def validate(self) -> None:
+        if self.feedback not in FEEDBACK:
+            raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(FEEDBACK)}")
+        if self.queries < 1 or self.humans < 1 or self.seeds < 1:
+            raise LangprefError("queries, humans and seeds must each be >= 1")
+        self.human.validate()
+        self.reward.validate()
+
+
+def human_weights(num_features: int, seed: int, human: int) -> np.ndarray:
+    """The reward weights of synthetic human number `human` of experiment seed `seed`."""
+    return sample_weights(num_features, np.random.default_rng([seed, 7919, human]))
+
+
+def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfig, run_seed: tuple[int, ...]
+                        ) -> Curves:
+    """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each."""
+    cfg.validate()
+    pool = space.split(cfg.query_split)
+    eval_rows = space.split(cfg.eval_split)
+    R_eval = true_reward(w, space.theta[eval_rows])
+    rng_query, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
+    learner = RewardLearner(space.dim, cfg.reward, seed=int(np.random.default_rng([*run_seed, 4]).integers(2**31)))
+    curves = Curves()
+    curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+    if cfg.feedback == "language":
+        lang = LanguageHuman(w, space.theta, space.table(cfg.human.phrasing_split), pool, space.feature_names,
+                             cfg.human.temperature, rng_human)
+    else:
+        comp = ComparisonHuman(w, space.theta, cfg.human.rationality, rng_human)
+    for _ in range(cfg.queries):
+        if cfg.feedback == "language":
+            answer = lang.answer(LanguageQuery(int(rng_query.choice(pool))))
+            learner.add(language_pairs(space, answer, cfg.reward, rng_neg))
+        else:
+            a, b = rng_query.choice(pool, size=2, replace=False)
+            learner.add(comparison_pairs(space, comp.answer(ComparisonQuery(int(a), int(b)))))
+        learner.fit()
+        curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+    return curves
+
+
+def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
+    """Mean and std per query count over runs, the area under the mean true-reward curve (its mean over query
+    counts 0..Q) and the first query count whose mean true reward reaches `threshold` (None if never)."""
+    ce = np.array([c.cross_entropy for c in runs])
+    best = np.array([c.true_reward_of_best for c in runs])
+    mean_best = best.mean(axis=0)
+    reached = np.flatnonzero(mean_best >= threshold)
+    return {
+        "cross_entropy": ce.mean(axis=0).tolist(),
+        "cross_entropy_std": ce.std(axis=0).tolist(),
+        "true_reward_of_best": mean_best.tolist(),
+        "true_reward_of_best_std": best.std(axis=0).tolist(),
+        "auc_true_reward": float(mean_best.mean()),
+        "auc_cross_entropy": float(ce.mean(axis=0).mean()),
+        f"queries_to_{threshold:g}": int(reached[0]) if len(reached) else None,
+        "num_runs": len(runs),
+    }
+
+
+def learn_reward(space: LatentSpace, cfg: LearnRewardConfig, progress: bool = True) -> dict:
+    """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config."""
+    from tqdm import tqdm
+
+    cfg.validate()
+    runs = []
+    with tqdm(total=cfg.humans * cfg.seeds, desc=f"learn-reward {cfg.feedback}", disable=not progress,
+              file=sys.stderr) as bar:
+        for h in range(cfg.humans):
+            w = human_weights(len(space.feature_names), cfg.seed, h)
+            for s in range(cfg.seeds):
+                runs.append(run_reward_learning(space, w, cfg, (cfg.seed, h, s)))
+                bar.update()
+    return {**summarise(runs), "feedback": cfg.feedback, "loss": cfg.reward.loss, "config": asdict(cfg),
+            "space": space.description}

@@ -1,0 +1,47 @@
+"""The simulated world: feature normalisation, phrase tables, the perfect and toy latent spaces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from langpref.errors import LangprefError
+from langpref.feedback import FeatureScale, perfect_encoder, toy_latent_space
+from langpref.language.bank import load_bank
+
+
+def test_feature_scale_uses_given_rows():
+    feats = np.array([[1.0, 10.0], [3.0, 10.0], [100.0, -5.0]])
+    scale = FeatureScale.fit(feats[:2])
+    assert np.allclose(scale(feats[:2]), [[-1.0, 0.0], [1.0, 0.0]])  # a constant feature keeps std 1
+    with pytest.raises(LangprefError):
+        FeatureScale.fit(feats[:1])
+
+
+def test_perfect_encoder_maps_meanings_to_signed_axes():
+    bank = load_bank("metaworld")
+    enc = perfect_encoder(bank.features, bank)
+    text = bank.get("test", "distance_to_button", "decrease")[0]
+    assert np.array_equal(enc([text])[0], [0.0, 0.0, -1.0])
+    with pytest.raises(LangprefError):
+        enc(["Dance a little."])
+
+
+def test_toy_space_is_an_isometric_perfect_space():
+    small, big = toy_latent_space(n=30, seed=1), toy_latent_space(n=30, dim=64, seed=1)
+    assert big.phi.shape == (30, 64) and big.table("train").psi.shape[1] == 64
+    i, j = 0, 1
+    # psi . (phi_j - phi_i) equals the feature difference, in any embedding dimension
+    text = big.table("test").texts[0]
+    f = big.table("test").feature[0]
+    sign = 1 if big.table("test").direction[0] == 0 else -1
+    for space in (small, big):
+        delta = space.psi_of(text) @ (space.phi[j] - space.phi[i])
+        assert np.isclose(delta, sign * (space.theta[j, f] - space.theta[i, f]))
+    assert set(small.splits["train"]).isdisjoint(small.splits["test"])
+    with pytest.raises(LangprefError):
+        small.psi_of("no such phrasing")
+    with pytest.raises(LangprefError):
+        small.table("val")  # only the test and train phrasings were embedded
+    with pytest.raises(LangprefError):
+        small.split("nope")

@@ -1,0 +1,138 @@
+"""Iterative improvement: Eq. 4's argmax, the paper and history strategies, the CLI and the resumable experiment."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from langpref.cli import main
+from langpref.errors import LangprefError
+from langpref.feedback import toy_latent_space
+from langpref.improve import (
+    ImproveConfig,
+    cosine_objective,
+    human_weights,
+    improve,
+    improvement_step,
+    plot_improvement,
+    run_improvement,
+)
+
+torch.set_num_threads(1)
+
+
+def write_features_dataset(root: Path, env: str = "metaworld", n: int = 40, seed: int = 0) -> Path:
+    """A dataset directory with meta.json and features.npy only (enough for --perfect-latent)."""
+    from langpref.dataset.storage import DatasetMeta, write_meta
+    from langpref.language.bank import FEATURES
+
+    rng = np.random.default_rng(seed)
+    feats = rng.normal(size=(n, len(FEATURES[env])))
+    order = rng.permutation(n).tolist()
+    splits = {"train": sorted(order[: n // 2]), "val": sorted(order[n // 2: 3 * n // 4]),
+              "test": sorted(order[3 * n // 4:])}
+    meta = DatasetMeta(env, 10, [{"name": "obs", "start": 0, "stop": 4}], 2, list(FEATURES[env]), splits, n)
+    write_meta(root, meta, feats)
+    return root
+
+
+def test_cosine_objective_and_argmax_on_hand_built_embeddings():
+    phi = np.array([[1.0, 0.0], [0.0, 1.0], [2.0, 2.0], [-1.0, 0.5]])
+    current = np.array([1.0, 0.0])
+    psi = np.array([0.0, 1.0])  # "more of dimension 2"
+    expected = (phi - current) @ psi / (np.linalg.norm(phi, axis=1) * 1.0)
+    assert np.allclose(cosine_objective(phi, current, psi), expected)
+    assert improvement_step(phi, current, psi) == 1  # 1/1 beats 2/sqrt(8) and 0.5/sqrt(1.25)
+    assert improvement_step(phi, current, -psi) == 0  # nothing lowers dim 2 below the current one: stay
+
+
+@pytest.fixture(scope="module")
+def space():
+    return toy_latent_space(n=100, seed=0)
+
+
+@pytest.mark.parametrize("strategy", ["paper", "history"])
+def test_improvement_with_a_perfect_latent_space_raises_the_reward(space, strategy):
+    result = improve(space, ImproveConfig(strategy=strategy, seeds=20, iterations=8), progress=False)
+    assert len(result["curve"]) == len(result["curve_std"]) == 9
+    assert result["optimal"] == 1.0
+    assert result["curve"][-1] - result["curve"][0] > 0.25
+    assert 0.0 <= min(result["curve"]) and max(result["curve"]) <= 1.0
+
+
+def test_history_ends_at_least_as_high_as_paper(space):
+    curves = {s: improve(space, ImproveConfig(strategy=s, seeds=20, iterations=8), progress=False)["curve"]
+              for s in ("paper", "history")}
+    assert curves["history"][-1] >= curves["paper"][-1] - 0.02
+
+
+def test_same_seed_same_curve_and_runs_differ(space):
+    cfg = ImproveConfig(strategy="history", seeds=4, iterations=4)
+    assert improve(space, cfg, progress=False)["curve"] == improve(space, cfg, progress=False)["curve"]
+    cfg.seed = 1
+    runs = [run_improvement(space, human_weights(3, 0, s), cfg, (0, s)).shown for s in range(4)]
+    assert len({tuple(r) for r in runs}) > 1
+
+
+def test_exclude_shown_never_repeats(space):
+    cfg = ImproveConfig(strategy="history", iterations=10, exclude_shown=True)
+    run = run_improvement(space, human_weights(3, 0, 0), cfg, (0, 0))
+    assert len(set(run.shown)) == len(run.shown) == 11
+
+
+def test_bad_config_is_a_one_line_error(space):
+    with pytest.raises(LangprefError, match="strategy"):
+        improve(space, ImproveConfig(strategy="greedy"), progress=False)
+    with pytest.raises(LangprefError, match="split"):
+        improve(space, ImproveConfig(candidate_split="holdout", seeds=1), progress=False)
+
+
+def test_plot_writes_a_png(space, tmp_path):
+    res = improve(space, ImproveConfig(seeds=3, iterations=3), progress=False)
+    out = plot_improvement({"paper": res}, tmp_path / "fig" / "improve.png")
+    assert out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cli_improve_json(tmp_path, capsys):
+    data = write_features_dataset(tmp_path / "d")
+    assert main(["improve", "--data", str(data), "--perfect-latent", "--seeds", "3", "--iterations", "4",
+                 "--strategy", "history", "--figure", str(tmp_path / "f.png"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["curve"]) == len(out["curve_std"]) == 5 and out["optimal"] == 1.0
+    assert Path(out["figure"]).is_file()
+    assert main(["improve", "--data", str(data)]) == 2  # neither a model nor --perfect-latent
+    assert "--perfect-latent" in capsys.readouterr().err
+
+
+def test_experiment_improve_writes_and_resumes(tmp_path, monkeypatch, capsys):
+    import langpref.improve as improve_module
+    from langpref.experiments.improve import run_improve_experiment
+
+    data = write_features_dataset(tmp_path / "d")
+    out = tmp_path / "res"
+    cfg = ImproveConfig(seeds=3, iterations=3)
+    first = run_improve_experiment("metaworld", data, None, out, perfect=True, config=cfg, progress=False)
+    assert {p.name for p in out.iterdir()} >= {"improve.json", "improve.png", "improve.md", "runs.json"}
+    assert set(first["strategies"]) == {"paper", "history"}
+    assert "| paper |" in (out / "improve.md").read_text()
+
+    def boom(*args, **kwargs):
+        raise AssertionError("a finished seed was rerun")
+
+    monkeypatch.setattr(improve_module, "run_improvement", boom)
+    again = run_improve_experiment("metaworld", data, None, out, perfect=True, config=cfg, progress=False)
+    assert again["strategies"]["paper"]["curve"] == first["strategies"]["paper"]["curve"]
+    with pytest.raises(LangprefError, match="another configuration"):
+        run_improve_experiment("metaworld", data, None, out, perfect=True,
+                               config=ImproveConfig(seeds=3, iterations=4), progress=False)
+    monkeypatch.undo()
+    assert main(["experiment", "improve", "--env", "metaworld", "--data", str(data), "--perfect-latent",
+                 "--out", str(out), "--seeds", "3", "--iterations", "4", "--force", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert len(summary["strategies"]["history"]["curve"]) == 5
+    assert asdict(ImproveConfig())["seeds"] == 100 and ImproveConfig().iterations == 15

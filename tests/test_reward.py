@@ -1,0 +1,241 @@
+"""Reward learning from language (Eq. 5-9) and comparisons: metrics, recovery of w, seeds, CLI, experiments."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.stats import spearmanr
+
+from langpref.cli import main
+from langpref.errors import LangprefError
+from langpref.feedback import (
+    ComparisonAnswer,
+    ComparisonQuery,
+    HumanConfig,
+    LanguageAnswer,
+    LanguageHuman,
+    LanguageQuery,
+    sample_weights,
+    toy_latent_space,
+)
+from langpref.reward import (
+    LearnRewardConfig,
+    RewardConfig,
+    RewardLearner,
+    comparison_pairs,
+    cross_entropy,
+    language_pairs,
+    learn_reward,
+    read_meaning,
+    reward_of_best,
+    run_reward_learning,
+)
+
+torch.set_num_threads(1)
+
+
+def test_cross_entropy_on_hand_built_numbers():
+    assert np.isclose(cross_entropy(np.array([0.0, 1.0]), np.zeros(2)), np.log(2))
+    # P_w(0 > 1) = sigmoid(-ln 3) = 1/4; with r = R, CE is the entropy H(1/4)
+    R = np.array([0.0, np.log(3.0)])
+    assert np.isclose(cross_entropy(R, R), -(0.25 * np.log(0.25) + 0.75 * np.log(0.75)))
+    # three trajectories: the mean over the 3 unordered pairs
+    R3, r3 = np.array([0.0, 1.0, 3.0]), np.array([1.0, 0.0, 0.0])
+    sig = lambda z: 1 / (1 + np.exp(-z))  # noqa: E731
+    pairs = [(0, 1), (0, 2), (1, 2)]
+    manual = np.mean([-(sig(R3[i] - R3[j]) * np.log(sig(r3[i] - r3[j]))
+                        + (1 - sig(R3[i] - R3[j])) * np.log(1 - sig(r3[i] - r3[j]))) for i, j in pairs])
+    assert np.isclose(cross_entropy(R3, r3), manual)
+    assert np.isclose(cross_entropy(R3, r3, rationality=0.0), np.mean(
+        [-(0.5 * np.log(sig(r3[i] - r3[j])) + 0.5 * np.log(1 - sig(r3[i] - r3[j]))) for i, j in pairs]))
+    with pytest.raises(LangprefError):
+        cross_entropy(np.zeros(3), np.zeros(2))
+
+
+def test_reward_of_best_on_hand_built_numbers():
+    R = np.array([1.0, 3.0, 2.0])
+    assert reward_of_best(R, np.array([0.0, 5.0, 1.0])) == 1.0
+    assert reward_of_best(R, np.array([2.0, 0.0, 0.0])) == 0.0
+    assert reward_of_best(R, np.array([0.0, 0.0, 1.0])) == 0.5
+    assert np.isclose(reward_of_best(R, np.zeros(3)), 0.5)  # ties: the mean of (0, 1, 0.5)
+
+
+@pytest.fixture(scope="module")
+def space():
+    return toy_latent_space(n=120, dim=16, seed=0)
+
+
+def test_language_pairs_read_no_label_and_skip_paraphrases(space):
+    table = space.table("test")
+    row = 0
+    answer = LanguageAnswer(LanguageQuery(int(space.split("train")[0])), table.texts[row])  # no feature/direction
+    cfg = RewardConfig(num_negatives=20)
+    batch = language_pairs(space, answer, cfg, np.random.default_rng(0))
+    assert len(batch.weights) == 21 and np.isclose(batch.weights.sum(), 2.0)
+    phi = space.phi[answer.query.shown]
+    assert np.allclose(batch.winners, phi + table.psi[row])
+    assert np.allclose(batch.losers[0], phi)  # explicit: improvement beats the shown trajectory
+    meaning = read_meaning(space, table.psi[row])
+    assert meaning == table.group[row]
+    pool = space.table("train")
+    negatives = batch.losers[1:] - phi
+    for neg in negatives:  # no implicit negative shares the meaning of l
+        j = int(np.argmin(np.linalg.norm(pool.psi - neg, axis=1)))
+        assert pool.group[j] != meaning
+    only = language_pairs(space, answer, RewardConfig(loss="explicit"), np.random.default_rng(0))
+    assert len(only.weights) == 1
+    assert len(language_pairs(space, answer, RewardConfig(loss="implicit"), np.random.default_rng(0)).weights) == 20
+
+
+def test_linear_reward_with_no_data_is_flat(space):
+    learner = RewardLearner(space.dim)
+    learner.fit()
+    assert np.all(learner.predict(space.phi) == 0.0)
+
+
+@pytest.mark.parametrize("model", ["linear", "mlp"])
+def test_language_feedback_recovers_the_ranking_of_w(space, model):
+    w = np.array([0.8, -0.5, 0.33])
+    pool = space.split("train")
+    human = LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, temperature=0.5, seed=0)
+    cfg = RewardConfig(model=model)
+    learner, rng = RewardLearner(space.dim, cfg, seed=0), np.random.default_rng(1)
+    for _ in range(40):
+        learner.add(language_pairs(space, human.answer(LanguageQuery(int(rng.choice(pool)))), cfg, rng))
+        learner.fit()
+    rho = spearmanr(learner.predict(space.phi), space.theta @ w)[0]
+    assert rho > (0.9 if model == "linear" else 0.8)
+
+
+def test_comparisons_recover_the_ranking_of_w(space):
+    w = sample_weights(3, 5)
+    pool = space.split("train")
+    R = space.theta @ w
+    learner, rng = RewardLearner(space.dim, RewardConfig()), np.random.default_rng(0)
+    for _ in range(60):
+        a, b = (int(i) for i in rng.choice(pool, 2, replace=False))
+        learner.add(comparison_pairs(space, ComparisonAnswer(ComparisonQuery(a, b), 0 if R[a] > R[b] else 1)))
+    learner.fit()
+    assert spearmanr(learner.predict(space.phi), R)[0] > 0.9
+
+
+def test_language_beats_comparisons_on_a_perfect_space(space):
+    res = {fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=15, humans=3, seeds=2), progress=False)
+           for fb in ("language", "comparison")}
+    lang, comp = (np.array(res[fb]["cross_entropy"]) for fb in ("language", "comparison"))
+    assert lang[0] == comp[0] == pytest.approx(np.log(2) - 0.0, abs=0.2)  # same flat start
+    assert lang[1:].mean() < comp[1:].mean()
+    assert res["language"]["auc_true_reward"] > res["comparison"]["auc_true_reward"]
+    for r in res.values():
+        assert len(r["cross_entropy"]) == len(r["true_reward_of_best"]) == 16
+
+
+def test_same_seed_same_curves(space):
+    cfg = LearnRewardConfig(queries=5)
+    w = sample_weights(3, 0)
+    a, b = run_reward_learning(space, w, cfg, (0, 0, 0)), run_reward_learning(space, w, cfg, (0, 0, 0))
+    assert a.cross_entropy == b.cross_entropy and a.true_reward_of_best == b.true_reward_of_best
+    c = run_reward_learning(space, w, cfg, (0, 0, 1))
+    assert c.cross_entropy != a.cross_entropy
+
+
+def test_bad_configs_are_one_line_errors(space):
+    for cfg in (LearnRewardConfig(feedback="gestures"), LearnRewardConfig(queries=0),
+                LearnRewardConfig(reward=RewardConfig(loss="neither")),
+                LearnRewardConfig(human=HumanConfig(temperature=0.0))):
+        with pytest.raises(LangprefError):
+            learn_reward(space, cfg, progress=False)
+
+
+# ---- command line and experiments, on datasets written to disk ---------------------------------------------------
+
+
+def write_dataset(root: Path, env: str, n: int = 24, horizon: int = 8, seed: int = 0) -> Path:
+    """A dataset in the real on-disk format (real observation layout of `env`), split 50/25/25."""
+    from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
+    from langpref.envs import get_spec
+
+    spec = get_spec(env)
+    rng = np.random.default_rng(seed)
+    nf = len(spec.features)
+    feats = []
+    for i in range(n):
+        obs = (rng.normal(size=spec.obs_dim) + 0.1 * rng.normal(size=(horizon, spec.obs_dim))).astype(np.float32)
+        traj = Trajectory(i, obs, rng.normal(size=(horizon, spec.action_dim)).astype(np.float32),
+                          obs[:, :nf].astype(np.float64), np.zeros((horizon, 2)), np.zeros((horizon, 2)),
+                          bool(i % 2), i, {})
+        save_trajectory(root, traj)
+        feats.append(traj.features)
+    splits = {"train": list(range(n // 2)), "val": list(range(n // 2, 3 * n // 4)), "test": list(range(3 * n // 4, n))}
+    write_meta(root, DatasetMeta(env, horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim,
+                                 list(spec.features), splits, n), np.array(feats))
+    return root
+
+
+def test_cli_learn_reward_json(tmp_path, capsys):
+    data = write_dataset(tmp_path / "d", "metaworld")
+    for fb in ("language", "comparison"):
+        assert main(["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", fb, "--queries", "4",
+                     "--humans", "1", "--seeds", "2", "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert len(out["cross_entropy"]) == len(out["true_reward_of_best"]) == 5
+        assert out["num_runs"] == 2 and out["feedback"] == fb
+    assert main(["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", "language",
+                 "--phrasing-split", "val", "--num-negatives", "0", "--json"]) == 2
+    assert "num_negatives" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def untrained_model(tmp_path_factory):
+    """A real (untrained) checkpoint of a metaworld model: encoders exercised end to end."""
+    from langpref.envs import get_spec
+    from langpref.model.checkpoint import build_model, save_model
+    from langpref.model.config import ModelConfig
+    from langpref.model.latent import DataInfo
+
+    spec = get_spec("metaworld")
+    info = DataInfo(env="metaworld", feature_names=list(spec.features),
+                    obs_layout=[asdict(f) for f in spec.obs_layout], obs_dim=spec.obs_dim,
+                    action_dim=spec.action_dim, horizon=8, schema_version=1,
+                    tie_thresholds=[0.0] * len(spec.features), feature_std=[1.0] * len(spec.features))
+    cfg = ModelConfig(latent_dim=8, max_length=12)
+    torch.manual_seed(0)
+    model = build_model(cfg, info, None, None)
+    return save_model(model, tmp_path_factory.mktemp("m") / "model", model_cfg=cfg, lang_finetuned=False)
+
+
+def test_cli_with_a_real_model_and_mismatched_env(tmp_path, capsys, untrained_model):
+    data = write_dataset(tmp_path / "mw", "metaworld")
+    assert main(["learn-reward", "--model", str(untrained_model), "--data", str(data), "--feedback", "language",
+                 "--queries", "2", "--humans", "1", "--seeds", "1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["cross_entropy"]) == 3 and "model" in out["space"]
+    other = write_dataset(tmp_path / "rs", "robosuite")
+    for argv in (["learn-reward", "--feedback", "comparison"], ["improve"]):
+        assert main([*argv, "--model", str(untrained_model), "--data", str(other), "--seeds", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and "trained on metaworld" in err and err.count("\n") == 1
+
+
+def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch):
+    import langpref.reward as reward_module
+    from langpref.experiments.reward import run_ablation_experiment, run_reward_experiment
+
+    data = write_dataset(tmp_path / "d", "metaworld", n=40)
+    cfg = LearnRewardConfig(queries=4, humans=2, seeds=1)
+    res = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
+    assert set(res["methods"]) == {"language", "comparison"} and len(res["targets"]) == 3
+    abl = run_ablation_experiment("metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, progress=False)
+    assert set(abl["methods"]) == {"both", "explicit", "implicit"}
+    for out, name in ((tmp_path / "r", "reward"), (tmp_path / "a", "ablation")):
+        assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+        assert json.loads((out / f"{name}.json").read_text())["queries"] == 4
+        assert "Paper:" in (out / f"{name}.md").read_text()
+    monkeypatch.setattr(reward_module, "run_reward_learning", lambda *a, **k: pytest.fail("rerun"))
+    again = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
+    assert again["methods"]["language"]["cross_entropy"] == res["methods"]["language"]["cross_entropy"]
