@@ -8,7 +8,7 @@ export PYOPENGL_PLATFORM ?= egl
 export TOKENIZERS_PARALLELISM ?= false
 export HF_HUB_OFFLINE ?= 1
 
-.PHONY: install demo test bench lint clean
+.PHONY: install demo test bench reproduce clean
 
 install: $(STAMP)
 
@@ -28,6 +28,21 @@ test: install
 
 bench: install
 	$(BIN)/python -m langpref.bench
+
+# Every experiment of the paper's simulation section, both envs, from nothing: data, models, experiments, figures.
+# Hours on a CPU; each step resumes or skips what is done. BACKEND=ray fans generation and sweeps out over Ray.
+ENVS ?= metaworld robosuite
+BACKEND ?= local
+reproduce: install
+	@for env in $(ENVS); do \
+	  set -e; \
+	  test -f data/$$env/meta.json || $(BIN)/langpref generate --env $$env --out data/$$env --backend $(BACKEND); \
+	  test -f results/alignment/$$env/alignment.json || $(BIN)/langpref experiment alignment --env $$env; \
+	  for exp in improve reward ablation; do \
+	    $(BIN)/langpref experiment $$exp --env $$env --model results/alignment/$$env/cofinetuned --backend $(BACKEND); \
+	  done; \
+	done
+	@echo "figures and tables: results/*/*/ (see docs/results.md)"
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache

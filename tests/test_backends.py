@@ -83,3 +83,18 @@ def test_rerun_skips_what_is_done(tmp_path):
     assert (tmp_path / "d" / "trajectories" / "000001.npz").stat().st_mtime_ns == stamp
     assert summary["steps_per_s"] is None  # nothing was rolled out again
     np.testing.assert_array_equal(load_dataset(tmp_path / "d").features, first)
+
+
+def test_reward_sweep_on_two_nodes_equals_local(cluster, tmp_path):
+    from langpref.experiments.improve import SweepConfig
+    from langpref.experiments.reward import run_reward_experiment
+    from langpref.reward import LearnRewardConfig
+
+    generate(GenerateConfig(env="metaworld", out=tmp_path / "data", num_trajectories=30, horizon=20, workers=1))
+    cfg = LearnRewardConfig(queries=3, humans=2, seeds=1)
+    kw = dict(env="metaworld", data=tmp_path / "data", perfect=True, config=cfg, progress=False)
+    local = run_reward_experiment(out=tmp_path / "local", **kw)
+    remote = run_reward_experiment(out=tmp_path / "ray", sweep=SweepConfig("ray", 2), **kw)
+    for method in ("language", "comparison"):
+        assert local["methods"][method]["cross_entropy"] == remote["methods"][method]["cross_entropy"]
+        assert local["methods"][method]["true_reward_of_best"] == remote["methods"][method]["true_reward_of_best"]

@@ -11,8 +11,10 @@ nodes need no shared file system. A task lost with its worker is retried by Ray 
 
 from __future__ import annotations
 
+import hashlib
 import multiprocessing as mp
 import os
+import pickle
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -22,11 +24,12 @@ BACKENDS = ("local", "ray")
 _SETUP_CACHE: dict[tuple, Any] = {}
 
 
+
 def _call_setup(setup: Callable[..., Any] | None, setup_args: tuple) -> Any:
     """Per-process state (e.g. a simulator), built once per worker process and reused by its later jobs."""
     if setup is None:
         return None
-    key = (setup.__module__, setup.__qualname__, setup_args)
+    key = (setup.__module__, setup.__qualname__, hashlib.sha1(pickle.dumps(setup_args)).hexdigest())
     if key not in _SETUP_CACHE:
         _SETUP_CACHE.clear()
         _SETUP_CACHE[key] = setup(*setup_args)

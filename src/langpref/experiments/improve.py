@@ -14,7 +14,7 @@ import hashlib
 import json
 import os
 import sys
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +51,52 @@ class RunCache:
         tmp = self.path.with_name(f".{self.path.name}.tmp-{os.getpid()}")
         tmp.write_text(json.dumps({"config_key": self.key, "runs": self.runs}))
         tmp.replace(self.path)
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Where the runs of an experiment execute (each run is one task: a seed, or a human x seed x method)."""
+
+    backend: str = "local"
+    """local worker processes or Ray tasks."""
+    workers: int = 1
+    """Parallel workers (local processes, or CPUs of a local Ray instance)."""
+    ray_address: str | None = None
+    """A running Ray cluster to join; default a local instance."""
+
+
+def _load_space(data: Path, model: Path | None, env: str, perfect: bool):
+    from langpref.feedback.space import load_space
+
+    return load_space(data, model, env=env, perfect=perfect)
+
+
+def run_sweep(job_fn, todo: list, space, space_args: tuple, cache: RunCache, sweep: SweepConfig, desc: str,
+              progress: bool) -> None:
+    """Run every job of `todo` and store each result in `cache` as it finishes (a rerun skips what is there).
+
+    In-process runs use `space` as it is; worker processes and Ray tasks rebuild it from `space_args` (data, model,
+    env, perfect), so on a cluster every node needs the dataset and the model at the same paths.
+    """
+    from tqdm import tqdm
+
+    from langpref.backends import run_jobs
+
+    if sweep.backend == "local" and sweep.workers <= 1:
+        results = (job_fn(space, job) for job in todo)
+    else:
+        results = run_jobs(job_fn, todo, setup=_load_space, setup_args=space_args, backend=sweep.backend,
+                           workers=sweep.workers, ray_address=sweep.ray_address)
+    for key, value in tqdm(results, total=len(todo), desc=desc, disable=not progress, file=sys.stderr):
+        cache.put(key, value)
+
+
+def _improvement_job(space, job) -> tuple[str, dict]:
+    from langpref.improve import human_weights, run_improvement
+
+    key, cfg, s = job
+    w = human_weights(len(space.feature_names), cfg.seed, s)
+    return key, asdict(run_improvement(space, w, cfg, (cfg.seed, s)))
 
 
 def default_paths(kind: str, env: str, data: str | Path | None, model: str | Path | None, out: str | Path | None,
@@ -100,12 +146,10 @@ def improve_markdown(summary: dict[str, Any]) -> str:
 def run_improve_experiment(env: str, data: str | Path | None = None, model: str | Path | None = None,
                            out: str | Path | None = None, *, perfect: bool = False, config=None,
                            strategies: tuple[str, ...] = ("paper", "history"), force: bool = False,
-                           progress: bool = True) -> dict[str, Any]:
+                           progress: bool = True, sweep: SweepConfig | None = None) -> dict[str, Any]:
     """Both strategies with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and markdown."""
-    from tqdm import tqdm
-
     from langpref.feedback.space import load_space
-    from langpref.improve import ImproveConfig, ImprovementRun, human_weights, plot_improvement, run_improvement
+    from langpref.improve import ImproveConfig, ImprovementRun, plot_improvement
     from langpref.improve import summarise as summarise_runs
 
     data, model, out = default_paths("improve", env, data, model, out, perfect)
@@ -114,17 +158,14 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     cfgs = {s: replace(base, strategy=s) for s in strategies}
     cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
                      force=force)
-    results = {}
-    for name, cfg in cfgs.items():
+    for cfg in cfgs.values():
         cfg.validate()
-        runs = []
-        for s in tqdm(range(cfg.seeds), desc=f"improve {env} {name}", disable=not progress, file=sys.stderr):
-            key = f"{name}/{s}"
-            if key not in cache:
-                w = human_weights(len(space.feature_names), cfg.seed, s)
-                cache.put(key, asdict(run_improvement(space, w, cfg, (cfg.seed, s))))
-            runs.append(ImprovementRun(**cache.runs[key]))
-        results[name] = {**summarise_runs(runs), "config": asdict(cfg)}
+    todo = [(f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds)
+            if f"{name}/{s}" not in cache]
+    run_sweep(_improvement_job, todo, space, (data, model, env, perfect), cache, sweep or SweepConfig(),
+              f"improve {env}", progress)
+    results = {name: {**summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
+                      "config": asdict(cfg)} for name, cfg in cfgs.items()}
     figure = plot_improvement({f"{n} ({'Eq. 4' if n == 'paper' else 'feedback history'})": r
                                for n, r in results.items()}, out / "improve.png",
                               f"Iterative improvement, {env}" + (" (perfect latent)" if perfect else ""))

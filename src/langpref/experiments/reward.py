@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.improve import RunCache, command_line, default_paths, figure_link
+from langpref.experiments.improve import RunCache, SweepConfig, command_line, default_paths, figure_link, run_sweep
 
 PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
               "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
@@ -55,30 +55,33 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
 
 
 def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out, perfect: bool, force: bool,
-                 progress: bool) -> tuple[dict[str, dict], Any, Path, Path | None, Path]:
+                 progress: bool, sweep: SweepConfig | None) -> tuple[dict[str, dict], Any, Path, Path | None, Path]:
     """Run every (method, human, seed) not yet in the cache; the summary of each method."""
-    from tqdm import tqdm
-
     from langpref.feedback.space import load_space
-    from langpref.reward import Curves, human_weights, run_reward_learning, summarise
+    from langpref.reward import Curves, summarise
 
     data, model, out = default_paths(kind, env, data, model, out, perfect)
     space = load_space(data, model, env=env, perfect=perfect)
     cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
                      force=force)
-    results = {}
-    for name, cfg in methods.items():
+    for cfg in methods.values():
         cfg.validate()
-        runs = []
-        todo = [(h, s) for h in range(cfg.humans) for s in range(cfg.seeds)]
-        for h, s in tqdm(todo, desc=f"{kind} {env} {name}", disable=not progress, file=sys.stderr):
-            key = f"{name}/{h}/{s}"
-            if key not in cache:
-                w = human_weights(len(space.feature_names), cfg.seed, h)
-                cache.put(key, asdict(run_reward_learning(space, w, cfg, (cfg.seed, h, s))))
-            runs.append(Curves(**cache.runs[key]))
-        results[name] = {**summarise(runs), "config": asdict(cfg)}
+    todo = [(f"{name}/{h}/{s}", cfg, h, s) for name, cfg in methods.items() for h in range(cfg.humans)
+            for s in range(cfg.seeds) if f"{name}/{h}/{s}" not in cache]
+    run_sweep(_reward_job, todo, space, (data, model, env, perfect), cache, sweep or SweepConfig(),
+              f"{kind} {env}", progress)
+    results = {name: {**summarise([Curves(**cache.runs[f"{name}/{h}/{s}"]) for h in range(cfg.humans)
+                                   for s in range(cfg.seeds)]), "config": asdict(cfg)}
+               for name, cfg in methods.items()}
     return results, space, data, model, out
+
+
+def _reward_job(space, job) -> tuple[str, dict]:
+    from langpref.reward import human_weights, run_reward_learning
+
+    key, cfg, h, s = job
+    w = human_weights(len(space.feature_names), cfg.seed, h)
+    return key, asdict(run_reward_learning(space, w, cfg, (cfg.seed, h, s)))
 
 
 def _table(results: dict[str, dict], at: list[int]) -> list[str]:
@@ -123,7 +126,8 @@ def _finish(kind: str, title: str, paper: str, env: str, results, space, data, m
 
 
 def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
-                          force: bool = False, progress: bool = True) -> dict[str, Any]:
+                          force: bool = False, progress: bool = True, sweep: SweepConfig | None = None
+                          ) -> dict[str, Any]:
     """Language (L_Explicit + L_Implicit) vs comparisons with the paper's settings (or `config`, a
     `LearnRewardConfig` whose feedback is replaced); writes reward.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
@@ -131,7 +135,7 @@ def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect:
     base = config or LearnRewardConfig()
     methods = {"language": replace(base, feedback="language"), "comparison": replace(base, feedback="comparison")}
     results, space, data, model, out = _run_methods("reward", env, methods, data, model, out, perfect, force,
-                                                    progress)
+                                                    progress, sweep)
     lang, comp = results["language"], results["comparison"]
     lq, cq = lang["queries_to_0.95"], comp["queries_to_0.95"]
     targets = {
@@ -145,7 +149,8 @@ def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect:
 
 
 def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
-                            force: bool = False, progress: bool = True) -> dict[str, Any]:
+                            force: bool = False, progress: bool = True, sweep: SweepConfig | None = None
+                          ) -> dict[str, Any]:
     """Language feedback with L_Explicit + L_Implicit, L_Explicit alone and L_Implicit alone; writes
     ablation.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
@@ -154,7 +159,7 @@ def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfec
     methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit",
                                                                                          "implicit")}
     results, space, data, model, out = _run_methods("ablation", env, methods, data, model, out, perfect, force,
-                                                    progress)
+                                                    progress, sweep)
     b, e, i = results["both"], results["explicit"], results["implicit"]
     targets = {
         "both has a higher AUC of true reward than explicit and implicit alone":
