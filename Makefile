@@ -18,6 +18,9 @@ $(STAMP): pyproject.toml requirements/constraints.txt
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[test,ray]"
+	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here).
+	command -v chromium >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
+	  || echo "warning: could not install Debian's chromium; the browser test will be skipped"
 	touch $(STAMP)
 
 demo: install
@@ -28,6 +31,7 @@ test: install
 
 bench: install
 	$(BIN)/python -m langpref.bench
+	$(BIN)/python -m langpref.study.bench
 
 # Every experiment of the paper's simulation section, both envs, from nothing: data, models, experiments, figures.
 # Hours on a CPU; each step resumes or skips what is done. BACKEND=ray fans generation and sweeps out over Ray.

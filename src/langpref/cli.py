@@ -319,8 +319,10 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
     from langpref.improve import ImproveConfig
     from langpref.reward import LearnRewardConfig
 
+    from langpref.experiments.improve import SweepConfig
+
     kw = dict(env=args.env, data=args.data, model=args.model, out=args.out, perfect=args.perfect_latent,
-              force=args.force)
+              force=args.force, sweep=SweepConfig(args.backend, args.workers, args.ray_address))
     if args.experiment == "improve":
         from langpref.experiments.improve import run_improve_experiment
 
@@ -422,8 +424,87 @@ def _register_latent_use_commands(sub) -> None:
             p.add_argument("--humans", type=int, default=None, help="override the 3 synthetic humans")
             p.add_argument("--queries", type=int, default=None, help="override Q = 40")
         p.add_argument("--force", action="store_true", help="discard finished runs in --out and start over")
+        p.add_argument("--backend", choices=("local", "ray"), default="local",
+                       help="run the seeds as local processes (default) or as Ray tasks, one per run")
+        p.add_argument("--workers", type=int, default=1, help="parallel runs (default %(default)s)")
+        p.add_argument("--ray-address", default=None, help="with --backend ray: a cluster to join (default local)")
         p.add_argument("--json", action="store_true", help="print one JSON object")
         p.set_defaults(func=cmd_experiment_uses)
+
+
+# ---- study commands (the web app for user studies) ---------------------------------------------------------------
+
+
+def cmd_study_serve(args: argparse.Namespace) -> None:
+    from langpref.study.config import ServeConfig, VideoConfig
+    from langpref.study.serve import resolve_study_config, serve
+
+    study = resolve_study_config(args.db, {
+        "split": args.split, "improve_max_iterations": args.improve_max_iterations,
+        "pref_queries": args.pref_queries, "rating_every": args.rating_every,
+        "num_negatives": args.num_negatives, "seed": args.seed})
+    video = VideoConfig(format=args.video_format, width=args.video_width, height=args.video_height,
+                        fps=args.video_fps, stride=args.video_stride)
+    serve(ServeConfig(model=str(args.model), data=str(args.data), db=str(args.db),
+                      videos=str(args.videos) if args.videos else None, host=args.host, port=args.port,
+                      admin_token=args.admin_token, prerender=not args.no_prerender, torch_threads=args.torch_threads,
+                      study=study, video=video))
+
+
+def cmd_study_export(args: argparse.Namespace) -> None:
+    from langpref.study.export import export
+
+    out = export(args.db, args.out)
+    _emit(out, args.json, lambda o: f"wrote {o['report']} ({o['participants']} participants, {o['finished']} "
+          f"finished), {len(o['tables'])} tables and {len(o['figures'])} figures in {o['out']}")
+
+
+def _register_study_commands(sub) -> None:
+    from langpref.study.config import StudyConfig, VideoConfig
+
+    d, v = StudyConfig(), VideoConfig()
+    p = sub.add_parser("study", help="the web app for user studies with real people (paper Sec. 5.2)")
+    st = p.add_subparsers(dest="study_command", required=True, metavar="SUBCOMMAND")
+    p = st.add_parser("serve", help="serve a study in the browser (Study 1: improvement, Study 2: language vs "
+                      "comparisons)",
+                      description="Prints the participant URL and an admin token. State lives in the SQLite --db: a "
+                      "restart on the same --db continues every participant where they were. Protocol options "
+                      "are fixed when the database is created.")
+    p.add_argument("--model", required=True, type=Path, help="checkpoint directory (`langpref train`)")
+    p.add_argument("--data", required=True, type=Path, help="dataset directory (`langpref generate`)")
+    p.add_argument("--split", default=None, choices=("train", "val", "test", "all"),
+                   help=f"trajectories the study shows and searches (default {d.split})")
+    p.add_argument("--db", type=Path, default=Path("study.sqlite"), help="SQLite database (default %(default)s)")
+    p.add_argument("--port", type=int, default=8000, help="default %(default)s; 0 picks a free port")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default %(default)s, this machine "
+                   "only; 0.0.0.0 opens it to the network)")
+    p.add_argument("--admin-token", default=None, help="token of the admin pages and export (default: a random one, "
+                   "printed at start)")
+    p.add_argument("--videos", type=Path, default=None, help="video cache folder (default DB.videos/)")
+    p.add_argument("--improve-max-iterations", type=int, default=None,
+                   help=f"Study 1: most rounds of feedback (default {d.improve_max_iterations})")
+    p.add_argument("--pref-queries", type=int, default=None, help=f"Study 2: queries per method "
+                   f"(default {d.pref_queries})")
+    p.add_argument("--rating-every", type=int, default=None,
+                   help=f"Study 2: rate the best trajectory after every N queries (default {d.rating_every})")
+    p.add_argument("--num-negatives", type=int, default=None,
+                   help=f"k, implicit negatives per language answer (default {d.num_negatives})")
+    p.add_argument("--seed", type=int, default=None, help=f"study seed (default {d.seed})")
+    p.add_argument("--no-prerender", action="store_true", help="render videos only when first asked for")
+    p.add_argument("--video-format", choices=("webm", "mp4"), default=v.format,
+                   help="webm (VP9, default) or mp4 (H.264; some Chromium builds cannot play it)")
+    p.add_argument("--video-width", type=int, default=v.width)
+    p.add_argument("--video-height", type=int, default=v.height)
+    p.add_argument("--video-fps", type=int, default=v.fps)
+    p.add_argument("--video-stride", type=int, default=v.stride, help="one frame per N stored steps")
+    p.add_argument("--torch-threads", type=int, default=1, help="torch threads per request (default %(default)s)")
+    p.set_defaults(func=cmd_study_serve)
+
+    p = st.add_parser("export", help="CSV tables, analyses and figures of a study (HTML report + JSON)")
+    p.add_argument("--db", required=True, type=Path, help="the study's SQLite database")
+    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_study_export)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -475,6 +556,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     # ---- latent-space commands register below (train, evaluate, embed, utterances, visualize) ----
     _register_latent_commands(sub)
+    _register_study_commands(sub)
     _register_latent_use_commands(sub)
 
     return parser

@@ -1,0 +1,178 @@
+"""Load benchmark of the study server: `python -m langpref.study.bench` (part of `make bench`).
+
+20 simulated participants (synthetic humans, `langpref.study.simulate`) run whole sessions of the paper's protocol
+(10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve` in
+its own process on loopback, on this machine's cores. Measured on the client: the latency of every answer, by kind;
+the target is a p95 under 300 ms for a language answer (embedding, reward update, next query). Two runs:
+
+- `paced`: each participant pauses 0.5-1.5 s before an answer (people take several seconds to watch and type);
+- `burst`: no pause at all, every participant answering as fast as the server allows (a stress figure).
+
+Without --model it trains a model of the default architecture (MiniLM language encoder, D = 128; language model
+frozen, one epoch: the serving cost does not depend on how well it is trained) on a fresh Meta-World dataset. The
+paced run's database is exported (`langpref study export`) and summarised beside the load figures in the results
+file, between `<!-- bench:study-load -->` markers. Videos are not part of the load (the simulated participants do
+not download them; a real study renders them ahead at start).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+RESULTS = Path("docs/results.md")
+
+
+def write_section(path: Path, name: str, body: str) -> None:
+    """Replace (or append) the block between `<!-- bench:NAME -->` markers of a results file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = path.read_text() if path.exists() else "# Results\n"
+    block = f"<!-- bench:{name} -->\n{body.strip()}\n<!-- /bench:{name} -->"
+    pattern = re.compile(rf"<!-- bench:{name} -->.*?<!-- /bench:{name} -->", re.DOTALL)
+    text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
+    path.write_text(text)
+
+
+def prepare(work: Path, num_trajectories: int) -> tuple[Path, Path]:
+    """A fresh Meta-World dataset and a default-architecture model trained briefly on it."""
+    from langpref.dataset.generate import GenerateConfig, generate
+    from langpref.model.config import TrainConfig
+    from langpref.model.train import train
+
+    data, model = work / "data", work / "model"
+    generate(GenerateConfig(env="metaworld", out=data, num_trajectories=num_trajectories, horizon=200, seed=5))
+    train(TrainConfig(data=str(data), out=str(model), stage1_epochs=1, stage2_epochs=0, patience=0, device="cpu"),
+          progress=True)
+    return data, model
+
+
+def start_server(model: Path, data: Path, db: Path, split: str) -> tuple[subprocess.Popen, str]:
+    import httpx
+
+    cmd = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data),
+           "--db", str(db), "--port", "0", "--split", split, "--no-prerender"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    url = None
+    for line in proc.stdout:
+        m = re.search(r"participants: (http://\S+?)/?$", line.strip())
+        if m:
+            url = m.group(1)
+            break
+    if url is None:
+        raise RuntimeError(f"the study server exited ({proc.wait()})")
+    for _ in range(300):
+        try:
+            if httpx.get(f"{url}/healthz", timeout=2).status_code == 200:
+                return proc, url
+        except httpx.HTTPError:
+            time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError("the study server did not answer")
+
+
+def run(model: Path, data: Path, db: Path, split: str, participants: int, think_ms: tuple[float, float]
+        ) -> dict[str, Any]:
+    from langpref.study.simulate import SimConfig, simulate
+
+    proc, url = start_server(model, data, db, split)
+    try:
+        return simulate(url, SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0),
+                        data_dir=data, split=split)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def _row(name: str, r: dict[str, Any]) -> str:
+    lat = r["latency"]
+    cell = {k: f"{lat[k]['p50_ms']:.0f} / {lat[k]['p95_ms']:.0f}" if k in lat else "-"
+            for k in ("language", "comparison", "rating", "satisfaction", "survey")}
+    return (f"| {name} | {r['completed']}/{r['participants']} | {r['answers']} | {r['wall_s']:.0f} s | "
+            f"{cell['language']} | {cell['comparison']} | {cell['rating']} | {cell['satisfaction']} | "
+            f"{cell['survey']} |")
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", type=Path, default=None, help="checkpoint (default: train one, see above)")
+    p.add_argument("--data", type=Path, default=None, help="dataset of --model")
+    p.add_argument("--split", default="test", help="study split (default %(default)s)")
+    p.add_argument("--participants", type=int, default=20)
+    p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
+    p.add_argument("--no-burst", action="store_true", help="only the paced run")
+    p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
+    p.add_argument("--export-out", type=Path, default=Path("results/study_bench"),
+                   help="where the paced run's export goes (default %(default)s)")
+    args = p.parse_args(argv)
+    if (args.model is None) != (args.data is None):
+        p.error("pass both --model and --data, or neither")
+    from langpref.model.checkpoint import read_config
+    from langpref.study.export import export
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
+        val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
+        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0))
+        print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
+        burst = None
+        if not args.no_burst:
+            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0))
+            print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
+        exported = export(work / "paced.sqlite", args.export_out)
+        summary = json.loads(Path(exported["summary"]).read_text())
+
+    model_note = (f"model `{args.model}`" if args.model else
+                  "a model of the default architecture (MiniLM language encoder, D = 128) trained one epoch here")
+    if isinstance(val_acc, float):
+        model_note += f", validation accuracy {val_acc:.3f}"
+    today = dt.date.today().isoformat()
+    n = args.participants
+    lines = [
+        (f"Measured {today} with `python -m langpref.study.bench` on this machine ({os.cpu_count()} cores, no GPU): "
+         f"{n} simulated participants at once run whole sessions of the paper's protocol against "
+         f"`langpref study serve` on loopback (server in its own process; {model_note}). Latency per answer as the "
+         "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
+         "query) under 300 ms.\n"),
+        "| run | sessions completed | answers | wall | language | comparison | rating | satisfaction | survey |",
+        "|---|---|---|---|---|---|---|---|---|",
+        _row("paced (0.5-1.5 s pause before each answer)", paced),
+    ]
+    if burst:
+        lines.append(_row(f"burst (no pause: all {n} answer as fast as the server allows)", burst))
+    r = summary["study2_ratings"]
+    test = r["auc_paired_test"]
+
+    def f(x, d=2):
+        return "-" if x is None else f"{x:.{d}f}"
+
+    lines += [
+        "",
+        (f"Export of the paced run (`langpref study export`, synthetic humans as participants; report in "
+         f"`{args.export_out}/report.html`): {summary['participants']} participants, {summary['finished']} finished, "
+         f"orders {summary['method_order']}. Area under the rating curve (queries {r['points']}): language "
+         f"{f(r['language']['auc']['mean'])} +- {f(r['language']['auc']['std'])}, comparison "
+         f"{f(r['comparison']['auc']['mean'])} +- {f(r['comparison']['auc']['std'])}; paired t-test p = "
+         f"{f(test['t_p_value'], 4)}, Wilcoxon p = {f(test['wilcoxon_p_value'], 4)} (n = {test['n']}). "
+         f"Study 1: {summary['study1_iterations_to_satisfaction']['n']} of {summary['participants']} satisfied "
+         "within the rounds. Times per query here are the simulated pauses, not human times; what the ratings say "
+         "depends on how well the model is trained."),
+    ]
+    write_section(args.results, "study-load", "\n".join(lines))
+    print(f"wrote {args.results}", flush=True)
+    return {"paced": paced, "burst": burst, "export": exported}
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    main()

@@ -1,0 +1,108 @@
+"""Configuration of a study: the protocol (saved in the database, fixed for its lifetime) and how to serve it."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from langpref.errors import LangprefError
+
+METHODS = ("language", "comparison")
+VIDEO_FORMATS = ("webm", "mp4")
+
+
+@dataclass
+class StudyConfig:
+    """The protocol of the paper's two studies (Sec. 5.2); the defaults are the paper's."""
+
+    split: str = "test"
+    """Dataset split whose trajectories the study shows and searches (`train`, `val`, `test` or `all`)."""
+    improve_max_iterations: int = 10
+    """Study 1: most rounds of feedback before the improvement survey."""
+    pref_queries: int = 20
+    """Study 2: queries per method."""
+    rating_every: int = 5
+    """Study 2: after every this many queries, the best trajectory under the reward learned so far is rated 1-5."""
+    num_negatives: int = 20
+    """k, implicit-negative utterances per language answer in reward learning (Eq. 9)."""
+    seed: int = 0
+    """Seed of the study: with the participant's own seed it fixes every trajectory drawn for them."""
+
+    def validate(self) -> None:
+        if self.split not in ("train", "val", "test", "all"):
+            raise LangprefError(f"--split must be train, val, test or all, got {self.split!r}")
+        for name in ("improve_max_iterations", "pref_queries", "rating_every", "num_negatives"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise LangprefError(f"{name} must be an integer >= 1, got {value!r}")
+
+    def rating_points(self) -> list[int]:
+        """Query counts after which the best trajectory is rated: every `rating_every`, and the last query."""
+        points = list(range(self.rating_every, self.pref_queries + 1, self.rating_every))
+        if not points or points[-1] != self.pref_queries:
+            points.append(self.pref_queries)
+        return points
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, raw: dict[str, Any]) -> StudyConfig:
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in raw.items() if k in known})
+
+
+@dataclass
+class VideoConfig:
+    """How study videos are rendered (one frame per `stride` stored steps, played at `fps`)."""
+
+    format: str = "webm"
+    """`webm` (VP9, plays in Debian's Chromium and every current browser) or `mp4` (H.264)."""
+    width: int = 320
+    height: int = 240
+    fps: int = 30
+    stride: int = 2
+
+    def validate(self) -> None:
+        if self.format not in VIDEO_FORMATS:
+            raise LangprefError(f"video format must be one of {', '.join(VIDEO_FORMATS)}, got {self.format!r}")
+        if not (16 <= self.width <= 1920 and 16 <= self.height <= 1080):
+            raise LangprefError(f"video size {self.width}x{self.height} is out of range (16..1920 x 16..1080)")
+        if self.fps < 1 or self.stride < 1:
+            raise LangprefError("video fps and stride must be >= 1")
+
+
+@dataclass
+class ServeConfig:
+    """`langpref study serve`: which model and data, where state lives, and where to listen."""
+
+    model: str = ""
+    """Checkpoint directory (`langpref train`)."""
+    data: str = ""
+    """Dataset directory (`langpref generate`)."""
+    db: str = "study.sqlite"
+    """SQLite database; created on first start, continued on later ones."""
+    videos: str | None = None
+    """Video cache folder; default `DB.videos/` beside the database."""
+    host: str = "127.0.0.1"
+    port: int = 8000
+    admin_token: str | None = None
+    """Bearer token of the admin pages and export; a random one is made and printed when not given."""
+    prerender: bool = True
+    """Render every study video in the background at start (with progress), so that no participant waits."""
+    torch_threads: int = 1
+    """Torch threads per request; requests of different participants run in parallel threads."""
+    study: StudyConfig = field(default_factory=StudyConfig)
+    video: VideoConfig = field(default_factory=VideoConfig)
+
+    def validate(self) -> None:
+        if not self.model:
+            raise LangprefError("no model given: pass --model MODEL_DIR (`langpref train`)")
+        if not self.data:
+            raise LangprefError("no dataset given: pass --data DIR (`langpref generate`)")
+        if not 0 <= self.port <= 65535:
+            raise LangprefError(f"--port must be 0..65535, got {self.port}")
+        if self.admin_token is not None and len(self.admin_token) < 16:
+            raise LangprefError("--admin-token must be at least 16 characters (or leave it out for a random one)")
+        self.study.validate()
+        self.video.validate()

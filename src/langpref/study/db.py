@@ -1,0 +1,232 @@
+"""The study database: SQLite in WAL mode, versioned schema, every answer with its timestamps.
+
+Tables (one CSV each in `langpref study export`):
+
+    meta              key/value: schema_version, study config, model and data it was created with, created_at
+    participants      unguessable id, sha256 of the token, arrival number, Study-2 method order, seed, times
+    steps             every step a participant was given, in order (seq); the last unanswered one is the current
+                      step. Its payload (trajectories shown, query numbers, how feedback was understood) is fixed when
+                      the step is made, so a reload or a server restart shows exactly the same step.
+    answers           every answer as received (JSON body), with client and server times
+    survey_responses  one row per survey question answered
+    feedback          language feedback: shown trajectory, text, how the model understood it, the improved trajectory
+    comparisons       pairwise choices
+    satisfaction      Study 1 "are you satisfied?" answers
+    ratings           Study 2 ratings of the best trajectory under the reward learned so far
+
+The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
+killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
+against a killed process (a power cut may lose the last commits, never corrupt the file).
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from langpref.errors import LangprefError
+
+SCHEMA_VERSION = 1
+
+_V1 = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE participants (
+    id TEXT PRIMARY KEY,
+    token_sha256 TEXT NOT NULL,
+    number INTEGER NOT NULL UNIQUE,
+    method_order TEXT NOT NULL,
+    seed INTEGER NOT NULL,
+    created_at REAL NOT NULL,
+    finished_at REAL,
+    user_agent TEXT
+);
+CREATE TABLE steps (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    phase TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    payload TEXT NOT NULL,
+    created_at REAL NOT NULL,
+    first_shown_at REAL,
+    answered_at REAL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE TABLE answers (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    phase TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    body TEXT NOT NULL,
+    client_ms REAL,
+    server_ms REAL NOT NULL,
+    time_consistent INTEGER,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE TABLE survey_responses (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    survey TEXT NOT NULL,
+    question_id TEXT NOT NULL,
+    item INTEGER NOT NULL,
+    method TEXT,
+    value TEXT NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, survey, question_id)
+);
+CREATE TABLE feedback (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    phase TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    shown INTEGER NOT NULL,
+    text TEXT NOT NULL,
+    understood_feature TEXT,
+    understood_direction TEXT,
+    understood_confidence REAL,
+    improved INTEGER,
+    client_ms REAL,
+    server_ms REAL NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE TABLE comparisons (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    number INTEGER NOT NULL,
+    a INTEGER NOT NULL,
+    b INTEGER NOT NULL,
+    choice INTEGER NOT NULL,
+    preferred INTEGER NOT NULL,
+    client_ms REAL,
+    server_ms REAL NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE TABLE satisfaction (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    iteration INTEGER NOT NULL,
+    shown INTEGER NOT NULL,
+    satisfied INTEGER NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE TABLE ratings (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    after_queries INTEGER NOT NULL,
+    shown INTEGER NOT NULL,
+    rating INTEGER NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE INDEX steps_open ON steps (participant_id, answered_at);
+"""
+
+# schema version -> SQL taking the database from the previous version to it
+MIGRATIONS: dict[int, str] = {1: _V1}
+TABLES = ("meta", "participants", "steps", "answers", "survey_responses", "feedback", "comparisons", "satisfaction",
+          "ratings")
+
+
+def connect(path: str | Path) -> sqlite3.Connection:
+    """A connection in autocommit mode (transactions are explicit), WAL, foreign keys on, rows as dicts."""
+    try:
+        conn = sqlite3.connect(str(path), timeout=30.0, isolation_level=None, check_same_thread=False)
+        conn.row_factory = sqlite3.Row
+        conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute("PRAGMA synchronous=NORMAL")  # durable against a killed process; fsync at checkpoints
+        conn.execute("PRAGMA foreign_keys=ON")
+        conn.execute("PRAGMA busy_timeout=30000")
+    except sqlite3.DatabaseError as exc:
+        raise LangprefError(f"{path} is not a usable SQLite database ({exc}); pass another --db") from None
+    return conn
+
+
+@contextmanager
+def transaction(conn: sqlite3.Connection) -> Iterator[sqlite3.Connection]:
+    """BEGIN IMMEDIATE ... COMMIT, rolled back on any exception."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        yield conn
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    conn.execute("COMMIT")
+
+
+def schema_version(conn: sqlite3.Connection) -> int:
+    has_meta = conn.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND name='meta'").fetchone()
+    if not has_meta:
+        return 0
+    row = conn.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
+    return int(row["value"]) if row else 0
+
+
+def init_db(path: str | Path, meta: dict[str, Any]) -> dict[str, Any]:
+    """Create or migrate the database; on first creation store `meta`. Returns the stored meta (decoded)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    conn = connect(path)
+    try:
+        try:
+            version = schema_version(conn)
+        except sqlite3.DatabaseError as exc:
+            raise LangprefError(f"{path} is not a usable SQLite database ({exc}); pass another --db") from None
+        if version == 0 and conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]:
+            raise LangprefError(f"{path} is an SQLite database of something else (no langpref study schema); "
+                                "pass another --db")
+        if version > SCHEMA_VERSION:
+            raise LangprefError(f"{path} has study schema version {version}, this langpref knows up to "
+                                f"{SCHEMA_VERSION}; upgrade langpref")
+        with transaction(conn):
+            for v in range(version + 1, SCHEMA_VERSION + 1):
+                # one statement at a time: executescript would COMMIT in the middle of the transaction
+                for statement in filter(str.strip, MIGRATIONS[v].split(";")):
+                    conn.execute(statement)
+                conn.execute("INSERT OR REPLACE INTO meta VALUES ('schema_version', ?)", (str(v),))
+            if version == 0:
+                for key, value in meta.items():
+                    conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
+                conn.execute("INSERT OR REPLACE INTO meta VALUES ('created_at', ?)", (json.dumps(time.time()),))
+        return read_meta(conn)
+    finally:
+        conn.close()
+
+
+def read_meta(conn: sqlite3.Connection) -> dict[str, Any]:
+    out = {}
+    for row in conn.execute("SELECT key, value FROM meta"):
+        try:
+            out[row["key"]] = json.loads(row["value"])
+        except json.JSONDecodeError:
+            out[row["key"]] = row["value"]
+    return out
+
+
+def open_existing(path: str | Path) -> sqlite3.Connection:
+    """A connection to an existing study database (for export); a clear error for anything else."""
+    path = Path(path)
+    if not path.is_file():
+        raise LangprefError(f"study database {path} does not exist; pass the --db a `langpref study serve` wrote")
+    conn = connect(path)
+    try:
+        version = schema_version(conn)
+    except sqlite3.DatabaseError as exc:
+        conn.close()
+        raise LangprefError(f"{path} is not a study database ({exc})") from None
+    if version != SCHEMA_VERSION:
+        conn.close()
+        raise LangprefError(f"{path} has study schema version {version}, expected {SCHEMA_VERSION}: "
+                            "open it once with `langpref study serve` to migrate it, or pass another --db")
+    return conn
+
+
+def rows(conn: sqlite3.Connection, sql: str, args: tuple = ()) -> list[dict[str, Any]]:
+    return [dict(r) for r in conn.execute(sql, args)]

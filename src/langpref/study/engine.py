@@ -1,0 +1,238 @@
+"""The learning side of the study: a thin adapter over the library for live participants.
+
+- embedding feedback: `model.encode_texts` (psi), cached per text; "how the robot understood it" is
+  `langpref.model.evaluate.embed_text` (nearest meaning prototype) on the same psi;
+- the improvement step of Study 1 (paper Eq. 4, `langpref.improve.improvement_step`) over the study set;
+- one reward learner per participant and method (`langpref.reward.RewardLearner`, explicit + implicit losses for
+  language via `language_pairs`, Bradley-Terry for comparisons via `comparison_pairs`), refit after every answer;
+- which trajectories each query shows (random, as in the paper, fixed by the study and participant seeds).
+
+The database is the only state that counts: a learner lost with a restart is rebuilt by replaying the participant's
+stored answers (`history`), with the same seeds, so it learns what it had learned.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from langpref.errors import LangprefError
+from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
+from langpref.improve import improvement_step
+from langpref.reward import RewardConfig, RewardLearner, comparison_pairs, language_pairs
+from langpref.study.config import METHODS, StudyConfig
+from langpref.study.flow import Participant
+
+# method -> its stored answers in order: language [(shown, text)], comparison [(a, b, choice)]
+History = Callable[[str, str], list[tuple]]
+
+
+class _TextCache:
+    """psi of texts, computed once each (bounded LRU), shared by the reward learner and `embed_text`."""
+
+    def __init__(self, model, size: int = 4096):
+        self.model = model
+        self.size = size
+        self._cache: OrderedDict[str, np.ndarray] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def __call__(self, texts: Sequence[str]) -> np.ndarray:
+        out = []
+        for text in texts:
+            with self._lock:
+                psi = self._cache.get(text)
+                if psi is not None:
+                    self._cache.move_to_end(text)
+            if psi is None:
+                psi = self.model.encode_texts([text])[0].detach().cpu().numpy().astype(np.float64)
+                with self._lock:
+                    self._cache[text] = psi
+                    while len(self._cache) > self.size:
+                        self._cache.popitem(last=False)
+            out.append(psi)
+        return np.stack(out)
+
+
+class _CachedModel:
+    """The model as `embed_text` sees it, with `encode_texts` answered from the cache."""
+
+    def __init__(self, model, cache: _TextCache):
+        self._model = model
+        self._cache = cache
+
+    def encode_texts(self, texts):
+        import torch
+
+        return torch.from_numpy(self._cache(list(texts)))
+
+    def __getattr__(self, name: str):
+        return getattr(self._model, name)
+
+
+class StudyEngine:
+    """Model, dataset and latent space of a study, shared by all participants (read-only after construction)."""
+
+    def __init__(self, model, dataset, cfg: StudyConfig):
+        from langpref.feedback.space import build_latent_space
+
+        cfg.validate()
+        self.model = model
+        self.dataset = dataset
+        self.cfg = cfg
+        self.reward_cfg = RewardConfig(num_negatives=cfg.num_negatives)
+        self.reward_cfg.validate()
+        self.cache = _TextCache(model)
+        space = build_latent_space(model, dataset, bank_splits=(self.reward_cfg.negative_split,))
+        self.space = replace(space, encode=self.cache)
+        self.study = np.asarray(range(len(dataset)) if cfg.split == "all" else dataset.split(cfg.split), dtype=np.int64)
+        if len(self.study) < 2:
+            raise LangprefError(f"split {cfg.split!r} of {dataset.root} has {len(self.study)} trajectories; a study "
+                                "needs at least 2 (pass another --split)")
+        success = np.asarray(dataset.success)[self.study]
+        self.failed = self.study[~success] if (~success).any() else self.study
+        self._understanding = _CachedModel(model, self.cache)
+        self.understand("Move faster.")  # fail at start, not with the first participant, if prototypes are missing
+
+    @classmethod
+    def load(cls, model_dir: str | Path, data_dir: str | Path, cfg: StudyConfig) -> StudyEngine:
+        from langpref.dataset.storage import load_dataset
+        from langpref.model.checkpoint import load_model
+
+        dataset = load_dataset(data_dir)
+        return cls(load_model(model_dir, device="cpu", dataset=dataset), dataset, cfg)
+
+    @property
+    def env(self) -> str:
+        return self.dataset.env
+
+    @staticmethod
+    def normalise(text: str) -> str:
+        return " ".join(str(text).split())
+
+    def understand(self, text: str) -> dict[str, Any]:
+        """How the model reads `text`: nearest (feature, direction) and its confidence (`embed_text`)."""
+        from langpref.model.evaluate import embed_text
+
+        out = embed_text(self._understanding, self.normalise(text))
+        return {"feature": out["feature"], "direction": out["direction"], "confidence": round(out["confidence"], 4)}
+
+    def psi(self, text: str) -> np.ndarray:
+        return self.cache([self.normalise(text)])[0]
+
+    def improve(self, current: int, text: str) -> int:
+        """Eq. 4 over the study set (the current trajectory included: it stays when nothing moves along psi)."""
+        phi = self.space.phi
+        return int(self.study[improvement_step(phi[self.study], phi[current], self.psi(text))])
+
+    def describe(self) -> dict[str, Any]:
+        return {"env": self.env, "data": str(self.dataset.root), "num_trajectories": len(self.dataset),
+                "split": self.cfg.split, "study_set": self.study.tolist(), "latent_dim": self.space.dim}
+
+
+class StudyRobot:
+    """The `flow.Robot` of a running study: per-participant reward learners over a shared `StudyEngine`."""
+
+    def __init__(self, engine: StudyEngine, history: History, max_cached: int = 512):
+        self.engine = engine
+        self.cfg = engine.cfg
+        self.history = history
+        self.max_cached = max_cached
+        self._learners: OrderedDict[tuple[str, str], tuple[RewardLearner, int]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    # ---- which trajectories are shown (fixed by the seeds) ----
+
+    def _rng(self, p: Participant, *keys: int) -> np.random.Generator:
+        return np.random.default_rng([self.cfg.seed, p.seed, *keys])
+
+    def start_trajectory(self, p: Participant) -> int:
+        """Study 1 starts from a random trajectory that fails the task (any, if none fails)."""
+        return int(self._rng(p, 0).choice(self.engine.failed))
+
+    def language_query(self, p: Participant, number: int) -> int:
+        """Query `number` (1-based): one pass over the study set in a random order, then another."""
+        study = self.engine.study
+        cycle, pos = divmod(number - 1, len(study))
+        return int(self._rng(p, 1, cycle).permutation(study)[pos])
+
+    def comparison_query(self, p: Participant, number: int) -> tuple[int, int]:
+        a, b = self._rng(p, 2, number).choice(self.engine.study, size=2, replace=False)
+        return int(a), int(b)
+
+    # ---- Study 1 ----
+
+    def improve(self, p: Participant, shown: int, text: str) -> tuple[int, dict[str, Any]]:
+        return self.engine.improve(shown, text), self.engine.understand(text)
+
+    # ---- Study 2: reward learning ----
+
+    def _fresh(self, p: Participant, method: str) -> RewardLearner:
+        return RewardLearner(self.engine.space.dim, self.engine.reward_cfg,
+                             seed=int(self._rng(p, 3, METHODS.index(method)).integers(2**31)))
+
+    def _add(self, learner: RewardLearner, p: Participant, method: str, number: int, item: tuple) -> None:
+        space = self.engine.space
+        if method == "language":
+            shown, text = item
+            answer = LanguageAnswer(LanguageQuery(int(shown)), self.engine.normalise(text))
+            learner.add(language_pairs(space, answer, self.engine.reward_cfg, self._rng(p, 4, number)))
+        else:
+            a, b, choice = item
+            learner.add(comparison_pairs(space, ComparisonAnswer(ComparisonQuery(int(a), int(b)), int(choice))))
+
+    def _learner(self, p: Participant, method: str, answered: int) -> RewardLearner:
+        """The learner of (participant, method) that has seen the first `answered` stored answers."""
+        key = (p.id, method)
+        with self._lock:
+            hit = self._learners.get(key)
+        if hit is not None and hit[1] == answered:
+            return hit[0]
+        learner = self._fresh(p, method)
+        past = self.history(p.id, method)[:answered]
+        if len(past) != answered:
+            raise LangprefError(f"participant {p.id} has {len(past)} stored {method} answers, expected {answered}")
+        for i, item in enumerate(past, start=1):
+            self._add(learner, p, method, i, item)
+        learner.fit()
+        return learner
+
+    def _keep(self, p: Participant, method: str, learner: RewardLearner, answered: int) -> None:
+        with self._lock:
+            self._learners[(p.id, method)] = (learner, answered)
+            self._learners.move_to_end((p.id, method))
+            while len(self._learners) > self.max_cached:
+                self._learners.popitem(last=False)
+
+    def learn_language(self, p: Participant, number: int, shown: int, text: str) -> dict[str, Any]:
+        learner = self._learner(p, "language", number - 1)
+        self._add(learner, p, "language", number, (shown, text))
+        learner.fit()
+        self._keep(p, "language", learner, number)
+        return self.engine.understand(text)
+
+    def learn_comparison(self, p: Participant, number: int, a: int, b: int, choice: int) -> None:
+        learner = self._learner(p, "comparison", number - 1)
+        self._add(learner, p, "comparison", number, (a, b, choice))
+        learner.fit()
+        self._keep(p, "comparison", learner, number)
+
+    def best(self, p: Participant, method: str) -> int:
+        """argmax of the reward learned so far over the study set."""
+        key = (p.id, method)
+        with self._lock:
+            hit = self._learners.get(key)
+        learner = hit[0] if hit is not None else self._learner(p, method, len(self.history(p.id, method)))
+        reward = learner.predict(self.engine.space.phi[self.engine.study])
+        return int(self.engine.study[int(np.argmax(reward))])
+
+    def forget(self, participant_id: str) -> None:
+        """Drop cached learners (after an answer that was not stored): the next use replays the database."""
+        with self._lock:
+            for method in METHODS:
+                self._learners.pop((participant_id, method), None)

@@ -1,0 +1,263 @@
+"""The participant's path through the study, as a state machine: (step, answer) -> next step.
+
+    pre_survey --> improve: language -> satisfaction -> (not satisfied, rounds left) language -> ... --> improve_survey
+      --> pref_<first method>: query 1..Q, a rating of the best trajectory after every `rating_every` queries
+      --> pref_<second method>: the same --> pref_survey --> done
+
+Nothing here touches the database or the model: `advance` gets the current `Step`, a parsed `Answer` and a `Robot`
+(the learning side, `langpref.study.engine`), and returns the next `Step` with the rows to store. The app writes both
+in one transaction. Every step fixes what it shows when it is made, so showing it again (a reload, a restart)
+shows the same thing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+from langpref.errors import LangprefError
+from langpref.study.config import StudyConfig
+from langpref.study.surveys import SURVEYS, validate_answers
+
+PHASES = ("pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey", "done")
+KINDS = ("survey", "language", "comparison", "satisfaction", "rating", "done")
+ANSWER_KEYS = {"answers": "survey", "feedback": "language", "choice": "comparison", "satisfied": "satisfaction",
+               "rating": "rating"}
+MAX_FEEDBACK = 500
+MAX_CLIENT_MS = 24 * 3600 * 1000
+
+
+class AnswerError(LangprefError):
+    """An answer that cannot be taken; `status` is the HTTP status (400 bad input, 409 wrong step)."""
+
+    status = 400
+
+
+class WrongStep(AnswerError):
+    status = 409
+
+
+@dataclass(frozen=True)
+class Participant:
+    id: str
+    number: int
+    method_order: tuple[str, str]
+    seed: int
+
+
+@dataclass(frozen=True)
+class Step:
+    """One screen. `number`: Study 1 rounds of feedback given so far; Study 2 the query number (1-based), or for a
+    rating the queries it follows. `extra` is shown as is (e.g. how the last feedback was understood)."""
+
+    seq: int
+    phase: str
+    kind: str
+    shown: tuple[int, ...] = ()
+    survey: str | None = None
+    number: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def payload(self) -> str:
+        return json.dumps({"shown": list(self.shown), "survey": self.survey, "number": self.number,
+                           "extra": self.extra})
+
+    @classmethod
+    def from_row(cls, row: dict[str, Any]) -> Step:
+        p = json.loads(row["payload"])
+        return cls(int(row["seq"]), row["phase"], row["kind"], tuple(p["shown"]), p["survey"], int(p["number"]),
+                   p.get("extra") or {})
+
+    @property
+    def method(self) -> str | None:
+        return self.phase[len("pref_"):] if self.phase in ("pref_language", "pref_comparison") else None
+
+
+@dataclass(frozen=True)
+class Answer:
+    kind: str
+    value: Any
+    client_ms: float | None = None
+
+
+class Robot(Protocol):
+    """What the flow asks of the learning side (implemented by `engine.StudyRobot`)."""
+
+    def start_trajectory(self, p: Participant) -> int: ...
+
+    def improve(self, p: Participant, shown: int, text: str) -> tuple[int, dict[str, Any]]: ...
+
+    def learn_language(self, p: Participant, number: int, shown: int, text: str) -> dict[str, Any]: ...
+
+    def learn_comparison(self, p: Participant, number: int, a: int, b: int, choice: int) -> None: ...
+
+    def language_query(self, p: Participant, number: int) -> int: ...
+
+    def comparison_query(self, p: Participant, number: int) -> tuple[int, int]: ...
+
+    def best(self, p: Participant, method: str) -> int: ...
+
+
+def first_step() -> Step:
+    return Step(0, "pre_survey", "survey", survey="pre")
+
+
+def progress(cfg: StudyConfig, step: Step) -> dict[str, int]:
+    """`{done, total}` within the step's phase: rounds of Study 1, queries of a Study-2 method."""
+    if step.phase == "improve":
+        return {"done": step.number, "total": cfg.improve_max_iterations}
+    if step.method:
+        done = step.number if step.kind == "rating" else step.number - 1
+        return {"done": done, "total": cfg.pref_queries}
+    if step.phase == "done":
+        return {"done": 1, "total": 1}
+    return {"done": 0, "total": 1}
+
+
+def _number(body: dict, key: str, lo: float, hi: float, what: str, integer: bool) -> Any:
+    value = body.get(key)
+    ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+    if isinstance(value, bool) or not ok or math.isnan(value) or not lo <= value <= hi:
+        raise AnswerError(f"{key!r} must be {what}")
+    return value
+
+
+def parse_answer(body: Any, step: Step) -> Answer:
+    """Check an answer body against the current step: a WrongStep (409) for another kind, else AnswerError (400)."""
+    if not isinstance(body, dict):
+        raise AnswerError("the body must be a JSON object")
+    kinds = {ANSWER_KEYS[k] for k in body if k in ANSWER_KEYS}
+    if not kinds:
+        raise AnswerError("missing answer field: send one of " + ", ".join(f"'{k}'" for k in ANSWER_KEYS))
+    if len(kinds) > 1:
+        raise AnswerError("send one answer at a time: the body has fields of several kinds")
+    kind = kinds.pop()
+    if step.kind == "done":
+        raise WrongStep("the study is finished; there is nothing left to answer")
+    if kind != step.kind:
+        raise WrongStep(f"the current step is a {step.kind} step, not {kind}: GET the step and answer it")
+    if "seq" in body and body["seq"] != step.seq:
+        raise WrongStep(f"step {body['seq']!r} was already answered; the current step is {step.seq}")
+    client_ms = None
+    if kind in ("language", "comparison"):
+        client_ms = float(_number(body, "client_ms", 0, MAX_CLIENT_MS, "the milliseconds from showing the videos to "
+                                  "the answer (a number >= 0)", integer=False))
+    if kind == "survey":
+        try:
+            value: Any = validate_answers(step.survey or "", body["answers"])
+        except AnswerError:
+            raise
+        except LangprefError as exc:
+            raise AnswerError(str(exc)) from None
+    elif kind == "language":
+        text = body["feedback"]
+        if not isinstance(text, str):
+            raise AnswerError("'feedback' must be text")
+        text = text.strip()
+        if not text:
+            raise AnswerError("Please type your feedback before continuing (for example: \"Move faster.\").")
+        if len(text) > MAX_FEEDBACK:
+            raise AnswerError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
+        value = text
+    elif kind == "comparison":
+        value = _number(body, "choice", 0, 1, "0 (the left/first video) or 1 (the right/second video)", integer=True)
+    elif kind == "satisfaction":
+        value = body["satisfied"]
+        if not isinstance(value, bool):
+            raise AnswerError("'satisfied' must be true or false")
+    else:
+        value = _number(body, "rating", 1, 5, "an integer from 1 to 5", integer=True)
+    return Answer(kind, value, client_ms)
+
+
+@dataclass
+class Transition:
+    next: Step
+    records: list[tuple[str, dict[str, Any]]]
+    """(table, row) to store with the answer; every row also gets participant_id, seq and answered_at."""
+
+
+def _query(p: Participant, robot: Robot, seq: int, method: str, q: int) -> Step:
+    """Query number `q` (1-based) of a Study-2 method; the kind of step is the method's name."""
+    shown = (robot.language_query(p, q),) if method == "language" else robot.comparison_query(p, q)
+    return Step(seq, f"pref_{method}", method, tuple(shown), number=q)
+
+
+def _pref_start(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, method: str) -> Step:
+    return _query(p, robot, seq, method, 1)
+
+
+def _after_method(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, method: str) -> Step:
+    later = p.method_order[p.method_order.index(method) + 1:]
+    if later:
+        return _pref_start(cfg, p, robot, seq, later[0])
+    return Step(seq, "pref_survey", "survey", survey="pref")
+
+
+def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
+    """The next step after `answer` to `step` (already checked by `parse_answer`), and the rows to store."""
+    seq = step.seq + 1
+    timing = {"client_ms": answer.client_ms}
+    if step.kind == "survey":
+        items = {q["id"]: q for q in SURVEYS[step.survey or ""]}
+        records = [("survey_responses", {"survey": step.survey, "question_id": qid, "item": items[qid]["item"],
+                                         "method": items[qid]["method"], "value": json.dumps(v)})
+                   for qid, v in answer.value.items()]
+        if step.survey == "pre":
+            return Transition(Step(seq, "improve", "language", (robot.start_trajectory(p),), number=0), records)
+        if step.survey == "improve":
+            return Transition(_pref_start(cfg, p, robot, seq, p.method_order[0]), records)
+        return Transition(Step(seq, "done", "done"), records)
+
+    if step.phase == "improve":
+        shown = step.shown[0]
+        if step.kind == "language":
+            improved, understood = robot.improve(p, shown, answer.value)
+            row = {"phase": "improve", "number": step.number + 1, "shown": shown, "text": answer.value,
+                   "improved": improved, **_understood_columns(understood), **timing}
+            extra = {"understood": {**understood, "text": answer.value}, "previous": shown,
+                     "unchanged": improved == shown}
+            return Transition(Step(seq, "improve", "satisfaction", (improved,), number=step.number + 1, extra=extra),
+                              [("feedback", row)])
+        row = {"iteration": step.number, "shown": shown, "satisfied": int(answer.value)}
+        if answer.value or step.number >= cfg.improve_max_iterations:
+            return Transition(Step(seq, "improve_survey", "survey", survey="improve"), [("satisfaction", row)])
+        return Transition(Step(seq, "improve", "language", (shown,), number=step.number), [("satisfaction", row)])
+
+    method = step.method
+    assert method is not None, step
+    if step.kind == "rating":
+        row = {"method": method, "after_queries": step.number, "shown": step.shown[0], "rating": answer.value}
+        if step.number >= cfg.pref_queries:
+            return Transition(_after_method(cfg, p, robot, seq, method), [("ratings", row)])
+        q = step.number + 1
+        return Transition(_query(p, robot, seq, method, step.number + 1), [("ratings", row)])
+
+    q = step.number
+    extra: dict[str, Any] = {}
+    if step.kind == "language":
+        understood = robot.learn_language(p, q, step.shown[0], answer.value)
+        records = [("feedback", {"phase": step.phase, "number": q, "shown": step.shown[0], "text": answer.value,
+                                 "improved": None, **_understood_columns(understood), **timing})]
+        extra = {"understood": {**understood, "text": answer.value}}
+    else:
+        a, b = step.shown
+        robot.learn_comparison(p, q, a, b, answer.value)
+        records = [("comparisons", {"number": q, "a": a, "b": b, "choice": answer.value,
+                                    "preferred": b if answer.value else a, **timing})]
+    if q in cfg.rating_points():
+        nxt = Step(seq, step.phase, "rating", (robot.best(p, method),), number=q, extra=extra)
+    else:
+        nxt = replace(_query(p, robot, seq, method, q + 1), extra=extra)
+    return Transition(nxt, records)
+
+
+def _understood_columns(understood: dict[str, Any]) -> dict[str, Any]:
+    return {"understood_feature": understood.get("feature"), "understood_direction": understood.get("direction"),
+            "understood_confidence": understood.get("confidence")}
+
+
+def questions(step: Step) -> list[dict[str, Any]]:
+    return [dict(q) for q in SURVEYS[step.survey]] if step.kind == "survey" and step.survey else []

@@ -1,0 +1,164 @@
+"""`langpref study serve`: load the model and data, open (or create) the database, render videos ahead, serve.
+
+The database remembers the protocol (`StudyConfig`), the model and the dataset it was created with; a later start
+on the same database continues the same study and refuses a different model, dataset or protocol (pass a new
+`--db` for a new study), so stored answers always mean what they meant.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import secrets
+import socket
+import sys
+import threading
+from dataclasses import asdict, fields
+from pathlib import Path
+from typing import Any
+
+from langpref import __version__
+from langpref.errors import LangprefError
+from langpref.study import db as sdb
+from langpref.study.app import StudyApp, create_app
+from langpref.study.config import ServeConfig, StudyConfig
+from langpref.study.engine import StudyEngine
+from langpref.study.videos import VideoCache
+
+
+def _file_sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else ""
+
+
+def resolve_study_config(db_path: str | Path, overrides: dict[str, Any]) -> StudyConfig:
+    """The protocol of the study in `db_path` (its stored one when it exists) with `overrides` (None = unset).
+
+    An override that contradicts a stored protocol is an error: a study keeps one protocol for its lifetime.
+    """
+    given = {k: v for k, v in overrides.items() if v is not None}
+    path = Path(db_path)
+    if path.is_file():
+        conn = sdb.connect(path)
+        try:
+            meta = sdb.read_meta(conn) if sdb.schema_version(conn) else {}
+        except Exception:  # noqa: BLE001 (init_db reports an unusable file with a clear message)
+            meta = {}
+        finally:
+            conn.close()
+        if "study" in meta:
+            stored = StudyConfig.from_dict(meta["study"])
+            for key, value in given.items():
+                if getattr(stored, key) != value:
+                    flag = "--" + key.replace("_", "-")
+                    raise LangprefError(f"{path} holds a study made with {flag} {getattr(stored, key)}, not {value}; "
+                                        f"drop {flag} to continue it, or pass a new --db for a new study")
+            return stored
+    known = {f.name for f in fields(StudyConfig)}
+    cfg = StudyConfig(**{k: v for k, v in given.items() if k in known})
+    cfg.validate()
+    return cfg
+
+
+def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True) -> StudyApp:
+    """Engine, database (created or checked) and video cache of a study."""
+    cfg.validate()
+    engine = engine or StudyEngine.load(cfg.model, cfg.data, cfg.study)
+    model_dir, data_dir = Path(cfg.model).resolve(), Path(cfg.data).resolve()
+    meta = {"study": cfg.study.to_dict(), "model": str(model_dir), "model_sha256": _file_sha(model_dir / "config.json"),
+            "data": str(data_dir), "data_sha256": _file_sha(data_dir / "meta.json"), "env": engine.env,
+            "video": asdict(cfg.video), "langpref_version": __version__}
+    stored = sdb.init_db(cfg.db, meta)
+    if stored.get("study") != cfg.study.to_dict():
+        raise LangprefError(f"{cfg.db} holds a study with protocol {stored.get('study')}; pass a new --db for "
+                            "another protocol")
+    for key, what in (("model_sha256", "model"), ("data_sha256", "dataset")):
+        if stored.get(key) != meta[key]:
+            raise LangprefError(f"{cfg.db} belongs to a study run with another {what} ({stored.get(key[:-7])}); pass "
+                                f"that {what} again, or a new --db for a new study")
+    videos = VideoCache(cfg.data, cfg.videos or f"{cfg.db}.videos", cfg.video, engine.study, progress=progress)
+    token = cfg.admin_token or secrets.token_urlsafe(24)
+    return StudyApp(cfg.db, engine, videos, token, cfg.study)
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket (port 0: any free port), with a clear error when the port is taken."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)  # asyncio sets TCP_NODELAY only then
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise LangprefError(f"cannot listen on {host}:{port} ({exc.strerror}); pass another --port or --host") from None
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock
+
+
+def _uvicorn_server(app, log_level: str = "warning"):
+    import uvicorn
+
+    return uvicorn.Server(uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
+                                         timeout_keep_alive=30))
+
+
+def serve(cfg: ServeConfig) -> None:
+    """Run the study server until interrupted."""
+    import torch
+
+    torch.set_num_threads(max(1, cfg.torch_threads))
+    state = build_state(cfg)
+    sock = bind(cfg.host, cfg.port)
+    host, port = sock.getsockname()[:2]
+    shown = f"[{host}]" if ":" in host else host
+    url = f"http://{shown}:{port}"
+    print(f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
+          f"database {cfg.db}", file=sys.stderr)
+    print(f"participants: {url}/", flush=True)
+    print(f"admin:        {url}/admin   token: {state.admin_token}", flush=True)
+    state.videos.start(prerender=cfg.prerender)
+    try:
+        _uvicorn_server(create_app(state)).run(sockets=[sock])
+    finally:
+        state.videos.close()
+        sock.close()
+
+
+class BackgroundServer:
+    """A study server in a thread of this process (tests, benchmarks): `with BackgroundServer(state) as url: ...`."""
+
+    def __init__(self, state: StudyApp, host: str = "127.0.0.1", port: int = 0):
+        self.state = state
+        self.sock = bind(host, port)
+        self.port = self.sock.getsockname()[1]
+        self.url = f"http://{host}:{self.port}"
+        self.server = _uvicorn_server(create_app(state), log_level="error")
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
+
+    def __enter__(self) -> str:
+        import time
+
+        self.thread.start()
+        deadline = time.time() + 30
+        while not self.server.started:
+            if time.time() > deadline or not self.thread.is_alive():
+                raise RuntimeError("the study server did not start")
+            time.sleep(0.02)
+        return self.url
+
+    def __exit__(self, *exc) -> None:
+        self.server.should_exit = True
+        self.thread.join(timeout=30)
+        self.sock.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m langpref.study.serve ...`: the same as `langpref study serve ...`."""
+    from langpref.cli import main as cli_main
+
+    return cli_main(["study", "serve", *(argv if argv is not None else sys.argv[1:])])
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    sys.exit(main())

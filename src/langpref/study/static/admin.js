@@ -1,0 +1,101 @@
+"use strict";
+// The admin dashboard: participants and their progress, video rendering, a JSON download of everything.
+// The token stays in this tab (sessionStorage); every value is shown with textContent, so feedback is never HTML.
+
+const TOKEN_KEY = "langpref-admin-token";
+let timer = null;
+
+function cell(text) {
+  const td = document.createElement("td");
+  td.textContent = text === null || text === undefined ? "" : String(text);
+  return td;
+}
+
+function when(t) { return t ? new Date(t * 1000).toLocaleString() : ""; }
+
+async function get(path) {
+  const res = await fetch(path, {headers: {Authorization: "Bearer " + sessionStorage.getItem(TOKEN_KEY)},
+                                 cache: "no-store"});
+  const data = await res.json().catch(() => ({error: "HTTP " + res.status}));
+  if (!res.ok) { const e = new Error(data.error || ("HTTP " + res.status)); e.status = res.status; throw e; }
+  return data;
+}
+
+function showError(msg) {
+  const e = document.getElementById("error");
+  e.textContent = msg;
+  e.hidden = !msg;
+}
+
+async function refresh() {
+  try {
+    const data = await get("/api/admin/participants");
+    showError("");
+    document.getElementById("login").hidden = true;
+    document.getElementById("dashboard").hidden = false;
+    const ps = data.participants;
+    const finished = ps.filter((p) => p.finished_at).length;
+    document.getElementById("summary").textContent =
+      `${ps.length} participants, ${finished} finished. Protocol: ${data.study.pref_queries} queries per method, ` +
+      `rating every ${data.study.rating_every}, up to ${data.study.improve_max_iterations} improvement rounds, ` +
+      `split ${data.study.split}.`;
+    const v = data.videos;
+    document.getElementById("video-status").textContent =
+      `Videos rendered: ${v.done} of ${v.total}${v.running ? " (rendering\u2026)" : ""}` +
+      (Object.keys(v.errors).length ? `; ${Object.keys(v.errors).length} failed` : "");
+    const body = document.querySelector("#participants tbody");
+    body.replaceChildren();
+    for (const p of ps) {
+      const tr = document.createElement("tr");
+      tr.append(cell(p.number), cell(p.participant_id.slice(0, 8) + "\u2026"), cell(p.method_order.replace(",", " \u2192 ")),
+                cell(p.phase), cell(p.kind), cell(`${p.progress.done} / ${p.progress.total}`), cell(p.answers),
+                cell(when(p.created_at)), cell(when(p.finished_at)));
+      const fb = document.createElement("td");
+      const ul = document.createElement("ul");
+      for (const f of p.recent_feedback) {
+        const li = document.createElement("li");
+        li.className = "feedback-text";
+        li.textContent = `${f.text}  [${f.understood_feature}/${f.understood_direction}]`;
+        ul.append(li);
+      }
+      fb.append(ul);
+      tr.append(fb);
+      body.append(tr);
+    }
+  } catch (e) {
+    if (e.status === 401 || e.status === 403) {
+      sessionStorage.removeItem(TOKEN_KEY);
+      document.getElementById("login").hidden = false;
+      document.getElementById("dashboard").hidden = true;
+      if (timer) { clearInterval(timer); timer = null; }
+    }
+    showError(e.message);
+  }
+}
+
+async function download() {
+  try {
+    const data = await get("/api/admin/export");
+    const blob = new Blob([JSON.stringify(data, null, 2)], {type: "application/json"});
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(blob);
+    a.download = "study-export.json";
+    a.click();
+    URL.revokeObjectURL(a.href);
+  } catch (e) { showError(e.message); }
+}
+
+function start() {
+  refresh();
+  if (!timer) timer = setInterval(refresh, 5000);
+}
+
+document.addEventListener("DOMContentLoaded", () => {
+  document.getElementById("login").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    sessionStorage.setItem(TOKEN_KEY, document.getElementById("token").value.trim());
+    start();
+  });
+  document.getElementById("export").addEventListener("click", download);
+  if (sessionStorage.getItem(TOKEN_KEY)) start();
+});

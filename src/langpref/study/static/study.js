@@ -1,0 +1,336 @@
+"use strict";
+// The participant's page: GET the current step, show it, POST the answer, show the step that comes back.
+// Everything shown is built with DOM calls and textContent (no HTML from data). The time per query runs from the
+// moment the step's videos play (or the step appears, when it has none) to the answer.
+
+const KEY = "langpref-participant";
+const MAX_FEEDBACK = 500;
+const PHASE_TITLES = {
+  pre_survey: "Before we begin",
+  improve: "Experiment 1: improve the robot's trajectory",
+  improve_survey: "Experiment 1: survey",
+  pref_language: "Experiment 2: teach the robot with language",
+  pref_comparison: "Experiment 2: teach the robot with comparisons",
+  pref_survey: "Experiment 2: survey",
+  done: "Thank you",
+};
+const MEANINGS = {
+  height: ["move higher", "move lower"],
+  speed: ["move faster", "move slower"],
+  distance_to_button: ["stay farther from the button", "get closer to the button"],
+  distance_to_cube: ["stay farther from the cube", "get closer to the cube"],
+  distance_to_bottle: ["stay farther from the bottle", "get closer to the bottle"],
+  lift_success: ["lift the cube better", "lift the cube less"],
+};
+
+let me = null;
+let current = null;
+let shownAt = null;
+let busy = false;
+
+function el(tag, attrs, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === null || v === undefined || v === false) continue;
+    if (k === "text") node.textContent = v;
+    else if (k.startsWith("on")) node.addEventListener(k.slice(2), v);
+    else if (v === true) node.setAttribute(k, "");
+    else node.setAttribute(k, String(v));
+  }
+  for (const c of children) if (c !== null && c !== undefined) node.append(c);
+  return node;
+}
+
+async function api(method, path, body) {
+  const res = await fetch(path, {
+    method,
+    headers: {"Content-Type": "application/json", "X-Participant-Token": me.token},
+    body: body === undefined ? undefined : JSON.stringify(body),
+    cache: "no-store",
+  });
+  let data = null;
+  try { data = await res.json(); } catch (e) { data = {error: "the server sent no JSON (HTTP " + res.status + ")"}; }
+  if (!res.ok) {
+    const err = new Error(data.error || ("HTTP " + res.status));
+    err.status = res.status;
+    throw err;
+  }
+  return data;
+}
+
+function meaning(u) {
+  const pair = MEANINGS[u.feature];
+  const text = pair ? pair[u.direction === "increase" ? 0 : 1] : `${u.direction} ${u.feature.replaceAll("_", " ")}`;
+  return `The robot understood your feedback as \u201c${text}\u201d (confidence ${Math.round(100 * u.confidence)}%).`;
+}
+
+function setHeader(step) {
+  document.getElementById("phase-title").textContent = PHASE_TITLES[step.phase] || step.phase;
+  const p = step.progress;
+  let text = "";
+  if (step.phase === "improve") {
+    text = step.kind === "language" ? `Round ${p.done + 1} of ${p.total}` : `Round ${p.done} of ${p.total}`;
+  } else if (step.kind === "language" || step.kind === "comparison") {
+    text = `Query ${p.done + 1} of ${p.total}`;
+  } else if (step.kind === "rating") {
+    text = `After ${p.done} of ${p.total} queries`;
+  }
+  document.getElementById("progress-text").textContent = text;
+  const bar = document.getElementById("progress");
+  bar.max = Math.max(1, p.total);
+  bar.value = step.kind === "done" ? bar.max : p.done;
+}
+
+function videos(urls, labels) {
+  const box = el("div", {class: "videos"});
+  const vids = [];
+  urls.forEach((url, i) => {
+    const v = el("video", {src: url, muted: true, autoplay: true, loop: true, playsinline: true, preload: "auto",
+                           "aria-label": labels[i]});
+    v.muted = true;
+    vids.push(v);
+    const replay = el("button", {type: "button", class: "secondary replay", text: "\u21BB Replay",
+                                 "aria-label": "Replay " + labels[i],
+                                 onclick: () => { v.currentTime = 0; v.play().catch(() => {}); }});
+    box.append(el("figure", {}, v, el("figcaption", {}, el("span", {text: labels[i]}), replay)));
+  });
+  // the query's clock starts when every video has started playing
+  let playing = 0;
+  vids.forEach((v) => v.addEventListener("playing", () => {
+    playing += 1;
+    if (playing === vids.length && shownAt === null) shownAt = performance.now();
+  }, {once: true}));
+  return box;
+}
+
+function errorLine() { return el("p", {class: "error", role: "alert", hidden: true, id: "answer-error"}); }
+
+function showError(message) {
+  const e = document.getElementById("answer-error");
+  if (e) { e.textContent = message; e.hidden = false; }
+}
+
+function clientMs() {
+  return Math.max(0, Math.round(performance.now() - (shownAt === null ? renderedAt : shownAt)));
+}
+let renderedAt = 0;
+
+async function submit(body, buttons) {
+  if (busy) return;
+  busy = true;
+  buttons.forEach((b) => { b.disabled = true; });
+  const status = document.getElementById("status");
+  if (status) { status.textContent = "The robot is thinking\u2026"; status.hidden = false; }
+  try {
+    const next = await api("POST", `/api/participants/${encodeURIComponent(me.participant_id)}/answer`,
+                           {...body, seq: current.seq});
+    busy = false;
+    render(next);
+  } catch (e) {
+    busy = false;
+    buttons.forEach((b) => { b.disabled = false; });
+    if (status) status.hidden = true;
+    if (e.status === 409) { load(); return; }
+    showError(e.status ? e.message : "The connection was lost; your answer was not sent. Please try again.");
+  }
+}
+
+function questionField(q) {
+  const required = q.required;
+  const legend = el("legend", {text: q.text}, required ? null : el("span", {class: "optional", text: " (optional)"}));
+  const fs = el("fieldset", {"data-qid": q.id, "data-type": q.type}, legend);
+  const name = "q_" + q.id;
+  if (q.type === "likert") {
+    const row = el("div", {class: "likert"});
+    if (q.labels) row.append(el("span", {class: "end", text: `${q.min} = ${q.labels[0]}`}));
+    for (let v = q.min; v <= q.max; v++) {
+      row.append(el("label", {class: "opt"}, el("input", {type: "radio", name, value: v}), String(v)));
+    }
+    if (q.labels) row.append(el("span", {class: "end", text: `${q.max} = ${q.labels[1]}`}));
+    fs.append(row);
+  } else if (q.type === "text") {
+    fs.querySelector("legend").setAttribute("id", name + "_l");
+    fs.append(el("textarea", {name, rows: 2, maxlength: 2000, "aria-labelledby": name + "_l"}));
+  } else {
+    const multi = q.type === "multi";
+    for (const o of q.options) {
+      fs.append(el("label", {class: "opt"}, el("input", {type: multi ? "checkbox" : "radio", name, value: o}), o));
+    }
+  }
+  return fs;
+}
+
+function collect(form, qs) {
+  const answers = {};
+  for (const q of qs) {
+    const name = "q_" + q.id;
+    if (q.type === "likert") {
+      const c = form.querySelector(`input[name="${name}"]:checked`);
+      if (c) answers[q.id] = parseInt(c.value, 10);
+    } else if (q.type === "text") {
+      const t = form.querySelector(`textarea[name="${name}"]`).value;
+      if (t.trim()) answers[q.id] = t;
+    } else if (q.type === "choice") {
+      const c = form.querySelector(`input[name="${name}"]:checked`);
+      if (c) answers[q.id] = c.value;
+    } else {
+      const cs = [...form.querySelectorAll(`input[name="${name}"]:checked`)].map((c) => c.value);
+      if (cs.length) answers[q.id] = cs;
+    }
+  }
+  const missing = qs.filter((q) => q.required && !(q.id in answers));
+  return {answers, missing};
+}
+
+function renderSurvey(main, step) {
+  main.append(el("h1", {text: step.title || "Survey"}));
+  const form = el("form", {class: "survey", novalidate: true});
+  step.questions.forEach((q) => form.append(questionField(q)));
+  const send = el("button", {type: "submit", text: "Continue"});
+  form.append(errorLine(), el("p", {}, send));
+  form.addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    const {answers, missing} = collect(form, step.questions);
+    if (missing.length) {
+      showError("Please answer: " + missing.map((q) => q.text).join(" \u2022 "));
+      form.querySelector(`fieldset[data-qid="${missing[0].id}"] input, fieldset[data-qid="${missing[0].id}"] textarea`)?.focus();
+      return;
+    }
+    submit({answers}, [send]);
+  });
+  main.append(form);
+}
+
+function understoodNotice(step) {
+  if (!step.understood) return null;
+  const box = el("div", {class: "notice understood", role: "status"});
+  if (step.understood.text) box.append(el("p", {text: `You said: \u201c${step.understood.text}\u201d`}));
+  box.append(el("p", {text: meaning(step.understood)}));
+  if (step.unchanged) {
+    box.append(el("p", {text: "No trajectory the robot knows matches this feedback better, so it kept the same one. "
+                              + "Try saying it differently."}));
+  }
+  box.append(el("p", {text: "If that is not what you meant, try rephrasing it next time."}));
+  return box;
+}
+
+function renderLanguage(main, step) {
+  const study1 = step.phase === "improve";
+  main.append(el("h1", {text: study1 ? "How should the robot change this trajectory?"
+                                     : "How should the robot move differently?"}));
+  const notice = understoodNotice(step);
+  if (notice) main.append(notice);
+  main.append(videos(step.videos, ["The robot's trajectory"]));
+  const form = el("form", {class: "feedback"});
+  const label = el("label", {for: "feedback", text: "Your feedback (for example \u201cMove faster.\u201d). "
+                                                   + "Press Enter to send, Shift+Enter for a new line."});
+  const box = el("textarea", {id: "feedback", name: "feedback", rows: 3, maxlength: MAX_FEEDBACK, autocomplete: "off"});
+  const counter = el("span", {class: "counter", "aria-live": "polite", text: `0 / ${MAX_FEEDBACK}`});
+  box.addEventListener("input", () => { counter.textContent = `${box.value.length} / ${MAX_FEEDBACK}`; });
+  const send = el("button", {type: "submit", text: "Send feedback"});
+  box.addEventListener("keydown", (ev) => {
+    if (ev.key === "Enter" && !ev.shiftKey) { ev.preventDefault(); form.requestSubmit(); }
+  });
+  form.addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    if (!box.value.trim()) { showError("Please type your feedback before continuing."); box.focus(); return; }
+    submit({feedback: box.value, client_ms: clientMs()}, [send]);
+  });
+  form.append(label, box, el("div", {}, counter), errorLine(), el("p", {id: "status", class: "thinking", hidden: true}),
+              el("p", {}, send));
+  main.append(form);
+  box.focus({preventScroll: true});
+}
+
+function renderComparison(main, step) {
+  main.append(el("h1", {text: "Which trajectory do you prefer?"}));
+  main.append(el("p", {text: "Watch both, then choose (keys 1 and 2 work too)."}));
+  main.append(videos(step.videos, ["Trajectory 1", "Trajectory 2"]));
+  const b0 = el("button", {type: "button", text: "I prefer trajectory 1", "data-choice": 0});
+  const b1 = el("button", {type: "button", text: "I prefer trajectory 2", "data-choice": 1});
+  const choose = (c) => submit({choice: c, client_ms: clientMs()}, [b0, b1]);
+  b0.addEventListener("click", () => choose(0));
+  b1.addEventListener("click", () => choose(1));
+  main.append(el("div", {class: "choices"}, b0, b1), errorLine(), el("p", {id: "status", class: "thinking", hidden: true}));
+  keyHandler = (ev) => {
+    if (ev.target.tagName === "TEXTAREA" || ev.target.tagName === "INPUT") return;
+    if (ev.key === "1") choose(0);
+    if (ev.key === "2") choose(1);
+  };
+}
+
+function renderSatisfaction(main, step) {
+  main.append(el("h1", {text: "Here is the improved trajectory"}));
+  const notice = understoodNotice(step);
+  if (notice) main.append(notice);
+  main.append(videos(step.videos, ["The improved trajectory"]));
+  main.append(el("p", {text: "Are you satisfied with this trajectory?"}));
+  const yes = el("button", {type: "button", text: "Yes, I am satisfied"});
+  const no = el("button", {type: "button", class: "secondary", text: "No, keep improving"});
+  yes.addEventListener("click", () => submit({satisfied: true}, [yes, no]));
+  no.addEventListener("click", () => submit({satisfied: false}, [yes, no]));
+  main.append(el("div", {class: "choices"}, yes, no), errorLine(), el("p", {id: "status", class: "thinking", hidden: true}));
+}
+
+function renderRating(main, step) {
+  main.append(el("h1", {text: "The best trajectory under what the robot has learned so far"}));
+  const notice = understoodNotice(step);
+  if (notice) main.append(notice);
+  main.append(videos(step.videos, ["The robot's best trajectory"]));
+  main.append(el("p", {text: "How well does it match your preferences? 1 = not at all, 5 = perfectly."}));
+  const buttons = [];
+  for (let r = 1; r <= 5; r++) {
+    const b = el("button", {type: "button", class: "secondary", text: String(r), "aria-label": `Rate ${r} of 5`});
+    b.addEventListener("click", () => submit({rating: r}, buttons));
+    buttons.push(b);
+  }
+  main.append(el("div", {class: "choices", role: "group", "aria-label": "rating"}, ...buttons), errorLine(),
+              el("p", {id: "status", class: "thinking", hidden: true}));
+}
+
+function renderDone(main) {
+  main.append(el("h1", {text: "Thank you!"}));
+  main.append(el("p", {text: "You have completed the study. Your answers are saved; you can close this page."}));
+}
+
+let keyHandler = null;
+document.addEventListener("keydown", (ev) => { if (keyHandler && !busy) keyHandler(ev); });
+
+function render(step) {
+  current = step;
+  shownAt = null;
+  keyHandler = null;
+  renderedAt = performance.now();
+  setHeader(step);
+  const main = document.getElementById("main");
+  main.replaceChildren();
+  main.dataset.kind = step.kind;
+  main.dataset.phase = step.phase;
+  ({survey: renderSurvey, language: renderLanguage, comparison: renderComparison, satisfaction: renderSatisfaction,
+    rating: renderRating, done: renderDone})[step.kind](main, step);
+  if (step.kind !== "language") main.focus({preventScroll: true});
+  window.scrollTo(0, 0);
+  if (!step.videos.length) shownAt = renderedAt;
+}
+
+async function load() {
+  try {
+    render(await api("GET", `/api/participants/${encodeURIComponent(me.participant_id)}/step`));
+  } catch (e) {
+    const main = document.getElementById("main");
+    if (e.status === 404 || e.status === 403 || e.status === 401) {
+      localStorage.removeItem(KEY);
+      main.replaceChildren(el("p", {class: "error", text: "This browser's study session is not known to the server."}),
+                           el("p", {}, el("a", {href: "/", class: "button", text: "Start again"})));
+      return;
+    }
+    main.replaceChildren(el("p", {class: "error", role: "alert", text: "Cannot reach the study server. Retrying\u2026"}));
+    setTimeout(load, 3000);
+  }
+}
+
+document.addEventListener("DOMContentLoaded", () => {
+  try { me = JSON.parse(localStorage.getItem(KEY) || "null"); } catch (e) { me = null; }
+  if (!me || !me.participant_id || !me.token) { location.href = "/"; return; }
+  load();
+});

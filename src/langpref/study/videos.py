@@ -1,0 +1,237 @@
+"""Study videos: rendered once from the stored simulator states, cached on disk, served by name.
+
+Names are `traj000012-<tag>.webm`, the tag a hash of the dataset and the render settings, so a cache folder never
+serves a video made another way. Rendering runs in one worker process (MuJoCo on EGL, apart from the server's
+threads) that keeps its env between trajectories. At start every study trajectory is queued (`prerender`), and a
+video asked for before its turn goes to the front of the queue; the request waits for it.
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import json
+import re
+import sys
+import threading
+from collections import deque
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from langpref.errors import LangprefError
+from langpref.study.config import VideoConfig
+
+MEDIA_TYPES = {"webm": "video/webm", "mp4": "video/mp4"}
+_NAME = re.compile(r"^traj(\d{6})-([0-9a-f]{10})\.(webm|mp4)$")
+
+# ---- the worker process ----------------------------------------------------------------------------------------
+
+_WORKER_STATE: dict[str, Any] = {}
+
+
+def _close_worker_envs() -> None:
+    for _, env in _WORKER_STATE.values():
+        try:
+            env.close()
+        except Exception:  # noqa: BLE001, S110 (closing at exit: nothing to do about it)
+            pass
+    _WORKER_STATE.clear()
+
+
+def _worker_init() -> None:
+    """The render worker yields the CPU to the server's requests."""
+    import os
+
+    try:
+        os.nice(10)
+    except (AttributeError, OSError):
+        pass
+
+
+def render_one(data_dir: str, index: int, out: str, width: int, height: int, fps: int, stride: int) -> str:
+    """Render trajectory `index` into `out` (runs in the worker process; the env is kept for the next one)."""
+    from langpref.dataset.storage import load_dataset
+    from langpref.envs import make_env
+    from langpref.envs.render import render_frames, write_video
+
+    if data_dir not in _WORKER_STATE:
+        ds = load_dataset(data_dir)
+        if not _WORKER_STATE:
+            atexit.register(_close_worker_envs)
+        _WORKER_STATE[data_dir] = (ds, make_env(ds.env, ds.meta.horizon))
+    ds, env = _WORKER_STATE[data_dir]
+    traj = ds.load(index)
+    env.reset(traj.seed)
+    frames = render_frames(env, traj.qpos, traj.qvel, width, height, stride)
+    return str(write_video(frames, Path(out), fps))
+
+
+# ---- the cache -------------------------------------------------------------------------------------------------
+
+
+class VideoCache:
+    """Videos of the study set in `cache_dir`; `ensure(index)` renders one now if needed."""
+
+    def __init__(self, data_dir: str | Path, cache_dir: str | Path, cfg: VideoConfig, indices, progress: bool = True):
+        cfg.validate()
+        self.data_dir = str(Path(data_dir).resolve())
+        self.dir = Path(cache_dir).resolve()
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.cfg = cfg
+        self.indices = sorted({int(i) for i in indices})
+        self._allowed = set(self.indices)
+        meta = Path(self.data_dir) / "meta.json"
+        ident = {"data": self.data_dir, "meta_sha": hashlib.sha256(meta.read_bytes()).hexdigest() if meta.is_file()
+                 else "", "width": cfg.width, "height": cfg.height, "fps": cfg.fps, "stride": cfg.stride}
+        self.tag = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:10]
+        self.show_progress = progress
+        self._queue: deque[int] = deque()
+        self._urgent: deque[int] = deque()
+        self._cond = threading.Condition()
+        self._errors: dict[int, str] = {}
+        self._thread: threading.Thread | None = None
+        self._pool: ProcessPoolExecutor | None = None
+        self._stopped = False
+        self._rendering: int | None = None
+        self._active = False  # a render thread is running (changed only under `_cond`)
+
+    # names and paths
+    def name(self, index: int) -> str:
+        return f"traj{int(index):06d}-{self.tag}.{self.cfg.format}"
+
+    def url(self, index: int) -> str:
+        return f"/videos/{self.name(index)}"
+
+    def path(self, index: int) -> Path:
+        return self.dir / self.name(index)
+
+    def index_of(self, name: str) -> int | None:
+        """The study trajectory a video name stands for; None for anything else (other tags, `../`, unknown)."""
+        m = _NAME.match(name)
+        if not m or m.group(2) != self.tag or m.group(3) != self.cfg.format:
+            return None
+        index = int(m.group(1))
+        if index not in self._allowed:
+            return None
+        path = (self.dir / name).resolve()
+        return index if path.parent == self.dir else None
+
+    @property
+    def media_type(self) -> str:
+        return MEDIA_TYPES[self.cfg.format]
+
+    def cached(self, index: int) -> bool:
+        return self.path(index).is_file()
+
+    def progress(self) -> dict[str, Any]:
+        done = sum(self.cached(i) for i in self.indices)
+        return {"done": done, "total": len(self.indices), "running": self._active,
+                "errors": {str(k): v for k, v in self._errors.items()}}
+
+    # rendering
+    def start(self, prerender: bool = True) -> None:
+        """Start the render thread; with `prerender`, queue every study video not yet cached."""
+        with self._cond:
+            if prerender:
+                self._queue.extend(i for i in self.indices if not self.cached(i))
+            self._ensure_thread()
+
+    def _ensure_thread(self) -> None:
+        """Start the render thread unless one runs (call with `_cond` held)."""
+        if not self._active and not self._stopped:
+            self._active = True
+            self._thread = threading.Thread(target=self._run, name="video-render", daemon=True)
+            self._thread.start()
+
+    def _next(self) -> int | None:
+        with self._cond:
+            while not self._stopped:
+                for q in (self._urgent, self._queue):
+                    while q:
+                        i = q.popleft()
+                        if not self.cached(i):
+                            self._rendering = i
+                            return i
+                self._cond.wait(timeout=1.0)
+                if not self._urgent and not self._queue:
+                    break
+            self._active = False
+            return None
+
+    def _run(self) -> None:
+        import multiprocessing
+
+        bar = None
+        if self.show_progress and self._queue:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(self.indices), initial=len(self.indices) - len(self._queue), desc="study videos",
+                       unit="video", file=sys.stderr)
+        try:
+            while True:
+                index = self._next()
+                if index is None:
+                    return
+                try:
+                    if self._pool is None:
+                        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                                                     initializer=_worker_init)
+                    c = self.cfg
+                    self._pool.submit(render_one, self.data_dir, index, str(self.path(index)), c.width, c.height,
+                                      c.fps, c.stride).result()
+                    self._errors.pop(index, None)
+                except Exception as exc:  # noqa: BLE001 (reported per video, the server keeps running)
+                    self._errors[index] = f"{type(exc).__name__}: {exc}"[:300]
+                    if self._pool is not None and getattr(self._pool, "_broken", False):
+                        self._pool = None
+                finally:
+                    with self._cond:
+                        self._rendering = None
+                        self._cond.notify_all()
+                if bar is not None:
+                    bar.n = sum(self.cached(i) for i in self.indices)
+                    bar.refresh()
+        except BaseException:
+            with self._cond:
+                self._active = False
+                self._cond.notify_all()
+            raise
+        finally:
+            if bar is not None:
+                bar.close()
+
+    def ensure(self, index: int, timeout: float = 180.0) -> Path:
+        """The video of `index`, rendering it first (ahead of the queue) if it is not cached yet."""
+        path = self.path(index)
+        if path.is_file():
+            return path
+        with self._cond:
+            self._errors.pop(index, None)
+            self._urgent.append(index)
+            self._ensure_thread()
+            self._cond.notify_all()
+            ok = self._cond.wait_for(lambda: path.is_file() or index in self._errors or self._stopped, timeout)
+        if path.is_file():
+            return path
+        if index in self._errors:
+            raise LangprefError(f"video of trajectory {index} could not be rendered: {self._errors[index]}")
+        raise LangprefError(f"video of trajectory {index} is not ready yet (timed out: {not ok}); try again")
+
+    def wait(self, timeout: float = 600.0) -> bool:
+        """Wait until the queue is empty (tests, benchmarks)."""
+        with self._cond:
+            return self._cond.wait_for(lambda: not self._queue and not self._urgent and self._rendering is None,
+                                       timeout)
+
+    def close(self) -> None:
+        with self._cond:
+            self._stopped = True
+            self._queue.clear()
+            self._urgent.clear()
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None

@@ -1,0 +1,97 @@
+"""`langpref study export`: CSV of every table, the paper's analyses as JSON, an HTML report with PNG figures."""
+
+from __future__ import annotations
+
+import csv
+import json
+import sqlite3
+
+import pytest
+
+from langpref.study import db as sdb
+
+
+@pytest.fixture(scope="module")
+def simulated_db(engine, h, tmp_path_factory):
+    """Four simulated participants (synthetic humans) through the real HTTP server."""
+    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.simulate import SimConfig, simulate
+
+    db = tmp_path_factory.mktemp("export") / "study.sqlite"
+    state = build_state(h.serve_config(db), engine=engine, progress=False)
+    with BackgroundServer(state) as url:
+        result = simulate(url, SimConfig(participants=4, seed=1), data_dir=h.data, split="all")
+    assert result["completed"] == 4, result["errors"]
+    return db
+
+
+def test_export_writes_tables_report_and_figures(simulated_db, tmp_path):
+    from langpref.study.export import FIGURES, export
+
+    out = export(simulated_db, tmp_path / "out")
+    assert out["participants"] == 4 and out["finished"] == 4
+    for table in sdb.TABLES:
+        with open(tmp_path / "out" / "tables" / f"{table}.csv") as fh:
+            rows = list(csv.DictReader(fh))
+        assert rows or table == "meta"
+        assert "token_sha256" not in (rows[0] if rows else {})
+    with open(tmp_path / "out" / "tables" / "answers.csv") as fh:
+        answers = list(csv.DictReader(fh))
+    conn = sqlite3.connect(simulated_db)
+    assert len(answers) == conn.execute("SELECT count(*) FROM answers").fetchone()[0]
+    for name in FIGURES:
+        assert (tmp_path / "out" / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "Study 1" in html and "Area under the rating curve" in html and "study2_ratings.png" in html
+
+
+def test_summary_holds_the_papers_analyses(simulated_db, tmp_path):
+    from langpref.study.export import export
+
+    export(simulated_db, tmp_path / "out")
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["participants"] == 4 and s["method_order"] == {"comparison,language": 2, "language,comparison": 2}
+    assert set(s["study2_attributes"]) == {"adapt_speed", "experience", "noticed_learning", "trust"}
+    for attr in s["study2_attributes"].values():
+        assert attr["language"]["n"] == 4 and 1 <= attr["language"]["mean"] <= 5
+    assert s["study2_ratings"]["points"] == [2, 4]
+    for m in ("language", "comparison"):
+        assert s["study2_ratings"][m]["auc"]["n"] == 4
+        assert all(1 <= v <= 5 * 2 for v in s["study2_ratings"][m]["auc_per_participant"].values())
+        assert s["study2_time_per_query_s"][m]["n"] == 16  # 4 participants x 4 queries
+    test = s["study2_ratings"]["auc_paired_test"]
+    assert test["n"] == 4 and ("note" in test or 0 <= test["t_p_value"] <= 1)
+    aspects = s["study2_aspects"]
+    assert aspects["respondents"] == 4 and set(aspects["language"]) >= {"Time efficiency", "Convenience",
+                                                                         "Adaptability"}
+    assert sum(s["study2_preference"].values()) == 4
+    it = s["study1_iterations_to_satisfaction"]
+    assert len(it["per_participant"]) == 4 and it["not_satisfied"] + it["n"] == 4
+    checked = s["study2_time_per_query_s"]["client_times_consistent_with_server"]
+    assert checked["checked"] > 0 and checked["consistent"] == checked["checked"]
+
+
+def test_paired_test_matches_scipy():
+    from scipy import stats
+
+    from langpref.study.export import _paired_tests
+
+    a, b = [10.0, 12.0, 9.0, 14.0, 11.0], [8.0, 11.0, 9.5, 10.0, 7.0]
+    got = _paired_tests(a, b)
+    assert got["t_p_value"] == pytest.approx(stats.ttest_rel(a, b).pvalue)
+    assert got["wilcoxon_p_value"] == pytest.approx(stats.wilcoxon(a, b).pvalue)
+    assert _paired_tests([1.0], [2.0])["t_p_value"] is None
+
+
+def test_cli_export_and_its_errors(simulated_db, tmp_path, capsys):
+    from langpref.cli import main
+
+    assert main(["study", "export", "--db", str(simulated_db), "--out", str(tmp_path / "o"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["participants"] == 4 and out["report"].endswith("report.html")
+    assert main(["study", "export", "--db", str(tmp_path / "missing.sqlite"), "--out", str(tmp_path / "x")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    other = tmp_path / "other.sqlite"
+    sqlite3.connect(other).execute("CREATE TABLE t (x)").connection.commit()
+    assert main(["study", "export", "--db", str(other), "--out", str(tmp_path / "y")]) == 2
+    assert "schema version" in capsys.readouterr().err
