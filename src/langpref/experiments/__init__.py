@@ -1,0 +1,1 @@
+"""The paper's experiments, each reproducible from one command (`langpref experiment NAME`)."""

@@ -1,0 +1,197 @@
+"""A trained latent-space model on disk: one directory, self-describing, checked when loaded.
+
+    MODEL/
+      config.json            format version, the full TrainConfig, the architecture, the language model's original
+                             name, the data it was trained on (env, features, observation layout, action size,
+                             dataset schema version, tie thresholds), normalisation stats, history, results, and
+                             the size and sha256 of every other file
+      encoders.safetensors   trajectory encoder (with its normalisation buffers), language head, meaning prototypes
+      language_model/        the fine-tuned transformer and its tokenizer (save_pretrained); absent when the
+                             transformer was frozen, which then loads again from its original name
+      training_curve.png     loss and accuracy per epoch (written by training)
+
+A checkpoint is written into a temporary sibling directory and renamed into place, so a crash never leaves half a
+model, and an existing directory is replaced only with `force`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from langpref import __version__
+from langpref.errors import LangprefError
+from langpref.model.config import ModelConfig
+from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, load_transformer, save_transformer
+from langpref.model.latent import DataInfo, LatentModel
+
+FORMAT = "langpref-latent-model"
+FORMAT_VERSION = 1
+WEIGHTS = "encoders.safetensors"
+LM_DIR = "language_model"
+CONFIG = "config.json"
+
+
+def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: str | None = None) -> LatentModel:
+    """A fresh model (random trajectory encoder and head, pretrained transformer from `lang_source` or the name)."""
+    tokenizer, transformer = load_transformer(lang_source or model_cfg.lang_model)
+    traj = TrajectoryEncoder(info.obs_dim + info.action_dim, model_cfg.traj_hidden, model_cfg.latent_dim, mean, std)
+    lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
+    return LatentModel(traj, lang, info, model_cfg.lang_model)
+
+
+def _own_state(model: LatentModel) -> dict[str, torch.Tensor]:
+    """Every tensor of the model except the transformer's (saved apart, and only when fine-tuned)."""
+    return {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()
+            if not k.startswith("lang.transformer.")}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def save_model(model: LatentModel, out: str | Path, *, model_cfg: ModelConfig, lang_finetuned: bool,
+               train_config: dict[str, Any] | None = None, history: list[dict] | None = None,
+               results: dict[str, Any] | None = None, force: bool = False,
+               extra_files: dict[str, Path] | None = None) -> Path:
+    """Write `model` as a checkpoint directory `out`; refuses an existing `out` unless `force`."""
+    from safetensors.torch import save_file
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise LangprefError(f"{out} already exists; pass --force to overwrite it or choose another --out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        save_file(_own_state(model), str(tmp / WEIGHTS))
+        if lang_finetuned:
+            save_transformer(model.lang.tokenizer, model.lang.transformer, tmp / LM_DIR)
+        for name, src in (extra_files or {}).items():
+            shutil.copyfile(src, tmp / name)
+        files = {p.relative_to(tmp).as_posix(): {"bytes": p.stat().st_size, "sha256": _sha256(p)}
+                 for p in sorted(tmp.rglob("*")) if p.is_file()}
+        config = {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "langpref_version": __version__,
+            "model": {**model_cfg.__dict__, "traj_hidden": list(model_cfg.traj_hidden),
+                      "lang_hidden": model.lang.hidden_size},
+            "lang_model": model.lang_model_name,
+            "lang_finetuned": lang_finetuned,
+            "data": model.info.to_dict(),
+            "normalisation": {"mean": model.traj.mean.cpu().tolist(), "std": model.traj.std.cpu().tolist()},
+            "meanings": [f"{f}/{d}" for f, d in model.meanings],
+            "train_config": train_config or {},
+            "history": history or [],
+            "results": results or {},
+            "files": files,
+        }
+        (tmp / CONFIG).write_text(json.dumps(config, indent=2) + "\n")
+        for p in tmp.rglob("*"):  # some writers create 0600 files; a model is meant to be shared
+            p.chmod(0o755 if p.is_dir() else 0o644)
+        tmp.chmod(0o755)
+        if out.exists():
+            old = out.parent / f".{out.name}.old-{os.getpid()}"
+            out.rename(old)
+            tmp.rename(out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+def read_config(path: str | Path) -> dict[str, Any]:
+    """The checked config.json of a checkpoint directory."""
+    path = Path(path)
+    if not path.exists():
+        raise LangprefError(f"model {path} does not exist; train one with `langpref train --data DIR --out {path}`")
+    cfg_path = path / CONFIG
+    if not path.is_dir() or not cfg_path.is_file():
+        raise LangprefError(f"{path} is not a langpref model (no {CONFIG}); train one with `langpref train`")
+    try:
+        cfg = json.loads(cfg_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise LangprefError(f"{cfg_path} is corrupt ({exc.__class__.__name__}); retrain the model") from None
+    if not isinstance(cfg, dict) or cfg.get("format") != FORMAT:
+        raise LangprefError(f"{cfg_path} is not a langpref latent-model config; retrain the model")
+    if cfg.get("format_version") != FORMAT_VERSION:
+        raise LangprefError(f"{path} has model format version {cfg.get('format_version')!r}, this langpref reads "
+                            f"{FORMAT_VERSION}; retrain the model")
+    for key in ("model", "data", "files", "lang_model"):
+        if key not in cfg:
+            raise LangprefError(f"{cfg_path} lacks {key!r}; retrain the model")
+    return cfg
+
+
+def _check_files(path: Path, files: dict[str, dict[str, Any]]) -> None:
+    for name, facts in files.items():
+        f = path / name
+        if not f.is_file():
+            raise LangprefError(f"model {path} is incomplete: {name} is missing; retrain the model")
+        size = f.stat().st_size
+        if size != facts.get("bytes"):
+            raise LangprefError(f"{f} is truncated or altered ({size} bytes, expected {facts.get('bytes')}); "
+                                "retrain the model")
+        if _sha256(f) != facts.get("sha256"):
+            raise LangprefError(f"{f} is corrupt (checksum mismatch); retrain the model")
+
+
+def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=None) -> LatentModel:
+    """Load a checkpoint directory; with `dataset`, also check the model fits it (env, observation layout)."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    path = Path(path)
+    cfg = read_config(path)
+    if WEIGHTS not in cfg["files"]:
+        raise LangprefError(f"{path / CONFIG} lists no {WEIGHTS}; retrain the model")
+    _check_files(path, cfg["files"])
+    try:
+        state = load_file(str(path / WEIGHTS))
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise LangprefError(f"{path / WEIGHTS} is unreadable ({type(exc).__name__}); retrain the model") from None
+    try:
+        mc = dict(cfg["model"])
+        mc.pop("lang_hidden", None)
+        mc["traj_hidden"] = tuple(mc["traj_hidden"])
+        model_cfg = ModelConfig(**mc)
+        info = DataInfo(**cfg["data"])
+    except (TypeError, KeyError) as exc:
+        raise LangprefError(f"{path / CONFIG} is not a valid model description ({exc}); retrain the model") from None
+    lang_source = str(path / LM_DIR) if cfg.get("lang_finetuned") else cfg["lang_model"]
+    if cfg.get("lang_finetuned") and not (path / LM_DIR).is_dir():
+        raise LangprefError(f"model {path} is incomplete: {LM_DIR}/ is missing; retrain the model")
+    model = build_model(model_cfg, info, None, None, lang_source=lang_source)
+    model.lang_model_name = cfg["lang_model"]
+    try:
+        missing, unexpected = model.load_state_dict(state, strict=False)
+    except RuntimeError as exc:
+        msg = str(exc).strip().splitlines()[-1].strip()[:160]
+        raise LangprefError(f"{path / WEIGHTS} does not fit the architecture in {CONFIG} ({msg}); retrain the model"
+                            ) from None
+    missing = [k for k in missing if not k.startswith("lang.transformer.")]
+    if missing or unexpected:
+        raise LangprefError(f"{path / WEIGHTS} does not fit the architecture in {CONFIG} (missing "
+                            f"{missing[:3]}, unexpected {unexpected[:3]}); retrain the model")
+    model.config = cfg  # the whole config.json, for reports
+    model.to(device)
+    model.eval()
+    if dataset is not None:
+        model.check_dataset(dataset)
+    return model

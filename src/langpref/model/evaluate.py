@@ -1,0 +1,111 @@
+"""Alignment accuracy (paper Sec. 5.1, DESIGN.md) and how the model reads one free-form sentence.
+
+Accuracy: over every ordered pair (tau_A, tau_B) of a split, every feature whose value differs between them (by more
+than the model's tie threshold), and every phrasing of that feature in the direction that takes tau_A to tau_B, the
+share with psi_l . (phi_B - phi_A) > 0. The score is psi_l . phi_B - psi_l . phi_A, so S = Psi @ Phi^T is computed
+once and every sample is two lookups.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from langpref.errors import LangprefError
+from langpref.language.pairs import DIRECTIONS, Pairs, Phrasings, build_pairs
+
+CONFIDENCE_TEMPERATURE = 0.1  # softmax temperature over the cosines of `embed_text`
+
+
+def alignment_counts(
+    phi: np.ndarray | torch.Tensor,
+    psi: np.ndarray | torch.Tensor,
+    pairs: Pairs,
+    group_ids: Sequence[np.ndarray],
+    num_features: int,
+    chunk: int = 1 << 22,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(correct, total) per feature: every pair scored with every phrasing id of its (feature, direction) group.
+
+    `phi` (N, D) are the rows `pairs.a`/`pairs.b` index; `psi` (P, D) the rows `group_ids[g]` index, with
+    g = 2 * feature + direction. A score of exactly 0 counts as wrong.
+    """
+    phi_t = torch.as_tensor(phi, dtype=torch.float64)
+    psi_t = torch.as_tensor(psi, dtype=torch.float64).to(phi_t.device)
+    scores = psi_t @ phi_t.T  # (P, N)
+    correct = np.zeros(num_features, dtype=np.int64)
+    total = np.zeros(num_features, dtype=np.int64)
+    groups = pairs.group
+    for g, ids in enumerate(group_ids):
+        if len(ids) == 0:
+            continue
+        sel = np.nonzero(groups == g)[0]
+        if len(sel) == 0:
+            continue
+        s = scores[torch.as_tensor(np.asarray(ids), device=scores.device)]  # (n_phr, N)
+        step = max(1, chunk // len(ids))
+        for start in range(0, len(sel), step):
+            idx = sel[start:start + step]
+            a = torch.as_tensor(pairs.a[idx], device=s.device)
+            b = torch.as_tensor(pairs.b[idx], device=s.device)
+            correct[g // 2] += int(((s[:, b] - s[:, a]) > 0).sum())
+        total[g // 2] += len(sel) * len(ids)
+    return correct, total
+
+
+def summarise(correct: np.ndarray, total: np.ndarray, feature_names: Sequence[str]) -> dict:
+    """{"accuracy", "per_feature", "num_samples"}; features without samples are left out of per_feature."""
+    n = int(total.sum())
+    return {
+        "accuracy": float(correct.sum() / n) if n else float("nan"),
+        "per_feature": {f: float(c / t) for f, c, t in zip(feature_names, correct, total) if t},
+        "num_samples": n,
+    }
+
+
+def evaluate_split(model, dataset, split: str, phrasings: Phrasings) -> dict:
+    """Alignment accuracy of a `LatentModel` on one split of a dataset with the given phrasings."""
+    model.check_dataset(dataset)
+    if tuple(phrasings.feature_names) != tuple(model.feature_names):
+        raise LangprefError("the phrasings' features do not match the model's")
+    if not phrasings.texts:
+        raise LangprefError("no phrasings to evaluate with")
+    idx = dataset.split(split)
+    if len(idx) < 2:
+        raise LangprefError(f"split {split!r} of {dataset.root} has {len(idx)} trajectories; need at least 2")
+    phi = model.encode_dataset(dataset, split).double().cpu()
+    psi = model.encode_texts(phrasings.texts).double().cpu()
+    pairs = build_pairs(dataset.features[idx], np.asarray(model.info.tie_thresholds))
+    correct, total = alignment_counts(phi, psi, pairs, phrasings.group_ids, len(model.feature_names))
+    out = summarise(correct, total, model.feature_names)
+    out.update(split=split, num_trajectories=len(idx), num_phrasings=len(phrasings.texts),
+               num_pairs=len(pairs))
+    return out
+
+
+def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) -> dict:
+    """Which (feature, direction) the model takes `text` to mean: the prototype (mean psi of that meaning's train
+    phrasings) with the highest cosine to psi(text). Confidence: softmax over the cosines at `temperature`, taken at
+    the winner (1 / number of meanings when all are equally close, near 1 when one stands out)."""
+    text = " ".join(str(text).split())
+    if not text:
+        raise LangprefError("the text is empty; pass a sentence such as \"Move faster.\"")
+    if not bool(model.prototypes.abs().sum() > 0):
+        raise LangprefError("this checkpoint has no prototypes of the bank meanings; retrain it with this langpref")
+    psi = model.encode_texts([text])[0].double()
+    protos = model.prototypes.double()
+    cos = torch.nn.functional.cosine_similarity(protos, psi.unsqueeze(0), dim=-1)
+    probs = torch.softmax(cos / temperature, dim=0)
+    best = int(torch.argmax(cos))
+    feature, direction = model.meanings[best]
+    assert direction in DIRECTIONS
+    return {
+        "text": text,
+        "feature": feature,
+        "direction": direction,
+        "confidence": float(probs[best]),
+        "cosine": float(cos[best]),
+        "scores": {f"{f}/{d}": float(c) for (f, d), c in zip(model.meanings, cos)},
+    }

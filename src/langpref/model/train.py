@@ -1,0 +1,390 @@
+"""`langpref train`: learn the shared latent space in the paper's two stages (Sec. 4.1, Appendix C).
+
+Stage 1 freezes the language model: its pooled sentence embeddings are computed once, and only the trajectory
+encoder and the language head learn (Adam, lr 1e-3). Stage 2 co-finetunes the transformer too, at a lower learning
+rate; `freeze_language` stops after stage 1. Every epoch ends with the validation accuracy (val trajectories x the
+bank's val phrasings); each stage keeps its best epoch and stops early after `patience` epochs without a better one.
+
+Cost on a CPU. A step computes phi once per distinct trajectory of its batch (a few hundred trajectories x 500 steps
+through a one-layer MLP) and, in stage 2, psi once per distinct utterance. The transformer dominates, so stage 2
+draws a few phrasings per (feature, direction) group for each step (`stage2_phrasings_per_step`) and lets each pair
+pick among its group's; a pair's phrasing stays uniform over its group. Pairs themselves cost almost nothing, which
+is why stage 2 takes large batches of them.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from langpref.dataset.storage import load_dataset
+from langpref.errors import LangprefError
+from langpref.language.pairs import (
+    Pairs,
+    Phrasings,
+    build_pairs,
+    merge_phrasings,
+    phrasings_from_bank,
+    phrasings_from_mapping,
+    sample_phrasings,
+    sample_subset,
+    tie_thresholds,
+)
+from langpref.model.checkpoint import build_model, save_model
+from langpref.model.config import TrainConfig
+from langpref.model.encoders import freeze, normalisation_stats
+from langpref.model.evaluate import alignment_counts
+from langpref.model.latent import DataInfo, LatentModel
+from langpref.model.loss import latent_loss
+
+
+@dataclass
+class TrainResult:
+    model: LatentModel
+    out: Path
+    history: list[dict[str, Any]]
+    results: dict[str, Any]
+    stage1_out: Path | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise LangprefError("--device cuda was asked for but no CUDA device is available; use --device cpu or auto")
+    return torch.device(name)
+
+
+def load_phrasings(cfg: TrainConfig, env: str, feature_names: list[str]) -> tuple[Phrasings, Phrasings]:
+    """(train, val) phrasings: the bank's splits, with `cfg.utterances` replacing or extending the train split."""
+    from langpref.language.bank import load_bank, load_user_utterances
+
+    bank = load_bank(env)
+    val = phrasings_from_bank(bank, "val", feature_names)
+    if cfg.utterances:
+        user = phrasings_from_mapping(load_user_utterances(cfg.utterances, env), feature_names,
+                                      require_all=not cfg.extend_bank, source=str(cfg.utterances))
+        train = merge_phrasings(phrasings_from_bank(bank, "train", feature_names), user) if cfg.extend_bank else user
+    else:
+        train = phrasings_from_bank(bank, "train", feature_names)
+    return train, val
+
+
+class _Split:
+    """One split on the device: raw steps (N, T, obs+act), features, pairs."""
+
+    def __init__(self, dataset, name: str, thresholds: np.ndarray, device: torch.device):
+        idx = dataset.split(name)
+        if len(idx) < 2:
+            raise LangprefError(f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
+                                "least 2 in train and val")
+        obs, act = dataset.arrays(name)
+        self.obs, self.act = obs, act
+        self.steps = torch.from_numpy(np.concatenate([obs, act], axis=-1)).to(device)
+        self.features = dataset.features[idx]
+        self.pairs: Pairs = build_pairs(self.features, thresholds)
+        if len(self.pairs) == 0:
+            raise LangprefError(f"split {name!r} has no pair of trajectories whose features differ")
+
+
+def _own_params(model: LatentModel) -> list[torch.nn.Parameter]:
+    return list(model.traj.parameters()) + list(model.lang.head.parameters())
+
+
+def _snapshot(model: LatentModel, with_transformer: bool) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in model.state_dict().items()
+            if with_transformer or not k.startswith("lang.transformer.")}
+
+
+class Trainer:
+    def __init__(self, cfg: TrainConfig, train_phr: Phrasings | None = None, val_phr: Phrasings | None = None,
+                 progress: bool = True):
+        cfg.validate()
+        self.cfg = cfg
+        self.progress = progress
+        self.device = resolve_device(cfg.device)
+        self.dataset = load_dataset(cfg.data)
+        meta = self.dataset.meta
+        names = list(meta.feature_names)
+        if train_phr is None or val_phr is None:
+            bank_train, bank_val = load_phrasings(cfg, meta.env, names)
+            train_phr, val_phr = train_phr or bank_train, val_phr or bank_val
+        for p in (train_phr, val_phr):
+            if list(p.feature_names) != names:
+                raise LangprefError(f"phrasings cover {list(p.feature_names)}, the dataset has features {names}")
+        self.train_phr, self.val_phr = train_phr, val_phr
+        self.rng = np.random.default_rng(cfg.seed)
+        torch.manual_seed(cfg.seed)
+
+        train_idx = self.dataset.split("train")
+        thresholds = tie_thresholds(self.dataset.features[train_idx], cfg.tie_fraction)
+        self.train = _Split(self.dataset, "train", thresholds, self.device)
+        self.val = _Split(self.dataset, "val", thresholds, self.device)
+        mean, std = normalisation_stats(self.train.obs, self.train.act)
+        info = DataInfo(env=meta.env, feature_names=names, obs_layout=[dict(x) for x in meta.obs_layout],
+                        obs_dim=meta.obs_dim, action_dim=meta.action_dim, horizon=meta.horizon,
+                        schema_version=meta.schema_version, tie_thresholds=thresholds.tolist(),
+                        feature_std=self.dataset.features[train_idx].std(axis=0).tolist())
+        self.model = build_model(cfg.model, info, mean, std)
+        torch.manual_seed(cfg.seed)  # whatever loading the transformer drew, the fresh layers start the same
+        for m in [*self.model.traj.modules(), self.model.lang.head]:
+            if isinstance(m, torch.nn.Linear):
+                m.reset_parameters()
+        self.model.to(self.device)
+        self.history: list[dict[str, Any]] = []
+        self.samples_seen = {1: 0, 2: 0}
+        self.seconds = {1: 0.0, 2: 0.0}
+
+    # ---- pieces shared by both stages ------------------------------------------------------------------------------
+
+    def _time_index(self, n: int, horizon: int) -> torch.Tensor | None:
+        """Stratified time steps for a training step: one random step in each of `time_samples` equal segments of
+        the horizon, drawn afresh per trajectory (None: every step). The mean of the per-step embeddings over them is
+        an unbiased estimate of the mean over all steps, at a fraction of the cost; evaluation always uses all."""
+        k = self.cfg.time_samples
+        if k <= 0 or k >= horizon:
+            return None
+        edges = np.linspace(0, horizon, k + 1)
+        lo, width = edges[:-1], np.diff(edges)
+        t = np.floor(lo + self.rng.random((n, k)) * width).astype(np.int64)
+        return torch.as_tensor(np.minimum(t, horizon - 1), device=self.device)
+
+    def _phi(self, split: _Split, a: np.ndarray, b: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        """phi_A, phi_B of a batch, computing phi once per distinct trajectory."""
+        both = np.concatenate([a, b])
+        uniq, inv = np.unique(both, return_inverse=True)
+        rows = torch.as_tensor(uniq, device=self.device)
+        t = self._time_index(len(uniq), split.steps.shape[1])
+        steps = split.steps[rows] if t is None else split.steps[rows.unsqueeze(1), t]
+        phi = self.model.traj(steps)
+        inv_t = torch.as_tensor(inv, device=self.device)
+        return phi[inv_t[:len(a)]], phi[inv_t[len(a):]]
+
+    @torch.no_grad()
+    def _val_accuracy(self, pooled_val: torch.Tensor) -> float:
+        phi = self.model.traj(self.val.steps).double().cpu()
+        psi = self.model.lang.head(pooled_val).double().cpu()
+        correct, total = alignment_counts(phi, psi, self.val.pairs, self.val_phr.group_ids,
+                                          len(self.val_phr.feature_names))
+        return float(correct.sum() / max(total.sum(), 1))
+
+    def _bar(self, stage: int, total: int):
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc=f"stage {stage} ({'frozen LM' if stage == 1 else 'co-finetune'})",
+                    unit="step", file=sys.stderr, disable=not self.progress, dynamic_ncols=True, leave=True)
+
+    def _run_stage(self, stage: int, epochs: int, batch_size: int, optimizer, step_fn, val_fn,
+                   init_best: tuple[float, dict] | None, with_transformer: bool) -> tuple[float, dict]:
+        """Epoch loop with validation, best-state tracking and early stopping; returns (best val acc, best state)."""
+        pairs = self.train.pairs
+        steps_per_epoch = math.ceil(len(pairs) / batch_size)
+        best_acc, best_state = init_best if init_best else (-1.0, _snapshot(self.model, with_transformer))
+        stale = 0
+        bar = self._bar(stage, epochs * steps_per_epoch)
+        try:
+            for epoch in range(1, epochs + 1):
+                t0 = time.perf_counter()
+                order = self.rng.permutation(len(pairs))
+                sums = np.zeros(4)  # loss, align, norm, correct
+                for start in range(0, len(order), batch_size):
+                    rows = order[start:start + batch_size]
+                    loss, la, ln, correct = step_fn(rows, epoch)
+                    optimizer.zero_grad(set_to_none=True)
+                    loss.backward()
+                    optimizer.step()
+                    sums += np.array([loss.item() * len(rows), la.item() * len(rows), ln.item() * len(rows),
+                                      correct])
+                    self.samples_seen[stage] += len(rows)
+                    bar.update(1)
+                    bar.set_postfix(loss=f"{loss.item():.3f}", acc=f"{correct / len(rows):.3f}",
+                                    val=f"{max(best_acc, 0):.3f}", refresh=False)
+                val_acc = val_fn()
+                secs = time.perf_counter() - t0
+                self.seconds[stage] += secs
+                n = len(order)
+                self.history.append({"stage": stage, "epoch": epoch, "loss": sums[0] / n, "align": sums[1] / n,
+                                     "norm": sums[2] / n, "train_acc": sums[3] / n, "val_acc": val_acc,
+                                     "seconds": secs})
+                if val_acc > best_acc:
+                    best_acc, best_state, stale = val_acc, _snapshot(self.model, with_transformer), 0
+                else:
+                    stale += 1
+                bar.set_postfix(loss=f"{sums[0] / n:.3f}", acc=f"{sums[3] / n:.3f}", val=f"{best_acc:.3f}")
+                if self.cfg.patience and stale >= self.cfg.patience:
+                    break
+        finally:
+            bar.close()
+        self.model.load_state_dict(best_state, strict=False)
+        return best_acc, best_state
+
+    def _loss(self, batch: Pairs, psi: torch.Tensor):
+        phi_a, phi_b = self._phi(self.train, batch.a, batch.b)
+        loss, la, ln = latent_loss(phi_a, phi_b, psi, self.cfg.norm_a, self.cfg.norm_b)
+        with torch.no_grad():
+            correct = int(((psi * (phi_b - phi_a)).sum(-1) > 0).sum())
+        return loss, la, ln, correct
+
+    # ---- stage 1: language model frozen ----------------------------------------------------------------------------
+
+    def stage1(self) -> float:
+        cfg, lang = self.cfg, self.model.lang
+        freeze(lang.transformer)
+        lang.transformer.eval()
+        with torch.no_grad():
+            pooled_train = lang.pooled_texts(self.train_phr.texts)
+            pooled_val = lang.pooled_texts(self.val_phr.texts)
+        optimizer = torch.optim.Adam([
+            {"params": list(self.model.traj.parameters()), "lr": cfg.stage1_lr},
+            {"params": list(lang.head.parameters()), "lr": cfg.stage1_head_lr},
+        ], weight_decay=cfg.weight_decay)
+        epoch_phr: dict[int, np.ndarray] = {}
+
+        def step(rows: np.ndarray, epoch: int):
+            if epoch not in epoch_phr:  # one phrasing per pair, drawn afresh each epoch
+                epoch_phr.clear()
+                epoch_phr[epoch] = sample_phrasings(self.train.pairs.group, self.train_phr, self.rng)
+            phr = torch.as_tensor(epoch_phr[epoch][rows], device=self.device)
+            return self._loss(self.train.pairs.subset(rows), lang.head(pooled_train[phr]))
+
+        best, _ = self._run_stage(1, cfg.stage1_epochs, cfg.stage1_batch_size, optimizer, step,
+                                  lambda: self._val_accuracy(pooled_val), None, False)
+        return best
+
+    # ---- stage 2: co-finetuning ------------------------------------------------------------------------------------
+
+    def stage2(self, init_acc: float) -> float:
+        cfg, lang = self.cfg, self.model.lang
+        freeze(lang.transformer, False)
+        if not cfg.finetune_embeddings:
+            emb = lang.transformer.get_input_embeddings()
+            if emb is not None:
+                freeze(emb)
+        lm_params = [p for p in lang.transformer.parameters() if p.requires_grad]
+        optimizer = torch.optim.Adam([
+            {"params": _own_params(self.model), "lr": cfg.stage2_lr},
+            {"params": lm_params, "lr": cfg.stage2_lm_lr},
+        ], weight_decay=cfg.weight_decay)
+        tokens = lang.tokenize(self.train_phr.texts)
+        val_tokens = lang.tokenize(self.val_phr.texts)
+        per_group = max(1, cfg.stage2_phrasings_per_step // self.train_phr.num_groups)
+
+        def encode(tok: dict[str, torch.Tensor], rows: torch.Tensor) -> torch.Tensor:
+            ids, mask = tok["input_ids"][rows], tok["attention_mask"][rows]
+            width = int(mask.sum(dim=1).max())
+            return lang.pooled(ids[:, :width], mask[:, :width])
+
+        def step(rows: np.ndarray, epoch: int):
+            batch = self.train.pairs.subset(rows)
+            lang.transformer.train()
+            subset = sample_subset(self.train_phr, per_group, self.rng)
+            phr = sample_phrasings(batch.group, self.train_phr, self.rng, subset)
+            uniq, inv = np.unique(phr, return_inverse=True)  # each distinct utterance once
+            pooled = encode(tokens, torch.as_tensor(uniq, device=self.device))
+            psi = lang.head(pooled)[torch.as_tensor(inv, device=self.device)]
+            return self._loss(batch, psi)
+
+        @torch.no_grad()
+        def val_fn() -> float:
+            lang.transformer.eval()
+            rows = torch.arange(len(self.val_phr.texts), device=self.device)
+            pooled = torch.cat([encode(val_tokens, rows[i:i + 128]) for i in range(0, len(rows), 128)])
+            return self._val_accuracy(pooled)
+
+        init = (init_acc, _snapshot(self.model, True))
+        best, _ = self._run_stage(2, cfg.stage2_epochs, cfg.stage2_batch_size, optimizer, step, val_fn, init, True)
+        freeze(lang.transformer)
+        lang.transformer.eval()
+        return best
+
+
+def plot_history(history: list[dict[str, Any]], path: Path, title: str = "") -> Path:
+    """Training curve: loss and accuracy (train, validation) per epoch, stage 2 after the dashed line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.arange(1, len(history) + 1)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax1.plot(x, [h["loss"] for h in history], label="loss")
+    ax1.plot(x, [h["align"] for h in history], label="L_align", alpha=0.7)
+    ax1.set_xlabel("epoch")
+    ax1.set_ylabel("train loss")
+    ax2.plot(x, [h["train_acc"] for h in history], label="train (sampled phrasings)")
+    ax2.plot(x, [h["val_acc"] for h in history], label="validation")
+    ax2.set_xlabel("epoch")
+    ax2.set_ylabel("alignment accuracy")
+    n1 = sum(1 for h in history if h["stage"] == 1)
+    for ax in (ax1, ax2):
+        if 0 < n1 < len(history):
+            ax.axvline(n1 + 0.5, color="grey", linestyle="--", linewidth=1)
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or "latent-space training (stage 2 right of the dashed line)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, force: bool) -> Path:
+    model, cfg = trainer.model, trainer.cfg
+    model.set_prototypes(trainer.train_phr)
+    history = [h for h in trainer.history if lang_finetuned or h["stage"] == 1]
+    with tempfile.TemporaryDirectory() as tmp:
+        curve = plot_history(history, Path(tmp) / "training_curve.png",
+                             title=f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}")
+        return save_model(model, out, model_cfg=cfg.model, lang_finetuned=lang_finetuned,
+                          train_config=cfg.to_dict(), history=history, results=results, force=force,
+                          extra_files={"training_curve.png": curve})
+
+
+def train(cfg: TrainConfig, *, train_phrasings: Phrasings | None = None, val_phrasings: Phrasings | None = None,
+          progress: bool = True, stage1_out: str | Path | None = None) -> TrainResult:
+    """Train and save a latent-space model into `cfg.out`.
+
+    `stage1_out`, when given, also saves the stage-1 (frozen language model) checkpoint there: the frozen ablation
+    and the co-finetuned model share stage 1, so one run yields both. Phrasings default to the bank's (train, val).
+    """
+    cfg.validate()
+    if stage1_out is not None and Path(stage1_out).exists() and not cfg.force:
+        raise LangprefError(f"{stage1_out} already exists; pass --force to overwrite it")
+    t_start = time.perf_counter()
+    trainer = Trainer(cfg, train_phrasings, val_phrasings, progress=progress)
+    setup_s = time.perf_counter() - t_start
+    acc1 = trainer.stage1()
+
+    def results(stage: int, best: float) -> dict[str, Any]:
+        s = sum(trainer.seconds[k] for k in range(1, stage + 1))
+        n = sum(trainer.samples_seen[k] for k in range(1, stage + 1))
+        return {"best_val_accuracy": best, "stages": stage, "train_pairs": len(trainer.train.pairs),
+                "train_phrasings": len(trainer.train_phr.texts), "val_phrasings": len(trainer.val_phr.texts),
+                "setup_s": setup_s, "train_s": s, "samples": n, "samples_per_s": n / s if s else 0.0,
+                "device": str(trainer.device), "torch_threads": torch.get_num_threads(),
+                "stage_seconds": {str(k): v for k, v in trainer.seconds.items() if k <= stage},
+                "stage_samples_per_s": {str(k): trainer.samples_seen[k] / trainer.seconds[k]
+                                        for k in range(1, stage + 1) if trainer.seconds[k]}}
+
+    s1 = None
+    if stage1_out is not None:
+        s1 = _save(trainer, Path(stage1_out), False, results(1, acc1), cfg.force)
+    if cfg.freeze_language or cfg.stage2_epochs == 0:
+        res = results(1, acc1)
+        out = _save(trainer, Path(cfg.out), False, res, cfg.force)
+    else:
+        acc2 = trainer.stage2(acc1)
+        res = results(2, acc2)
+        res["stage1_val_accuracy"] = acc1
+        out = _save(trainer, Path(cfg.out), True, res, cfg.force)
+    res["wall_s"] = time.perf_counter() - t_start
+    return TrainResult(trainer.model, out, trainer.history, res, s1)

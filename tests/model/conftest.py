@@ -1,0 +1,93 @@
+"""Tiny synthetic datasets (no simulator) and small phrasing tables for the latent-space tests.
+
+Each trajectory wanders around its own random level per observation dimension; the three features are the means of
+observation dimensions 0, 1, 2, so a per-step MLP averaged over time can learn them exactly.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
+from langpref.language.pairs import phrasings_from_mapping
+
+torch.set_num_threads(1)
+
+MW_FEATURES = ["height", "speed", "distance_to_button"]
+
+
+def make_dataset(root: Path, *, env: str = "metaworld", n: int = 16, horizon: int = 20, obs_dim: int = 6,
+                 action_dim: int = 2, seed: int = 0, feature_names: list[str] | None = None) -> Path:
+    rng = np.random.default_rng(seed)
+    names = feature_names or MW_FEATURES
+    layout = [{"name": "hand", "start": 0, "stop": 3}, {"name": "rest", "start": 3, "stop": obs_dim}]
+    feats = []
+    for i in range(n):
+        level = rng.uniform(-1, 1, size=obs_dim)
+        obs = (level + 0.3 * rng.standard_normal((horizon, obs_dim))).astype(np.float32)
+        act = rng.standard_normal((horizon, action_dim)).astype(np.float32)
+        step_features = obs[:, : len(names)].astype(np.float64) if len(names) <= obs_dim else \
+            np.tile(obs[:, :1], (1, len(names)))
+        traj = Trajectory(index=i, observations=obs, actions=act, step_features=step_features,
+                          qpos=np.zeros((horizon, 2)), qvel=np.zeros((horizon, 2)), success=bool(i % 2), seed=i)
+        save_trajectory(root, traj)
+        feats.append(traj.features)
+    n_train, n_val = int(n * 0.625), (n - int(n * 0.625)) // 2
+    splits = {"train": list(range(n_train)), "val": list(range(n_train, n_train + n_val)),
+              "test": list(range(n_train + n_val, n))}
+    meta = DatasetMeta(env=env, horizon=horizon, obs_layout=layout, action_dim=action_dim, feature_names=names,
+                       splits=splits, num_trajectories=n)
+    write_meta(root, meta, np.array(feats))
+    return root
+
+
+TRAIN_TEXTS = {
+    "height": {"increase": ["Move higher.", "Go up more.", "Raise your arm."],
+               "decrease": ["Move lower.", "Go down more.", "Lower your arm."]},
+    "speed": {"increase": ["Move faster.", "Speed up.", "Go quicker."],
+              "decrease": ["Move slower.", "Slow down.", "Go more slowly."]},
+    "distance_to_button": {"increase": ["Stay away from the button.", "Move farther from the button."],
+                           "decrease": ["Get closer to the button.", "Move nearer to the button."]},
+}
+VAL_TEXTS = {
+    "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},
+    "speed": {"increase": ["Be quicker."], "decrease": ["Be slower."]},
+    "distance_to_button": {"increase": ["Keep further from the button."], "decrease": ["Approach the button."]},
+}
+
+
+@pytest.fixture(scope="session")
+def tiny_data(tmp_path_factory) -> Path:
+    return make_dataset(tmp_path_factory.mktemp("data") / "tiny")
+
+
+@pytest.fixture(scope="session")
+def phrasings():
+    return (phrasings_from_mapping(TRAIN_TEXTS, MW_FEATURES), phrasings_from_mapping(VAL_TEXTS, MW_FEATURES))
+
+
+def tiny_config(data: Path, out: Path, **overrides):
+    from langpref.model.config import ModelConfig, TrainConfig
+
+    cfg = TrainConfig(data=str(data), out=str(out), model=ModelConfig(latent_dim=16, max_length=12),
+                      stage1_epochs=6, stage1_batch_size=32, stage1_lr=1e-2, stage1_head_lr=1e-2, stage2_epochs=1,
+                      stage2_batch_size=128, stage2_phrasings_per_step=6, patience=0, device="cpu", seed=0)
+    for k, v in overrides.items():
+        setattr(cfg, k, v)
+    return cfg
+
+
+@pytest.fixture(scope="session")
+def trained(tiny_data, phrasings, tmp_path_factory):
+    """One small run of both stages, shared by the tests that only read a trained model: (result, stage-1 dir)."""
+    from langpref.model.train import train
+
+    root = tmp_path_factory.mktemp("models")
+    cfg = tiny_config(tiny_data, root / "cofinetuned")
+    result = train(cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False,
+                   stage1_out=root / "frozen")
+    return result

@@ -1,0 +1,66 @@
+import json
+
+import pytest
+
+from langpref.cli import main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
+    model = tmp_path / "m"
+    code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(model), "--freeze-language",
+                         "--epochs", "3", "--batch-size", "64", "--latent-dim", "16", "--max-length", "16",
+                         "--device", "cpu", "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["stages"] == 1 and summary["out"] == str(model)
+    assert "stage 1" in err  # the progress bar goes to stderr
+
+    code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--split", "val",
+                         "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert 0 <= res["accuracy"] <= 1 and res["num_samples"] > 0 and set(res["per_feature"]) <= {
+        "height", "speed", "distance_to_button"}
+
+    user = tmp_path / "mine.json"
+    user.write_text(json.dumps({"_note": "mine", "metaworld": {"speed": {"increase": ["Hurry up!"]}}}))
+    code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--utterances",
+                         str(user), "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert list(res["per_feature"]) == ["speed"]
+
+    code, out, err = run(capsys, "embed", "--model", str(model), "Move faster.", "--json")
+    assert code == 0, err
+    assert set(json.loads(out)) >= {"feature", "direction", "confidence"}
+
+    code, out, err = run(capsys, "visualize", "--model", str(model), "--data", str(tiny_data), "--out",
+                         str(tmp_path / "v.png"))
+    assert code == 0, err and (tmp_path / "v.png").stat().st_size > 1000
+
+    code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(model), "--freeze-language")
+    assert code == 2 and "already exists" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["embed", "--model", "MODEL", "   "], "empty"),
+    (["evaluate", "--model", "NOPE", "--data", "DATA"], "does not exist"),
+])
+def test_one_line_errors(trained, tiny_data, capsys, argv, match):
+    argv = [str(trained.out) if a == "MODEL" else str(tiny_data) if a == "DATA" else a for a in argv]
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and match in err and err.count("\n") == 1 and out == ""
+
+
+def test_utterances_prints_the_bank(capsys):
+    code, out, _ = run(capsys, "utterances", "--env", "metaworld", "--json")
+    assert code == 0
+    bank = json.loads(out)
+    assert set(bank) == {"height", "speed", "distance_to_button"}
+    assert "Move faster." in bank["speed"]["increase"]
