@@ -88,7 +88,7 @@ def _train_config(args: argparse.Namespace):
         stage2_batch_size=d.stage2_batch_size if args.finetune_batch_size is None else args.finetune_batch_size,
         stage2_phrasings_per_step=args.phrasings_per_step, stage1_lr=args.lr, stage2_lm_lr=args.lm_lr,
         patience=args.patience, norm_a=args.norm_a, norm_b=args.norm_b, tie_fraction=args.tie_fraction,
-        time_samples=args.time_samples,
+        time_samples=args.time_samples, stage1_head_lr=args.head_lr,
     )
 
 
@@ -192,7 +192,10 @@ def _register_latent_commands(sub) -> None:
                    help=f"pairs per step, stage 2 (default {d.stage2_batch_size})")
     p.add_argument("--phrasings-per-step", type=int, default=d.stage2_phrasings_per_step,
                    help="distinct utterances through the transformer per stage-2 step (default %(default)s)")
-    p.add_argument("--lr", type=float, default=d.stage1_lr, help="stage-1 learning rate (default %(default)s)")
+    p.add_argument("--lr", type=float, default=d.stage1_lr,
+                   help="stage-1 learning rate of the trajectory encoder (default %(default)s)")
+    p.add_argument("--head-lr", type=float, default=d.stage1_head_lr,
+                   help="stage-1 learning rate of the language head (default %(default)s)")
     p.add_argument("--lm-lr", type=float, default=d.stage2_lm_lr,
                    help="stage-2 learning rate of the transformer (default %(default)s)")
     p.add_argument("--latent-dim", type=int, default=m.latent_dim, help="D, size of phi and psi (default %(default)s)")
