@@ -68,3 +68,15 @@ def test_unique_trajectories_are_encoded_once(tiny_data, phrasings, tmp_path):
         phi_a, phi_b = trainer._phi(trainer.train, a, b)
         full = trainer.model.traj(trainer.train.steps)
     assert torch.allclose(phi_a, full[a], atol=1e-6) and torch.allclose(phi_b, full[b], atol=1e-6)
+
+
+def test_time_samples_are_stratified_and_training_uses_them(tiny_data, phrasings, tmp_path):
+    trainer = Trainer(tiny_config(tiny_data, tmp_path / "m", time_samples=5), *phrasings, progress=False)
+    t = trainer._time_index(7, 20).numpy()
+    assert t.shape == (7, 5)
+    assert np.all(t // 4 == np.arange(5))  # one step in each segment of 4
+    a, b = np.array([0, 1]), np.array([1, 2])
+    phi_a, _ = trainer._phi(trainer.train, a, b)
+    assert phi_a.shape == (2, 16)
+    trainer.cfg.time_samples = 0
+    assert trainer._time_index(7, 20) is None
