@@ -80,7 +80,8 @@ def _train_config(args: argparse.Namespace):
     d = TrainConfig()
     model = ModelConfig(lang_model=args.lang_model, latent_dim=args.latent_dim, max_length=args.max_length)
     return TrainConfig(
-        data=str(args.data), out=str(args.out), model=model, utterances=args.utterances, extend_bank=args.extend_bank,
+        data=str(args.data), out=str(args.out), model=model, extend_bank=args.extend_bank,
+        utterances=str(args.utterances) if args.utterances else None,
         freeze_language=args.freeze_language, seed=args.seed, device=args.device, force=args.force,
         stage1_epochs=d.stage1_epochs if args.epochs is None else args.epochs,
         stage1_batch_size=d.stage1_batch_size if args.batch_size is None else args.batch_size,

@@ -47,6 +47,12 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(model), "--freeze-language")
     assert code == 2 and "already exists" in err and err.count("\n") == 1
 
+    code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(tmp_path / "m2"), "--freeze-language",
+                         "--utterances", str(user), "--extend-bank", "--epochs", "1", "--latent-dim", "8", "--json")
+    assert code == 0, err
+    saved = json.loads((tmp_path / "m2" / "config.json").read_text())["train_config"]
+    assert saved["utterances"] == str(user) and saved["extend_bank"] is True
+
 
 @pytest.mark.parametrize("argv,match", [
     (["embed", "--model", "MODEL", "   "], "empty"),

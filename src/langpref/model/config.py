@@ -122,9 +122,10 @@ class TrainConfig:
             raise LangprefError(f"{out} already exists; pass --force to overwrite it or choose another --out")
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain JSON types only (paths as strings), for config.json."""
         d = asdict(self)
         d["model"]["traj_hidden"] = list(self.model.traj_hidden)
-        return d
+        return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
 
     @classmethod
     def from_dict(cls, raw: dict[str, Any]) -> TrainConfig:
