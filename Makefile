@@ -43,7 +43,7 @@ reproduce: install
 	  test -f data/$$env/meta.json || $(BIN)/langpref generate --env $$env --out data/$$env --backend $(BACKEND); \
 	  test -f results/alignment/$$env/alignment.json || $(BIN)/langpref experiment alignment --env $$env; \
 	  for exp in improve reward ablation; do \
-	    $(BIN)/langpref experiment $$exp --env $$env --model results/alignment/$$env/cofinetuned --backend $(BACKEND); \
+	    $(BIN)/langpref experiment $$exp --env $$env --backend $(BACKEND); \
 	  done; \
 	done
 	@echo "figures and tables: results/*/*/ (see docs/results.md)"

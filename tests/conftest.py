@@ -49,3 +49,24 @@ def write_synthetic_dataset(root: Path, n: int = 12, horizon: int = 20, env: str
 @pytest.fixture
 def synthetic_dataset(tmp_path: Path) -> Path:
     return write_synthetic_dataset(tmp_path / "synthetic")
+
+
+TRAIN_TEXTS = {
+    "height": {"increase": ["Move higher.", "Go up more.", "Raise your arm."],
+               "decrease": ["Move lower.", "Go down more.", "Lower your arm."]},
+    "speed": {"increase": ["Move faster.", "Speed up.", "Go quicker."],
+              "decrease": ["Move slower.", "Slow down.", "Go more slowly."]},
+    "distance_to_button": {"increase": ["Stay away from the button.", "Move farther from the button."],
+                           "decrease": ["Get closer to the button.", "Move nearer to the button."]},
+}
+VAL_TEXTS = {
+    "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},
+    "speed": {"increase": ["Be quicker."], "decrease": ["Be slower."]},
+    "distance_to_button": {"increase": ["Keep further from the button."], "decrease": ["Approach the button."]},
+}
+
+
+@pytest.fixture(scope="session")
+def tiny_texts() -> tuple[dict, dict]:
+    """A few Meta-World train and val phrasings (utterance-file schema) for tiny training runs."""
+    return TRAIN_TEXTS, VAL_TEXTS

@@ -24,7 +24,6 @@ BACKENDS = ("local", "ray")
 _SETUP_CACHE: dict[tuple, Any] = {}
 
 
-
 def _call_setup(setup: Callable[..., Any] | None, setup_args: tuple) -> Any:
     """Per-process state (e.g. a simulator), built once per worker process and reused by its later jobs."""
     if setup is None:
@@ -73,8 +72,8 @@ def run_jobs(
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     if backend == "ray":
         yield from _run_ray(fn, jobs, setup, setup_args, workers, ray_address, chunk, max_retries)
-    elif workers == 1:
-        state = setup(*setup_args) if setup else None
+    elif workers == 1:  # in this process, reusing its state across calls (a second run skips the simulator start-up)
+        state = _call_setup(setup, setup_args)
         for job in jobs:
             yield fn(state, job)
     else:

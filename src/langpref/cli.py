@@ -417,7 +417,8 @@ def _register_latent_use_commands(sub) -> None:
                            "section for docs/results.md); an interrupted run resumes without redoing finished seeds.")
         p.add_argument("--env", required=True, choices=ENVS)
         p.add_argument("--data", type=Path, default=None, help="dataset directory (default data/ENV)")
-        p.add_argument("--model", type=Path, default=None, help="checkpoint directory (default models/ENV)")
+        p.add_argument("--model", type=Path, default=None,
+                       help="checkpoint (default results/alignment/ENV/cofinetuned, from `experiment alignment`)")
         p.add_argument("--perfect-latent", action="store_true", help="ORACLE latent space instead of a model")
         p.add_argument("--out", type=Path, default=None,
                        help=f"output directory (default results/{name}/ENV, or ENV-perfect)")
@@ -576,6 +577,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `langpref ... --json | head`: the reader left; not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return 0
 
 

@@ -45,29 +45,15 @@ def make_dataset(root: Path, *, env: str = "metaworld", n: int = 16, horizon: in
     return root
 
 
-TRAIN_TEXTS = {
-    "height": {"increase": ["Move higher.", "Go up more.", "Raise your arm."],
-               "decrease": ["Move lower.", "Go down more.", "Lower your arm."]},
-    "speed": {"increase": ["Move faster.", "Speed up.", "Go quicker."],
-              "decrease": ["Move slower.", "Slow down.", "Go more slowly."]},
-    "distance_to_button": {"increase": ["Stay away from the button.", "Move farther from the button."],
-                           "decrease": ["Get closer to the button.", "Move nearer to the button."]},
-}
-VAL_TEXTS = {
-    "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},
-    "speed": {"increase": ["Be quicker."], "decrease": ["Be slower."]},
-    "distance_to_button": {"increase": ["Keep further from the button."], "decrease": ["Approach the button."]},
-}
-
-
 @pytest.fixture(scope="session")
 def tiny_data(tmp_path_factory) -> Path:
     return make_dataset(tmp_path_factory.mktemp("data") / "tiny")
 
 
 @pytest.fixture(scope="session")
-def phrasings():
-    return (phrasings_from_mapping(TRAIN_TEXTS, MW_FEATURES), phrasings_from_mapping(VAL_TEXTS, MW_FEATURES))
+def phrasings(tiny_texts):
+    train_texts, val_texts = tiny_texts
+    return (phrasings_from_mapping(train_texts, MW_FEATURES), phrasings_from_mapping(val_texts, MW_FEATURES))
 
 
 def tiny_config(data: Path, out: Path, **overrides):

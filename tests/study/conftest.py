@@ -25,21 +25,6 @@ TINY = {"split": "all", "improve_max_iterations": 3, "pref_queries": 4, "rating_
 ADMIN = "admin-token-for-tests-0123456789"
 SRC = str(Path(__file__).resolve().parents[2] / "src")
 
-TRAIN_TEXTS = {
-    "height": {"increase": ["Move higher.", "Go up more.", "Raise your arm."],
-               "decrease": ["Move lower.", "Go down more.", "Lower your arm."]},
-    "speed": {"increase": ["Move faster.", "Speed up.", "Go quicker."],
-              "decrease": ["Move slower.", "Slow down.", "Go more slowly."]},
-    "distance_to_button": {"increase": ["Stay away from the button.", "Move farther from the button."],
-                           "decrease": ["Get closer to the button.", "Move nearer to the button."]},
-}
-VAL_TEXTS = {
-    "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},
-    "speed": {"increase": ["Be quicker."], "decrease": ["Be slower."]},
-    "distance_to_button": {"increase": ["Keep further from the button."], "decrease": ["Approach the button."]},
-}
-
-
 @pytest.fixture(scope="session")
 def study_data(tmp_path_factory) -> Path:
     from langpref.dataset.generate import GenerateConfig, generate
@@ -50,7 +35,7 @@ def study_data(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def study_model(study_data, tmp_path_factory) -> Path:
+def study_model(study_data, tmp_path_factory, tiny_texts) -> Path:
     from langpref.language.pairs import phrasings_from_mapping
     from langpref.model.config import ModelConfig, TrainConfig
     from langpref.model.train import train
@@ -59,8 +44,9 @@ def study_model(study_data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("study_model") / "model"
     cfg = TrainConfig(data=str(study_data), out=str(out), model=ModelConfig(latent_dim=16, max_length=16),
                       stage1_epochs=2, stage1_batch_size=256, stage2_epochs=0, patience=0, device="cpu", seed=0)
-    train(cfg, train_phrasings=phrasings_from_mapping(TRAIN_TEXTS, features),
-          val_phrasings=phrasings_from_mapping(VAL_TEXTS, features), progress=False)
+    train_texts, val_texts = tiny_texts
+    train(cfg, train_phrasings=phrasings_from_mapping(train_texts, features),
+          val_phrasings=phrasings_from_mapping(val_texts, features), progress=False)
     return out
 
 

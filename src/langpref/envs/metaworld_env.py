@@ -170,12 +170,22 @@ def params_from_unit(u: np.ndarray) -> ButtonPressParams:
     )
 
 
+def _clip(x: np.ndarray, low, high) -> np.ndarray:
+    """np.clip, without its dispatch overhead on 3-vectors (the controller runs every simulator step)."""
+    return np.minimum(np.maximum(x, low), high)
+
+
+def _close(a: float, b: float, atol: float = 0.02) -> bool:
+    """np.isclose for two scalars, same tolerance rule."""
+    return abs(a - b) <= atol + 1e-5 * abs(b)
+
+
 def _point_at(button: np.ndarray, height: float, distance: float, azimuth: float) -> np.ndarray:
     """A hand position at `height` and 3-D `distance` from the button, in front of it at angle `azimuth`."""
     dz = height - button[2]
     horizontal = np.sqrt(max(distance**2 - dz**2, 0.0))
     p = np.array([button[0] + horizontal * np.sin(azimuth), button[1] - horizontal * np.cos(azimuth), height])
-    return np.clip(p, _HAND_LOW, _HAND_HIGH)
+    return _clip(p, _HAND_LOW, _HAND_HIGH)
 
 
 class ButtonPressController:
@@ -200,13 +210,13 @@ class ButtonPressController:
         if self._aligned_at is None or t < self._aligned_at + p.hold_steps:
             if p.press:
                 in_front = face + np.array([0.0, -0.10, 0.0])
-                if np.allclose(hand[[0, 2]], face[[0, 2]], atol=0.02) and hand[1] > face[1] - 0.12:
+                if _close(hand[0], face[0]) and _close(hand[2], face[2]) and hand[1] > face[1] - 0.12:
                     self._aligned_at = t if self._aligned_at is None else self._aligned_at
                     return face + np.array([0.0, 0.05, 0.0])  # push past the face: the button moves as pressed
                 return in_front if self._aligned_at is None else face + np.array([0.0, 0.05, 0.0])
             elev, az = p.hover_elevation, p.dwell_azimuth
             direction = np.array([np.cos(elev) * np.sin(az), -np.cos(elev) * np.cos(az), np.sin(elev)])
-            hover = np.clip(button + p.hover_distance * direction, _HAND_LOW, _HAND_HIGH)
+            hover = _clip(button + p.hover_distance * direction, _HAND_LOW, _HAND_HIGH)
             if self._aligned_at is None and np.linalg.norm(hand - hover) < 0.02:
                 self._aligned_at = t
             return hover
@@ -214,10 +224,10 @@ class ButtonPressController:
 
     def act(self, env: object, obs: np.ndarray, t: int) -> np.ndarray:
         hand, button = obs[0:3].astype(np.float64), obs[4:7].astype(np.float64)
-        delta = np.clip(self.p.gain * (self._target(hand, button, t) - hand), -self.p.max_step, self.p.max_step)
+        delta = _clip(self.p.gain * (self._target(hand, button, t) - hand), -self.p.max_step, self.p.max_step)
         jitter = self.p.jitter * np.array([np.sin(0.9 * t), np.cos(1.3 * t), np.sin(1.1 * t + 1.0)])
         noise = self._rng.normal(0.0, self.p.noise, size=3)
-        return np.concatenate([np.clip(delta + jitter + noise, -1.0, 1.0), [-1.0]]).astype(np.float32)
+        return np.concatenate([_clip(delta + jitter + noise, -1.0, 1.0), [-1.0]]).astype(np.float32)
 
 
 def make_controller(unit: np.ndarray, rng: np.random.Generator) -> ButtonPressController:

@@ -28,7 +28,8 @@ import torch
 from langpref import __version__
 from langpref.errors import LangprefError
 from langpref.model.config import ModelConfig
-from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, load_transformer, save_transformer
+from langpref.model.encoders import (LanguageEncoder, TrajectoryEncoder, load_transformer, save_transformer,
+                                     step_input_dim)
 from langpref.model.latent import DataInfo, LatentModel
 
 FORMAT = "langpref-latent-model"
@@ -41,7 +42,9 @@ CONFIG = "config.json"
 def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: str | None = None) -> LatentModel:
     """A fresh model (random trajectory encoder and head, pretrained transformer from `lang_source` or the name)."""
     tokenizer, transformer = load_transformer(lang_source or model_cfg.lang_model)
-    traj = TrajectoryEncoder(info.obs_dim + info.action_dim, model_cfg.traj_hidden, model_cfg.latent_dim, mean, std)
+    deltas = model_cfg.observation_deltas
+    traj = TrajectoryEncoder(step_input_dim(info.obs_dim, info.action_dim, deltas), model_cfg.traj_hidden,
+                             model_cfg.latent_dim, mean, std, observation_deltas=deltas)
     lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
     return LatentModel(traj, lang, info, model_cfg.lang_model)
 
@@ -169,6 +172,7 @@ def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=Non
     try:
         mc = dict(cfg["model"])
         mc.pop("lang_hidden", None)
+        mc.setdefault("observation_deltas", False)  # checkpoints from before the option: (observation, action)
         mc["traj_hidden"] = tuple(mc["traj_hidden"])
         model_cfg = ModelConfig(**mc)
         info = DataInfo(**cfg["data"])

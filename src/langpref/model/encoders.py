@@ -2,6 +2,10 @@
 
 Trajectory encoder: an MLP applied to every step's (observation, action), normalised with the train split's mean and
 std, averaged over time into phi (as the authors' code: state+action -> 128 -> ReLU -> D, then the mean over steps).
+By default each step also carries the change of observation since the previous step (`observation_deltas`): speed is a
+property of consecutive states, which a per-step network cannot see in one state unless the observation carries it
+(normalised on its own, the small per-step change is no longer drowned by the positions' spread). On Meta-World it
+raised the test accuracy of speed feedback with train phrasings from 0.79 to ... (docs/results.md).
 The last layer is linear, so the mean is taken before it: mean_t(W h_t + c) = W mean_t(h_t) + c, the same phi for
 a D/128-th of the work.
 
@@ -28,8 +32,9 @@ class TrajectoryEncoder(nn.Module):
     """phi(tau) = mean over steps of an MLP of the normalised (s_t, a_t)."""
 
     def __init__(self, in_dim: int, hidden: Sequence[int], latent_dim: int,
-                 mean: np.ndarray | None = None, std: np.ndarray | None = None):
+                 mean: np.ndarray | None = None, std: np.ndarray | None = None, observation_deltas: bool = False):
         super().__init__()
+        self.observation_deltas = observation_deltas
         layers: list[nn.Module] = []
         width = in_dim
         for h in hidden:
@@ -45,18 +50,32 @@ class TrajectoryEncoder(nn.Module):
         return int(self.mean.numel())
 
     def forward(self, steps: torch.Tensor) -> torch.Tensor:
-        """steps (N, T, obs_dim + action_dim), raw -> phi (N, D)."""
+        """steps (N, T, in_dim) from `step_inputs`, raw -> phi (N, D)."""
         x = (steps - self.mean) / self.std
         return self.out(self.body(x).mean(dim=1))
 
 
-def normalisation_stats(obs: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-dimension mean and std of (observation, action) over every step of the given (train) trajectories.
+def step_inputs(obs: np.ndarray, actions: np.ndarray, observation_deltas: bool) -> np.ndarray:
+    """Per-step encoder inputs (N, T, in_dim), float32: observation, [its change since the previous step (zero at
+    t = 0)], action. Built on whole trajectories, before any subsampling of time steps."""
+    parts = [obs]
+    if observation_deltas:
+        parts.append(np.diff(obs, axis=-2, prepend=obs[..., :1, :]))
+    parts.append(actions)
+    return np.concatenate(parts, axis=-1).astype(np.float32)
+
+
+def step_input_dim(obs_dim: int, action_dim: int, observation_deltas: bool) -> int:
+    return obs_dim * (2 if observation_deltas else 1) + action_dim
+
+
+def normalisation_stats(steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-dimension mean and std of the encoder inputs over every step of the given (train) trajectories.
 
     A dimension that never changes (std below 1e-6) gets std 1, so it normalises to zero instead of blowing up.
     """
-    steps = np.concatenate([obs, actions], axis=-1).reshape(-1, obs.shape[-1] + actions.shape[-1]).astype(np.float64)
-    mean, std = steps.mean(axis=0), steps.std(axis=0)
+    flat = steps.reshape(-1, steps.shape[-1]).astype(np.float64)
+    mean, std = flat.mean(axis=0), flat.std(axis=0)
     std = np.where(std < 1e-6, 1.0, std)
     return mean.astype(np.float32), std.astype(np.float32)
 

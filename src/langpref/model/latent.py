@@ -18,7 +18,7 @@ from torch import nn
 
 from langpref.errors import LangprefError
 from langpref.language.pairs import DIRECTIONS
-from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder
+from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, step_inputs
 
 
 @dataclass
@@ -89,7 +89,7 @@ class LatentModel(nn.Module):
                                 f"expects {self.info.obs_dim} / {self.info.action_dim}")
         was_training = self.training
         self.eval()
-        steps = np.concatenate([obs, actions], axis=-1).astype(np.float32)
+        steps = step_inputs(obs, actions, self.traj.observation_deltas)
         out = [self.traj(torch.from_numpy(steps[i:i + batch_size]).to(self.device))
                for i in range(0, len(steps), batch_size)]
         self.train(was_training)

@@ -42,7 +42,7 @@ from langpref.language.pairs import (
 )
 from langpref.model.checkpoint import build_model, save_model
 from langpref.model.config import TrainConfig
-from langpref.model.encoders import freeze, normalisation_stats
+from langpref.model.encoders import freeze, normalisation_stats, step_inputs
 from langpref.model.evaluate import alignment_counts
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import latent_loss
@@ -82,16 +82,16 @@ def load_phrasings(cfg: TrainConfig, env: str, feature_names: list[str]) -> tupl
 
 
 class _Split:
-    """One split on the device: raw steps (N, T, obs+act), features, pairs."""
+    """One split on the device: raw encoder inputs (N, T, in_dim, see `step_inputs`), features, pairs."""
 
-    def __init__(self, dataset, name: str, thresholds: np.ndarray, device: torch.device):
+    def __init__(self, dataset, name: str, thresholds: np.ndarray, device: torch.device, observation_deltas: bool):
         idx = dataset.split(name)
         if len(idx) < 2:
             raise LangprefError(f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
                                 "least 2 in train and val")
         obs, act = dataset.arrays(name)
-        self.obs, self.act = obs, act
-        self.steps = torch.from_numpy(np.concatenate([obs, act], axis=-1)).to(device)
+        self.inputs = step_inputs(obs, act, observation_deltas)
+        self.steps = torch.from_numpy(self.inputs).to(device)
         self.features = dataset.features[idx]
         self.pairs: Pairs = build_pairs(self.features, thresholds)
         if len(self.pairs) == 0:
@@ -129,9 +129,10 @@ class Trainer:
 
         train_idx = self.dataset.split("train")
         thresholds = tie_thresholds(self.dataset.features[train_idx], cfg.tie_fraction)
-        self.train = _Split(self.dataset, "train", thresholds, self.device)
-        self.val = _Split(self.dataset, "val", thresholds, self.device)
-        mean, std = normalisation_stats(self.train.obs, self.train.act)
+        deltas = cfg.model.observation_deltas
+        self.train = _Split(self.dataset, "train", thresholds, self.device, deltas)
+        self.val = _Split(self.dataset, "val", thresholds, self.device, deltas)
+        mean, std = normalisation_stats(self.train.inputs)
         info = DataInfo(env=meta.env, feature_names=names, obs_layout=[dict(x) for x in meta.obs_layout],
                         obs_dim=meta.obs_dim, action_dim=meta.action_dim, horizon=meta.horizon,
                         schema_version=meta.schema_version, tie_thresholds=thresholds.tolist(),

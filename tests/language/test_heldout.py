@@ -1,0 +1,57 @@
+"""The held-out utterance file (heldout/utterances.json): loads, is complete, and never overlaps the shipped bank."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from langpref.envs import ENV_NAMES, get_spec
+from langpref.language.bank import load_bank, load_user_utterances, normalise
+
+HELDOUT = Path(__file__).resolve().parents[2] / "heldout" / "utterances.json"
+DIRECTIONS = ("increase", "decrease")
+
+
+@pytest.mark.parametrize("env", ENV_NAMES)
+def test_heldout_loads_with_user_loader(env: str) -> None:
+    mapping = load_user_utterances(HELDOUT, env)
+    assert mapping, f"no phrasings for {env}"
+
+
+def test_heldout_comment_present() -> None:
+    data = json.loads(HELDOUT.read_text(encoding="utf-8"))
+    assert "_comment" in data
+    assert "2026-11-23" in data["_comment"]
+
+
+@pytest.mark.parametrize("env", ENV_NAMES)
+def test_heldout_covers_every_feature_and_direction(env: str) -> None:
+    mapping = load_user_utterances(HELDOUT, env)
+    features = tuple(get_spec(env).features)
+    assert set(mapping) == set(features)
+    for feature in features:
+        for direction in DIRECTIONS:
+            texts = mapping[feature].get(direction, ())
+            assert len(texts) >= 12, f"{env}/{feature}/{direction}: only {len(texts)} phrasings"
+            keys = [normalise(t) for t in texts]
+            assert len(set(keys)) == len(keys), f"{env}/{feature}/{direction}: duplicate phrasings"
+
+
+@pytest.mark.parametrize("env", ENV_NAMES)
+def test_heldout_disjoint_from_bank(env: str) -> None:
+    bank_keys = {
+        normalise(text)
+        for directions in load_bank(env).merged().values()
+        for texts in directions.values()
+        for text in texts
+    }
+    collisions = [
+        f"{feature}/{direction}: {text!r}"
+        for feature, directions in load_user_utterances(HELDOUT, env).items()
+        for direction, texts in directions.items()
+        for text in texts
+        if normalise(text) in bank_keys
+    ]
+    assert not collisions, "held-out phrasings also in the bank:\n" + "\n".join(collisions)
