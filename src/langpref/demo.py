@@ -61,7 +61,7 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     if (model_dir / "config.json").exists():
         print(f"   reusing {model_dir} (delete it to retrain)")
     else:
-        cfg = replace(TrainConfig(), data=str(data), out=str(model_dir), stage1_epochs=12, stage2_epochs=1,
+        cfg = replace(TrainConfig(), data=str(data), out=str(model_dir), stage1_epochs=12, stage2_epochs=6,
                       force=True)
         train(cfg)
     made["model"] = str(model_dir)

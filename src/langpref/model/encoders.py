@@ -4,8 +4,8 @@ Trajectory encoder: an MLP applied to every step's (observation, action), normal
 std, averaged over time into phi (as the authors' code: state+action -> 128 -> ReLU -> D, then the mean over steps).
 By default each step also carries the change of observation since the previous step (`observation_deltas`): speed is a
 property of consecutive states, which a per-step network cannot see in one state unless the observation carries it
-(normalised on its own, the small per-step change is no longer drowned by the positions' spread). On Meta-World it
-raised the test accuracy of speed feedback with train phrasings from 0.79 to ... (docs/results.md).
+(normalised on its own, the small per-step change is no longer drowned by the positions' spread). On Meta-World's
+test trajectories with the train phrasings it raised the accuracy on speed from 0.79 to 0.95 (docs/results.md).
 The last layer is linear, so the mean is taken before it: mean_t(W h_t + c) = W mean_t(h_t) + c, the same phi for
 a D/128-th of the work.
 
