@@ -74,14 +74,13 @@ def _noop(state, job):
     return job
 
 
-def worker_startup_seconds(env_name: str, horizon: int, workers: int) -> float:
-    """Wall time for `workers` fresh processes to start and build their simulators: the generator's one-off cost."""
+def worker_startup_seconds(setup, setup_args: tuple, workers: int) -> float:
+    """Wall time for `workers` fresh processes to start and build their per-process state (a simulator, a latent
+    space): the one-off cost before their first task."""
     from langpref.backends import run_jobs
-    from langpref.dataset.generate import _make_worker_env
 
     start = time.perf_counter()
-    list(run_jobs(_noop, list(range(workers)), setup=_make_worker_env, setup_args=(env_name, horizon),
-                  workers=workers))
+    list(run_jobs(_noop, list(range(workers)), setup=setup, setup_args=setup_args, workers=workers))
     return time.perf_counter() - start
 
 
@@ -89,15 +88,18 @@ def sweep_timings(env_name: str, workers: int) -> dict:
     """A reward-learning sweep (language vs comparisons, 3 humans x 3 seeds, Q = 40: 18 tasks) on the default dataset
     and model, on 1 worker, then on `workers` local processes and Ray tasks: the projection from per-task time
     against the measured wall time. Uses the oracle latent space where no default model exists yet."""
-    from langpref.experiments.improve import DEFAULT_MODEL_ROOT, SweepConfig
+    from langpref.experiments.improve import DEFAULT_MODEL_ROOT, SweepConfig, _load_space
     from langpref.experiments.reward import run_reward_experiment
     from langpref.feedback.space import load_space
 
     data, model = Path("data") / env_name, DEFAULT_MODEL_ROOT / env_name / "cofinetuned"
     perfect = not (model / "config.json").exists()
+    space_args = (data, None if perfect else model, env_name, perfect)
+    load_space(*space_args[:2], env=env_name, perfect=perfect)  # warm: imports and file cache, as in a worker's later tasks
     start = time.perf_counter()
-    load_space(data, None if perfect else model, env=env_name, perfect=perfect)
-    load_s = time.perf_counter() - start
+    load_space(*space_args[:2], env=env_name, perfect=perfect)
+    warm_load_s = time.perf_counter() - start
+    startup_s = worker_startup_seconds(_load_space, space_args, workers)
     walls = {}
     for name, sweep in (("1 worker", SweepConfig(workers=1)), ("local", SweepConfig(workers=workers)),
                         ("ray", SweepConfig(backend="ray", workers=workers))):
@@ -107,10 +109,55 @@ def sweep_timings(env_name: str, workers: int) -> dict:
                                   progress=False, sweep=sweep)
             walls[name] = time.perf_counter() - start
     tasks = 18
-    per_task = (walls["1 worker"] - load_s) / tasks
+    per_task = (walls["1 worker"] - warm_load_s) / tasks
     return {"env": env_name, "space": "oracle" if perfect else str(model), "tasks": tasks, "per_task_s": per_task,
-            "space_load_s": load_s, "walls": walls, "workers": workers,
-            "projected_s": load_s + per_task * -(-tasks // workers)}
+            "startup_s": startup_s, "walls": walls, "workers": workers,
+            "projected_s": startup_s + per_task * -(-tasks // workers)}
+
+
+def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
+    """What a live session waits for, on the default dataset and model: one reward-learning refit after query number
+    `queries` (language with L_Explicit + L_Implicit, and comparisons), one improvement step (Eq. 4 argmax over the
+    test split), and embedding one new free-form sentence with the model. Milliseconds per trial."""
+    from langpref.experiments.improve import DEFAULT_MODEL_ROOT
+    from langpref.feedback.humans import ComparisonHuman, LanguageHuman, sample_weights
+    from langpref.feedback.space import load_space
+    from langpref.feedback.types import ComparisonQuery, LanguageQuery
+    from langpref.improve import improvement_step
+    from langpref.reward import RewardConfig, RewardLearner, comparison_pairs, language_pairs
+
+    model = DEFAULT_MODEL_ROOT / env_name / "cofinetuned"
+    space = load_space(Path("data") / env_name, model, env=env_name)
+    pool, cands = space.split("train"), space.split("test")
+    times: dict[str, list[float]] = {"language update": [], "comparison update": [], "improvement step": [],
+                                     "embed a new sentence": []}
+    for trial in range(trials):
+        rng = np.random.default_rng([trial, 99])
+        w = sample_weights(len(space.feature_names), rng)
+        lang = LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, 1.0, rng)
+        comp = ComparisonHuman(w, space.theta, 1.0, rng)
+        cfg = RewardConfig()
+        for kind in ("language", "comparison"):
+            learner = RewardLearner(space.dim, cfg, seed=trial)
+            for q in range(queries):
+                if kind == "language":
+                    batch = language_pairs(space, lang.answer(LanguageQuery(int(rng.choice(pool)))), cfg, rng)
+                else:
+                    a, b = rng.choice(pool, size=2, replace=False)
+                    batch = comparison_pairs(space, comp.answer(ComparisonQuery(int(a), int(b))))
+                start = time.perf_counter()
+                learner.add(batch)
+                learner.fit()
+                if q == queries - 1:
+                    times[f"{kind} update"].append(1e3 * (time.perf_counter() - start))
+        psi = space.psi_of(space.table("test").texts[trial % len(space.table("test").texts)])
+        start = time.perf_counter()
+        improvement_step(space.phi[cands], space.phi[int(rng.choice(cands))], psi)
+        times["improvement step"].append(1e3 * (time.perf_counter() - start))
+        start = time.perf_counter()
+        space.encode([f"please move a little more carefully, attempt {trial}"])
+        times["embed a new sentence"].append(1e3 * (time.perf_counter() - start))
+    return {k: (float(np.median(v)), float(np.percentile(v, 95))) for k, v in times.items()}
 
 
 def training_table(today: str) -> str | None:
@@ -159,39 +206,32 @@ def write_section(name: str, body: str) -> None:
     RESULTS.write_text(text)
 
 
-def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--envs", nargs="+", default=["metaworld", "robosuite"])
-    p.add_argument("--default-datasets", action="store_true",
-                   help="also time a full default dataset per env (writes data/ENV; robosuite takes ~20-40 min)")
-    p.add_argument("--no-ray", dest="ray", action="store_false", help="skip the Ray backend comparison")
-    p.add_argument("--no-sweep", dest="sweep", action="store_false",
-                   help="skip the experiment-sweep projection (needs the default dataset data/ENV)")
-    p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
-    args = p.parse_args(argv)
-    today = dt.date.today().isoformat()
+def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> None:
+    """The generator-throughput and ray-overhead tables (see the module docstring)."""
+    from langpref.dataset.generate import _make_worker_env
+
     rows, ray_rows = [], []
-    ray_init = ray_init_seconds(2) if args.ray else None
+    ray_init = ray_init_seconds(2) if ray else None
     load_before = os.getloadavg()[0]
-    for env_name in args.envs:
+    for env_name in envs:
         horizon = 500
         n = 120 if env_name == "metaworld" else 16  # the same trajectories for 1 and 2 workers
         generator_steps_per_s(env_name, 3, horizon, 1)  # warm-up: the simulator is built once per process
         # Interleaved rounds, best of each: this shared machine's speed drifts, and the best is the least disturbed.
         rounds = []
-        for _ in range(args.repeats):
+        for _ in range(repeats):
             one, replayed = generator_steps_per_s(env_name, n, horizon, 1, replay=True)
             two, _ = generator_steps_per_s(env_name, n, horizon, 2)
-            ray_two = generator_steps_per_s(env_name, n, horizon, 2, backend="ray")[0] if args.ray else None
+            ray_two = generator_steps_per_s(env_name, n, horizon, 2, backend="ray")[0] if ray else None
             rounds.append({"raw": raw_steps_per_s(env_name, 8 if env_name == "metaworld" else 2, horizon),
                            "one": one, "replay": replayed, "two": two, "ray_two": ray_two,
-                           "startup": worker_startup_seconds(env_name, horizon, 2)})
+                           "startup": worker_startup_seconds(_make_worker_env, (env_name, horizon), 2)})
         best = {k: max(r[k] for r in rounds) for k in ("raw", "one", "replay", "two")}
         startup = min(r["startup"] for r in rounds)
         raw, one, replayed, two = best["raw"], best["one"], best["replay"], best["two"]
         steady = n * horizon / (n * horizon / two - startup)
         rows.append((env_name, raw, one, one / raw, replayed, one / replayed, two, two / one, startup, steady / one))
-        if args.ray:
+        if ray:
             ray_two = max(r["ray_two"] for r in rounds)
             ray_rows.append((env_name, two, ray_two, 1 - ray_two / two))
         print(json.dumps({"env": env_name, "rounds": rounds}), flush=True)
@@ -203,7 +243,7 @@ def main(argv: list[str] | None = None) -> None:
         "workers; one worker is timed after a warm-up run. Replay: `env.step` alone on the generator's own actions "
         "(the same physics and contacts), so generator / replay is the generator's own overhead. Two workers are "
         "timed with their start-up (processes spawned, simulators imported and built), and without it (start-up "
-        f"timed apart and subtracted). Best of {args.repeats} interleaved rounds; load average "
+        f"timed apart and subtracted). Best of {repeats} interleaved rounds; load average "
         f"{load_before:.2f} before the run.\n",
         "| env | raw env.step, random actions (steps/s) | generator, 1 worker (steps/s) | ratio to raw (target >= 0.8) "
         "| replay of the generator's actions (steps/s) | ratio to replay "
@@ -215,7 +255,7 @@ def main(argv: list[str] | None = None) -> None:
         table.append(f"| {env_name} | {raw:.0f} | {one:.0f} | {ratio:.2f} | {replayed:.0f} | {ratio_replay:.2f} "
                      f"| {two:.0f} | {speedup:.2f}x | {startup:.1f} | {steady:.2f}x |")
     write_section("generator-throughput", "\n".join(table))
-    if args.ray:
+    if ray:
         lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`), 2 workers, horizon 500. Ray was "
                  f"started once before timing (a local instance took {ray_init:.1f} s to start; that one-off cost "
                  "is not in the rates).\n",
@@ -223,17 +263,51 @@ def main(argv: list[str] | None = None) -> None:
                  "|---|---|---|---|"]
         lines += [f"| {e} | {loc:.0f} | {r:.0f} | {ovh:.1%} |" for e, loc, r, ovh in ray_rows]
         write_section("ray-overhead", "\n".join(lines))
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--envs", nargs="+", default=["metaworld", "robosuite"])
+    p.add_argument("--default-datasets", action="store_true",
+                   help="also time a full default dataset per env (writes data/ENV; robosuite takes ~20-40 min)")
+    p.add_argument("--no-generator", dest="generator", action="store_false",
+                   help="skip the generator and Ray throughput tables")
+    p.add_argument("--no-ray", dest="ray", action="store_false", help="skip the Ray backend comparison")
+    p.add_argument("--no-uses", dest="uses", action="store_false",
+                   help="skip the reward-update and improvement-step latencies (need the default model)")
+    p.add_argument("--no-sweep", dest="sweep", action="store_false",
+                   help="skip the experiment-sweep projection (needs the default dataset data/ENV)")
+    p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
+    args = p.parse_args(argv)
+    from langpref.experiments.improve import DEFAULT_MODEL_ROOT
+
+    today = dt.date.today().isoformat()
+    if args.generator:
+        generator_sections(args.envs, args.repeats, args.ray, today)
+    if args.uses:
+        lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`) on the default dataset and the "
+                 "co-finetuned model, 2 CPU cores, 30 trials: the work a live session waits for. Reward update: "
+                 "add the 40th query and refit r_xi on all 40 (L-BFGS, warm start). Targets: update median < 50 ms "
+                 "and p95 < 100 ms; improvement step < 10 ms.\n",
+                 "| env | what | median (ms) | p95 (ms) |", "|---|---|---|---|"]
+        for env_name in args.envs:
+            if not (DEFAULT_MODEL_ROOT / env_name / "cofinetuned" / "config.json").exists():
+                print(f"uses bench: no model {DEFAULT_MODEL_ROOT / env_name / 'cofinetuned'}; skipped", file=sys.stderr)
+                continue
+            for what, (med, p95) in uses_timings(env_name).items():
+                lines.append(f"| {env_name} | {what} | {med:.1f} | {p95:.1f} |")
+        write_section("uses-latency", "\n".join(lines))
     training = training_table(today)
     if training:
         write_section("training-time", training)
     if args.sweep:
         lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref experiment reward` "
                  "(language vs comparisons, 3 humans x 3 seeds, Q = 40: one task per run) on the default dataset. "
-                 "Projected wall time on k workers: loading the latent space once per worker (in parallel) plus "
-                 "ceil(tasks / k) tasks at the 1-worker per-task time.\n",
-                 "| env | latent space | tasks | per-task time, 1 worker | 1 worker wall | workers | projected wall "
-                 "| measured, local processes | measured, Ray tasks | speed-up (local) |",
-                 "|---|---|---|---|---|---|---|---|---|---|"]
+                 "Projected wall time on k workers: their start-up (processes spawned, torch and the model loaded, "
+                 "the bank encoded; timed apart) plus ceil(tasks / k) tasks at the 1-worker per-task time.\n",
+                 "| env | latent space | tasks | per-task time, 1 worker | 1 worker wall | workers | worker start-up "
+                 "| projected wall | measured, local processes | measured, Ray tasks | speed-up (local) |",
+                 "|---|---|---|---|---|---|---|---|---|---|---|"]
         for env_name in args.envs:
             if not (Path("data") / env_name / "meta.json").exists():
                 print(f"sweep bench: no default dataset data/{env_name}; skipped", file=sys.stderr)
@@ -241,8 +315,8 @@ def main(argv: list[str] | None = None) -> None:
             t = sweep_timings(env_name, 2)
             w = t["walls"]
             lines.append(f"| {env_name} | {t['space']} | {t['tasks']} | {t['per_task_s']:.2f} s | {w['1 worker']:.1f} s "
-                         f"| {t['workers']} | {t['projected_s']:.1f} s | {w['local']:.1f} s | {w['ray']:.1f} s "
-                         f"| {w['1 worker'] / w['local']:.2f}x |")
+                         f"| {t['workers']} | {t['startup_s']:.1f} s | {t['projected_s']:.1f} s | {w['local']:.1f} s "
+                         f"| {w['ray']:.1f} s | {w['1 worker'] / w['local']:.2f}x |")
         write_section("sweep-projection", "\n".join(lines))
     if args.default_datasets:
         lines = [f"Measured {today} with `python -m langpref.bench --default-datasets` (all cores).\n",

@@ -78,7 +78,8 @@ def _train_config(args: argparse.Namespace):
     from langpref.model.config import ModelConfig, TrainConfig
 
     d = TrainConfig()
-    model = ModelConfig(lang_model=args.lang_model, latent_dim=args.latent_dim, max_length=args.max_length)
+    model = ModelConfig(lang_model=args.lang_model, latent_dim=args.latent_dim, max_length=args.max_length,
+                        observation_deltas=args.observation_deltas)
     return TrainConfig(
         data=str(args.data), out=str(args.out), model=model, extend_bank=args.extend_bank,
         utterances=str(args.utterances) if args.utterances else None,
@@ -128,9 +129,10 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
     else:
         from langpref.language.bank import load_bank
 
-        phrasings = phrasings_from_bank(load_bank(dataset.env), args.split, dataset.feature_names)
+        phrasing_split = args.phrasing_split or args.split
+        phrasings = phrasings_from_bank(load_bank(dataset.env), phrasing_split, dataset.feature_names)
     out = evaluate_split(model, dataset, args.split, phrasings)
-    out["utterances"] = str(args.utterances) if args.utterances else f"bank:{args.split}"
+    out["utterances"] = str(args.utterances) if args.utterances else f"bank:{phrasing_split}"
     _emit(out, args.json, lambda o: f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
           f"{o['utterances']}); " + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items()))
 
@@ -201,6 +203,9 @@ def _register_latent_commands(sub) -> None:
                    help="stage-2 learning rate of the transformer (default %(default)s)")
     p.add_argument("--latent-dim", type=int, default=m.latent_dim, help="D, size of phi and psi (default %(default)s)")
     p.add_argument("--max-length", type=int, default=m.max_length, help="tokens per utterance (default %(default)s)")
+    p.add_argument("--no-observation-deltas", dest="observation_deltas", action="store_false",
+                   help="trajectory encoder on (observation, action) only, as the authors' code, without each "
+                        "step's change of observation")
     p.add_argument("--patience", type=int, default=d.patience,
                    help="early stopping: epochs without a better validation accuracy (default %(default)s; 0 = off)")
     p.add_argument("--norm-a", type=float, default=d.norm_a, help="a of L_norm, hinge on |phi| (default %(default)s)")
@@ -222,6 +227,9 @@ def _register_latent_commands(sub) -> None:
     p.add_argument("--model", required=True, type=Path, help="checkpoint directory (`langpref train`)")
     p.add_argument("--data", required=True, type=Path, help="dataset directory")
     p.add_argument("--split", default="test", choices=("train", "val", "test"), help="default %(default)s")
+    p.add_argument("--phrasing-split", default=None, choices=("train", "val", "test"),
+                   help="bank split of the phrasings (default: --split); `train` on test trajectories separates "
+                        "reading the trajectories from reading unseen words")
     p.add_argument("--utterances", type=Path, default=None,
                    help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu")

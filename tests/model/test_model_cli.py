@@ -28,6 +28,10 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     assert 0 <= res["accuracy"] <= 1 and res["num_samples"] > 0 and set(res["per_feature"]) <= {
         "height", "speed", "distance_to_button"}
 
+    code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--split", "val",
+                         "--phrasing-split", "train", "--json")
+    assert code == 0 and json.loads(out)["utterances"] == "bank:train", err
+
     user = tmp_path / "mine.json"
     user.write_text(json.dumps({"_note": "mine", "metaworld": {"speed": {"increase": ["Hurry up!"]}}}))
     code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--utterances",
@@ -48,10 +52,12 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     assert code == 2 and "already exists" in err and err.count("\n") == 1
 
     code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(tmp_path / "m2"), "--freeze-language",
-                         "--utterances", str(user), "--extend-bank", "--epochs", "1", "--latent-dim", "8", "--json")
+                         "--utterances", str(user), "--extend-bank", "--epochs", "1", "--latent-dim", "8",
+                         "--no-observation-deltas", "--json")
     assert code == 0, err
-    saved = json.loads((tmp_path / "m2" / "config.json").read_text())["train_config"]
-    assert saved["utterances"] == str(user) and saved["extend_bank"] is True
+    saved = json.loads((tmp_path / "m2" / "config.json").read_text())
+    assert saved["train_config"]["utterances"] == str(user) and saved["train_config"]["extend_bank"] is True
+    assert saved["model"]["observation_deltas"] is False and len(saved["normalisation"]["mean"]) == 6 + 2
 
 
 @pytest.mark.parametrize("argv,match", [
