@@ -2,7 +2,8 @@
 
 Measures, per env: raw `env.step` with random actions, the generator on one worker (target: >= 0.8 of raw), the
 speed-up of 2 workers over 1 (target >= 1.7x), Ray's overhead against local processes (target < 15%), an
-experiment sweep's projected against measured wall time, and (optionally) the wall time of a default dataset. Not part of the tests:
+experiment sweep's projected against measured wall time, the latency of a reward update and an improvement step,
+the training times, and (optionally) the wall time of a default dataset. Not part of the tests:
 timings belong in benchmarks, not in unit tests that flake on shared machines.
 """
 
@@ -88,18 +89,18 @@ def sweep_timings(env_name: str, workers: int) -> dict:
     """A reward-learning sweep (language vs comparisons, 3 humans x 3 seeds, Q = 40: 18 tasks) on the default dataset
     and model, on 1 worker, then on `workers` local processes and Ray tasks: the projection from per-task time
     against the measured wall time. Uses the oracle latent space where no default model exists yet."""
-    from langpref.experiments.improve import DEFAULT_MODEL_ROOT, SweepConfig, _load_space
+    from langpref.experiments.improve import DEFAULT_MODEL_ROOT, SweepConfig, worker_space
     from langpref.experiments.reward import run_reward_experiment
     from langpref.feedback.space import load_space
 
     data, model = Path("data") / env_name, DEFAULT_MODEL_ROOT / env_name / "cofinetuned"
     perfect = not (model / "config.json").exists()
     space_args = (data, None if perfect else model, env_name, perfect)
-    load_space(*space_args[:2], env=env_name, perfect=perfect)  # warm: imports and file cache, as in a worker's later tasks
+    load_space(*space_args[:2], env=env_name, perfect=perfect)  # warm imports and file cache, as a worker's later tasks
     start = time.perf_counter()
     load_space(*space_args[:2], env=env_name, perfect=perfect)
     warm_load_s = time.perf_counter() - start
-    startup_s = worker_startup_seconds(_load_space, space_args, workers)
+    startup_s = worker_startup_seconds(worker_space, space_args, workers)
     walls = {}
     for name, sweep in (("1 worker", SweepConfig(workers=1)), ("local", SweepConfig(workers=workers)),
                         ("ray", SweepConfig(backend="ray", workers=workers))):
@@ -160,15 +161,52 @@ def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
     return {k: (float(np.median(v)), float(np.percentile(v, 95))) for k, v in times.items()}
 
 
+def uses_table(envs: list[str], today: str) -> str:
+    from langpref.experiments.improve import DEFAULT_MODEL_ROOT
+
+    lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`) on the default dataset and the "
+             "co-finetuned model, 2 CPU cores, 30 trials: the work a live session waits for. Reward update: "
+             "add the 40th query and refit r_xi on all 40 (L-BFGS, warm start). Targets: update median < 50 ms "
+             "and p95 < 100 ms; improvement step < 10 ms.\n",
+             "| env | what | median (ms) | p95 (ms) |", "|---|---|---|---|"]
+    for env_name in envs:
+        if not (DEFAULT_MODEL_ROOT / env_name / "cofinetuned" / "config.json").exists():
+            print(f"uses bench: no model {DEFAULT_MODEL_ROOT / env_name / 'cofinetuned'}; skipped", file=sys.stderr)
+            continue
+        for what, (med, p95) in uses_timings(env_name).items():
+            lines.append(f"| {env_name} | {what} | {med:.1f} | {p95:.1f} |")
+    return "\n".join(lines)
+
+
+def sweep_table(envs: list[str], today: str) -> str:
+    lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref experiment reward` "
+             "(language vs comparisons, 3 humans x 3 seeds, Q = 40: one task per run) on the default dataset. "
+             "Projected wall time on k workers: their start-up (processes spawned, torch and the model loaded, "
+             "the bank encoded; timed apart) plus ceil(tasks / k) tasks at the 1-worker per-task time.\n",
+             "| env | latent space | tasks | per-task time, 1 worker | 1 worker wall | workers | worker start-up "
+             "| projected wall | measured, local processes | measured, Ray tasks | speed-up (local) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for env_name in envs:
+        if not (Path("data") / env_name / "meta.json").exists():
+            print(f"sweep bench: no default dataset data/{env_name}; skipped", file=sys.stderr)
+            continue
+        t = sweep_timings(env_name, 2)
+        w = t["walls"]
+        lines.append(f"| {env_name} | {t['space']} | {t['tasks']} | {t['per_task_s']:.2f} s | {w['1 worker']:.1f} s "
+                     f"| {t['workers']} | {t['startup_s']:.1f} s | {t['projected_s']:.1f} s | {w['local']:.1f} s "
+                     f"| {w['ray']:.1f} s | {w['1 worker'] / w['local']:.2f}x |")
+    return "\n".join(lines)
+
+
 def training_table(today: str) -> str | None:
     """Training time and throughput per env, from the runs of `langpref experiment alignment` (default config)."""
     lines = []
     for path in sorted(Path("results/alignment").glob("*/alignment.json")):
         t = json.loads(path.read_text())["train"]
         st, sps = t["stage_seconds"], t["stage_samples_per_s"]
-        lines.append(f"| {path.parent.name} | {t['device']} ({t['torch_threads']} threads) | {t['wall_s'] / 60:.1f} min "
-                     f"| {st['1']:.0f} s, {sps['1']:,.0f} samples/s | {st.get('2', 0):.0f} s, "
-                     f"{sps.get('2', 0):,.0f} samples/s | {t['train_pairs']:,} |")
+        lines.append(f"| {path.parent.name} | {t['device']} ({t['torch_threads']} threads) "
+                     f"| {t['wall_s'] / 60:.1f} min | {st['1']:.0f} s, {sps['1']:,.0f} samples/s "
+                     f"| {st.get('2', 0):.0f} s, {sps.get('2', 0):,.0f} samples/s | {t['train_pairs']:,} |")
     if not lines:
         return None
     return "\n".join([
@@ -208,7 +246,7 @@ def write_section(name: str, body: str) -> None:
 
 def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> None:
     """The generator-throughput and ray-overhead tables (see the module docstring)."""
-    from langpref.dataset.generate import _make_worker_env
+    from langpref.dataset.generate import make_worker_env
 
     rows, ray_rows = [], []
     ray_init = ray_init_seconds(2) if ray else None
@@ -225,7 +263,7 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
             ray_two = generator_steps_per_s(env_name, n, horizon, 2, backend="ray")[0] if ray else None
             rounds.append({"raw": raw_steps_per_s(env_name, 8 if env_name == "metaworld" else 2, horizon),
                            "one": one, "replay": replayed, "two": two, "ray_two": ray_two,
-                           "startup": worker_startup_seconds(_make_worker_env, (env_name, horizon), 2)})
+                           "startup": worker_startup_seconds(make_worker_env, (env_name, horizon), 2)})
         best = {k: max(r[k] for r in rounds) for k in ("raw", "one", "replay", "two")}
         startup = min(r["startup"] for r in rounds)
         raw, one, replayed, two = best["raw"], best["one"], best["replay"], best["two"]
@@ -279,45 +317,16 @@ def main(argv: list[str] | None = None) -> None:
                    help="skip the experiment-sweep projection (needs the default dataset data/ENV)")
     p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
     args = p.parse_args(argv)
-    from langpref.experiments.improve import DEFAULT_MODEL_ROOT
-
     today = dt.date.today().isoformat()
     if args.generator:
         generator_sections(args.envs, args.repeats, args.ray, today)
     if args.uses:
-        lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`) on the default dataset and the "
-                 "co-finetuned model, 2 CPU cores, 30 trials: the work a live session waits for. Reward update: "
-                 "add the 40th query and refit r_xi on all 40 (L-BFGS, warm start). Targets: update median < 50 ms "
-                 "and p95 < 100 ms; improvement step < 10 ms.\n",
-                 "| env | what | median (ms) | p95 (ms) |", "|---|---|---|---|"]
-        for env_name in args.envs:
-            if not (DEFAULT_MODEL_ROOT / env_name / "cofinetuned" / "config.json").exists():
-                print(f"uses bench: no model {DEFAULT_MODEL_ROOT / env_name / 'cofinetuned'}; skipped", file=sys.stderr)
-                continue
-            for what, (med, p95) in uses_timings(env_name).items():
-                lines.append(f"| {env_name} | {what} | {med:.1f} | {p95:.1f} |")
-        write_section("uses-latency", "\n".join(lines))
+        write_section("uses-latency", uses_table(args.envs, today))
     training = training_table(today)
     if training:
         write_section("training-time", training)
     if args.sweep:
-        lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref experiment reward` "
-                 "(language vs comparisons, 3 humans x 3 seeds, Q = 40: one task per run) on the default dataset. "
-                 "Projected wall time on k workers: their start-up (processes spawned, torch and the model loaded, "
-                 "the bank encoded; timed apart) plus ceil(tasks / k) tasks at the 1-worker per-task time.\n",
-                 "| env | latent space | tasks | per-task time, 1 worker | 1 worker wall | workers | worker start-up "
-                 "| projected wall | measured, local processes | measured, Ray tasks | speed-up (local) |",
-                 "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for env_name in args.envs:
-            if not (Path("data") / env_name / "meta.json").exists():
-                print(f"sweep bench: no default dataset data/{env_name}; skipped", file=sys.stderr)
-                continue
-            t = sweep_timings(env_name, 2)
-            w = t["walls"]
-            lines.append(f"| {env_name} | {t['space']} | {t['tasks']} | {t['per_task_s']:.2f} s | {w['1 worker']:.1f} s "
-                         f"| {t['workers']} | {t['startup_s']:.1f} s | {t['projected_s']:.1f} s | {w['local']:.1f} s "
-                         f"| {w['ray']:.1f} s | {w['1 worker'] / w['local']:.2f}x |")
-        write_section("sweep-projection", "\n".join(lines))
+        write_section("sweep-projection", sweep_table(args.envs, today))
     if args.default_datasets:
         lines = [f"Measured {today} with `python -m langpref.bench --default-datasets` (all cores).\n",
                  "| env | trajectories | wall time | task success | largest abs off-diagonal feature correlation |",

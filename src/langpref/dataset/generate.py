@@ -148,7 +148,7 @@ def rollout(env: Any, module: Any, unit: np.ndarray, traj_seed: int, horizon: in
 # ---- parallel rollouts ---------------------------------------------------------------------------------------------
 
 
-def _make_worker_env(env_name: str, horizon: int) -> tuple[Any, Any]:
+def make_worker_env(env_name: str, horizon: int) -> tuple[Any, Any]:
     import warnings
 
     warnings.filterwarnings("ignore")
@@ -210,7 +210,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
             features[i], success[i] = done
     start = time.time()
     bar = tqdm(total=n, initial=n - len(jobs), desc=f"generate {cfg.env}", unit="traj", dynamic_ncols=True)
-    results = run_jobs(_rollout_job, jobs, setup=_make_worker_env, setup_args=(cfg.env, cfg.horizon),
+    results = run_jobs(_rollout_job, jobs, setup=make_worker_env, setup_args=(cfg.env, cfg.horizon),
                        backend=cfg.backend, workers=cfg.workers, ray_address=cfg.ray_address, chunk=4)
     for traj in results:
         save_trajectory(cfg.out, traj)  # one file per trajectory, written as it arrives: a rerun skips it

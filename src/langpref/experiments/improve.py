@@ -65,7 +65,7 @@ class SweepConfig:
     """A running Ray cluster to join; default a local instance."""
 
 
-def _load_space(data: Path, model: Path | None, env: str, perfect: bool):
+def worker_space(data: Path, model: Path | None, env: str, perfect: bool):
     from langpref.feedback.space import load_space
 
     return load_space(data, model, env=env, perfect=perfect)
@@ -85,7 +85,7 @@ def run_sweep(job_fn, todo: list, space, space_args: tuple, cache: RunCache, swe
     if sweep.backend == "local" and sweep.workers <= 1:
         results = (job_fn(space, job) for job in todo)
     else:
-        results = run_jobs(job_fn, todo, setup=_load_space, setup_args=space_args, backend=sweep.backend,
+        results = run_jobs(job_fn, todo, setup=worker_space, setup_args=space_args, backend=sweep.backend,
                            workers=sweep.workers, ray_address=sweep.ray_address)
     for key, value in tqdm(results, total=len(todo), desc=desc, disable=not progress, file=sys.stderr):
         cache.put(key, value)
