@@ -84,6 +84,7 @@ def _train_config(args: argparse.Namespace):
         data=str(args.data), out=str(args.out), model=model, extend_bank=args.extend_bank,
         utterances=str(args.utterances) if args.utterances else None,
         freeze_language=args.freeze_language, seed=args.seed, device=args.device, force=args.force,
+        mixed_precision=args.mixed_precision,
         stage1_epochs=d.stage1_epochs if args.epochs is None else args.epochs,
         stage1_batch_size=d.stage1_batch_size if args.batch_size is None else args.batch_size,
         stage2_epochs=d.stage2_epochs if args.finetune_epochs is None else args.finetune_epochs,
@@ -215,6 +216,8 @@ def _register_latent_commands(sub) -> None:
     p.add_argument("--time-samples", type=int, default=d.time_samples,
                    help="time steps per trajectory per training step, stratified (default %(default)s; 0 = all)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda when available")
+    p.add_argument("--no-mixed-precision", dest="mixed_precision", action="store_false",
+                   help="on CUDA, train in float32 instead of under bfloat16 autocast (CPU is always float32)")
     p.add_argument("--seed", type=int, default=0, help="the same seed gives the same model on CPU")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out")
     p.add_argument("--json", action="store_true", help="print a JSON summary")

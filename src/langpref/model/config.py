@@ -55,6 +55,9 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     """auto (cuda when available), cpu or cuda."""
+    mixed_precision: bool = True
+    """On CUDA, run the training steps' forward passes under bfloat16 autocast (weights and optimiser stay float32);
+    no effect on CPU, whose path is unchanged. Not yet measured on a GPU here."""
     time_samples: int = 50
     """Time steps per trajectory in a training step: one drawn at random in each of this many equal segments of
     the horizon (an unbiased estimate of the mean over all steps at a tenth of the cost for T = 500; 0 = all).

@@ -114,6 +114,7 @@ class Trainer:
         self.cfg = cfg
         self.progress = progress
         self.device = resolve_device(cfg.device)
+        self.mixed_precision = cfg.mixed_precision and self.device.type == "cuda"  # bf16: no loss scaling needed
         self.dataset = load_dataset(cfg.data)
         meta = self.dataset.meta
         names = list(meta.feature_names)
@@ -201,7 +202,8 @@ class Trainer:
                 sums = np.zeros(4)  # loss, align, norm, correct
                 for start in range(0, len(order), batch_size):
                     rows = order[start:start + batch_size]
-                    loss, la, ln, correct = step_fn(rows, epoch)
+                    with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.mixed_precision):
+                        loss, la, ln, correct = step_fn(rows, epoch)
                     optimizer.zero_grad(set_to_none=True)
                     loss.backward()
                     optimizer.step()
