@@ -50,6 +50,13 @@ def test_same_seed_same_numbers(tiny_data, phrasings, tmp_path):
     assert not torch.equal(other.model.traj.out.weight, runs[0].model.traj.out.weight)
 
 
+def test_mixed_precision_leaves_the_cpu_path_unchanged(tiny_data, phrasings, tmp_path):
+    runs = [train(tiny_config(tiny_data, tmp_path / f"amp{amp}", stage1_epochs=1, stage2_epochs=1, mixed_precision=amp),
+                  train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False) for amp in (True, False)]
+    s0, s1 = runs[0].model.state_dict(), runs[1].model.state_dict()
+    assert all(torch.equal(s0[k], s1[k]) for k in s0)
+
+
 def test_config_fails_fast(tiny_data, tmp_path):
     (tmp_path / "exists").mkdir()
     with pytest.raises(LangprefError, match="already exists"):
