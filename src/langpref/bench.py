@@ -24,22 +24,30 @@ import numpy as np
 RESULTS = Path("docs/results.md")
 
 
-def raw_steps_per_s(env_name: str, episodes: int, horizon: int) -> float:
-    """`env.step` with uniform random actions, in episodes of `horizon` steps, each from a reset (as the generator)."""
-    from langpref.envs import get_spec, make_env
+def env_steps_per_s(env_name: str, episodes: list[tuple[int, np.ndarray]]) -> float:
+    """`env.step` (plus the step features) alone over the given episodes, each (reset seed, actions (T, A))."""
+    from langpref.envs import make_env
 
+    horizon = len(episodes[0][1])
     env = make_env(env_name, horizon)
-    rng = np.random.default_rng(0)
-    dim = get_spec(env_name).action_dim
     start = time.perf_counter()
-    for episode in range(episodes):
-        env.reset(episode)
-        for _ in range(horizon):
-            env.step(rng.uniform(-1, 1, dim))
+    for seed, actions in episodes:
+        env.reset(seed)
+        for action in actions:
+            env.step(action)
             env.step_features()
-    rate = episodes * horizon / (time.perf_counter() - start)
+    rate = len(episodes) * horizon / (time.perf_counter() - start)
     env.close()
     return rate
+
+
+def raw_steps_per_s(env_name: str, episodes: int, horizon: int) -> float:
+    """`env.step` with uniform random actions, in episodes of `horizon` steps, each from a reset (as the generator)."""
+    from langpref.envs import get_spec
+
+    rng = np.random.default_rng(0)
+    dim = get_spec(env_name).action_dim
+    return env_steps_per_s(env_name, [(e, rng.uniform(-1, 1, (horizon, dim))) for e in range(episodes)])
 
 
 def generator_steps_per_s(env_name: str, n: int, horizon: int, workers: int, backend: str = "local",
@@ -51,24 +59,14 @@ def generator_steps_per_s(env_name: str, n: int, horizon: int, workers: int, bac
     """
     from langpref.dataset.generate import GenerateConfig, generate
     from langpref.dataset.storage import load_dataset
-    from langpref.envs import make_env
 
     with tempfile.TemporaryDirectory() as tmp:
         s = generate(GenerateConfig(env=env_name, out=Path(tmp) / "d", num_trajectories=n, horizon=horizon,
                                     workers=workers, backend=backend))
         if not replay:
             return s["steps_per_s"], None
-        trajectories = load_dataset(Path(tmp) / "d").trajectories()
-    env = make_env(env_name, horizon)
-    start = time.perf_counter()
-    for traj in trajectories:
-        env.reset(traj.seed)
-        for action in traj.actions:
-            env.step(action)
-            env.step_features()
-    replay_rate = len(trajectories) * horizon / (time.perf_counter() - start)
-    env.close()
-    return s["steps_per_s"], replay_rate
+        episodes = [(t.seed, t.actions) for t in load_dataset(Path(tmp) / "d").trajectories()]
+    return s["steps_per_s"], env_steps_per_s(env_name, episodes)
 
 
 def _noop(state, job):
@@ -89,16 +87,17 @@ def sweep_timings(env_name: str, workers: int) -> dict:
     """A reward-learning sweep (language vs comparisons, 3 humans x 3 seeds, Q = 40: 18 tasks) on the default dataset
     and model, on 1 worker, then on `workers` local processes and Ray tasks: the projection from per-task time
     against the measured wall time. Uses the oracle latent space where no default model exists yet."""
-    from langpref.experiments.improve import DEFAULT_MODEL_ROOT, SweepConfig, worker_space
+    from langpref.experiments.alignment import default_model
+    from langpref.experiments.improve import SweepConfig, worker_space
     from langpref.experiments.reward import run_reward_experiment
-    from langpref.feedback.space import load_space
 
-    data, model = Path("data") / env_name, DEFAULT_MODEL_ROOT / env_name / "cofinetuned"
+    data, model = Path("data") / env_name, default_model(env_name)
     perfect = not (model / "config.json").exists()
-    space_args = (data, None if perfect else model, env_name, perfect)
-    load_space(*space_args[:2], env=env_name, perfect=perfect)  # warm imports and file cache, as a worker's later tasks
+    model = None if perfect else model
+    space_args = (data, model, env_name, perfect)
+    worker_space(*space_args)  # warm imports and file cache, as a worker's later tasks find them
     start = time.perf_counter()
-    load_space(*space_args[:2], env=env_name, perfect=perfect)
+    worker_space(*space_args)
     warm_load_s = time.perf_counter() - start
     startup_s = worker_startup_seconds(worker_space, space_args, workers)
     walls = {}
@@ -106,8 +105,7 @@ def sweep_timings(env_name: str, workers: int) -> dict:
                         ("ray", SweepConfig(backend="ray", workers=workers))):
         with tempfile.TemporaryDirectory() as tmp:
             start = time.perf_counter()
-            run_reward_experiment(env_name, data, None if perfect else model, Path(tmp), perfect=perfect,
-                                  progress=False, sweep=sweep)
+            run_reward_experiment(env_name, data, model, Path(tmp), perfect=perfect, progress=False, sweep=sweep)
             walls[name] = time.perf_counter() - start
     tasks = 18
     per_task = (walls["1 worker"] - warm_load_s) / tasks
@@ -120,15 +118,14 @@ def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
     """What a live session waits for, on the default dataset and model: one reward-learning refit after query number
     `queries` (language with L_Explicit + L_Implicit, and comparisons), one improvement step (Eq. 4 argmax over the
     test split), and embedding one new free-form sentence with the model. Milliseconds per trial."""
-    from langpref.experiments.improve import DEFAULT_MODEL_ROOT
+    from langpref.experiments.alignment import default_model
     from langpref.feedback.humans import ComparisonHuman, LanguageHuman, sample_weights
     from langpref.feedback.space import load_space
     from langpref.feedback.types import ComparisonQuery, LanguageQuery
     from langpref.improve import improvement_step
     from langpref.reward import RewardConfig, RewardLearner, comparison_pairs, language_pairs
 
-    model = DEFAULT_MODEL_ROOT / env_name / "cofinetuned"
-    space = load_space(Path("data") / env_name, model, env=env_name)
+    space = load_space(Path("data") / env_name, default_model(env_name), env=env_name)
     pool, cands = space.split("train"), space.split("test")
     times: dict[str, list[float]] = {"language update": [], "comparison update": [], "improvement step": [],
                                      "embed a new sentence": []}
@@ -162,7 +159,7 @@ def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
 
 
 def uses_table(envs: list[str], today: str) -> str:
-    from langpref.experiments.improve import DEFAULT_MODEL_ROOT
+    from langpref.experiments.alignment import default_model
 
     lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`) on the default dataset and the "
              "co-finetuned model, 2 CPU cores, 30 trials: the work a live session waits for. Reward update: "
@@ -170,8 +167,8 @@ def uses_table(envs: list[str], today: str) -> str:
              "and p95 < 100 ms; improvement step < 10 ms.\n",
              "| env | what | median (ms) | p95 (ms) |", "|---|---|---|---|"]
     for env_name in envs:
-        if not (DEFAULT_MODEL_ROOT / env_name / "cofinetuned" / "config.json").exists():
-            print(f"uses bench: no model {DEFAULT_MODEL_ROOT / env_name / 'cofinetuned'}; skipped", file=sys.stderr)
+        if not (default_model(env_name) / "config.json").exists():
+            print(f"uses bench: no model {default_model(env_name)}; skipped", file=sys.stderr)
             continue
         for what, (med, p95) in uses_timings(env_name).items():
             lines.append(f"| {env_name} | {what} | {med:.1f} | {p95:.1f} |")
@@ -201,7 +198,9 @@ def sweep_table(envs: list[str], today: str) -> str:
 def training_table(today: str) -> str | None:
     """Training time and throughput per env, from the runs of `langpref experiment alignment` (default config)."""
     lines = []
-    for path in sorted(Path("results/alignment").glob("*/alignment.json")):
+    from langpref.experiments.alignment import RESULTS_ROOT
+
+    for path in sorted(RESULTS_ROOT.glob("*/alignment.json")):
         t = json.loads(path.read_text())["train"]
         st, sps = t["stage_seconds"], t["stage_samples_per_s"]
         lines.append(f"| {path.parent.name} | {t['device']} ({t['torch_threads']} threads) "

@@ -162,10 +162,10 @@ def cmd_utterances(args: argparse.Namespace) -> None:
 
 
 def cmd_experiment_alignment(args: argparse.Namespace) -> None:
-    from langpref.experiments.alignment import alignment_table, run_alignment_experiment
+    from langpref.experiments.alignment import alignment_table, default_out, run_alignment_experiment
 
     data = args.data or Path("data") / args.env
-    out = args.out or Path("results") / "alignment" / args.env
+    out = args.out or default_out(args.env)
     summary = run_alignment_experiment(args.env, data, out, force=args.force)
     _emit(summary, args.json, lambda s: alignment_table([s]) + f"\n(wrote {out}/alignment.md and alignment.json)")
 

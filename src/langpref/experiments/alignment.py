@@ -16,6 +16,19 @@ from typing import Any
 
 from langpref.errors import LangprefError
 
+RESULTS_ROOT = Path("results") / "alignment"
+
+
+def default_out(env: str) -> Path:
+    """Where `langpref experiment alignment --env ENV` writes by default."""
+    return RESULTS_ROOT / env
+
+
+def default_model(env: str) -> Path:
+    """The co-finetuned model of `experiment alignment`: the model every other experiment uses by default."""
+    return default_out(env) / "cofinetuned"
+
+
 PAPER = {  # Appendix C, Table "Test Accuracy of training with frozen language model and co-finetuning"
     "robosuite": {"cofinetune": 0.8489, "frozen": 0.7625},
     "metaworld": {"cofinetune": 0.8288, "frozen": 0.7344},

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
+from langpref.experiments.alignment import default_model
 
 PAPER_FIG4 = ("Fig. 4 (no numbers printed): in both envs the true reward rises consistently over 15 iterations but "
               "stays below the dashed average optimum, because each step uses only the last feedback and can loop "
@@ -99,15 +100,12 @@ def _improvement_job(space, job) -> tuple[str, dict]:
     return key, asdict(run_improvement(space, w, cfg, (cfg.seed, s)))
 
 
-DEFAULT_MODEL_ROOT = Path("results") / "alignment"
-
-
 def default_paths(kind: str, env: str, data: str | Path | None, model: str | Path | None, out: str | Path | None,
                   perfect: bool) -> tuple[Path, Path | None, Path]:
     """data/ENV, the co-finetuned model of `langpref experiment alignment` (results/alignment/ENV/cofinetuned) and
     results/KIND/ENV (results/KIND/ENV-perfect for the oracle space) unless given."""
     data = Path(data) if data else Path("data") / env
-    model = None if perfect else (Path(model) if model else DEFAULT_MODEL_ROOT / env / "cofinetuned")
+    model = None if perfect else (Path(model) if model else default_model(env))
     out = Path(out) if out else Path("results") / kind / (f"{env}-perfect" if perfect else env)
     return data, model, out
 

@@ -90,8 +90,7 @@ class _Split:
             raise LangprefError(f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
                                 "least 2 in train and val")
         obs, act = dataset.arrays(name)
-        self.inputs = step_inputs(obs, act, observation_deltas)
-        self.steps = torch.from_numpy(self.inputs).to(device)
+        self.steps = torch.from_numpy(step_inputs(obs, act, observation_deltas)).to(device)
         self.features = dataset.features[idx]
         self.pairs: Pairs = build_pairs(self.features, thresholds)
         if len(self.pairs) == 0:
@@ -133,7 +132,7 @@ class Trainer:
         deltas = cfg.model.observation_deltas
         self.train = _Split(self.dataset, "train", thresholds, self.device, deltas)
         self.val = _Split(self.dataset, "val", thresholds, self.device, deltas)
-        mean, std = normalisation_stats(self.train.inputs)
+        mean, std = normalisation_stats(self.train.steps.cpu().numpy())
         info = DataInfo(env=meta.env, feature_names=names, obs_layout=[dict(x) for x in meta.obs_layout],
                         obs_dim=meta.obs_dim, action_dim=meta.action_dim, horizon=meta.horizon,
                         schema_version=meta.schema_version, tie_thresholds=thresholds.tolist(),
