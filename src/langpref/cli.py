@@ -141,8 +141,11 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
 def cmd_embed(args: argparse.Namespace) -> None:
     from langpref.model.evaluate import embed_text
 
+    from langpref.language.relevance import FeedbackGate
+
     model, _ = _load(args, with_data=False)
-    out = embed_text(model, args.text)
+    out = embed_text(model, args.text)  # an empty text fails here, before the gate is built
+    out["relevance"] = round(FeedbackGate(model.info.env).check(args.text).score, 4)
     _emit(out, args.json, lambda o: f"{o['feature']}/{o['direction']} (confidence {o['confidence']:.2f}, "
           f"cosine {o['cosine']:.2f})")
 
@@ -241,7 +244,9 @@ def _register_latent_commands(sub) -> None:
 
     p = sub.add_parser("embed", help="which feature and direction the model reads into a sentence",
                        description="Nearest bank meaning by cosine: the mean psi of each feature/direction's training "
-                       "phrasings; confidence is a softmax over the cosines at temperature 0.1.")
+                       "phrasings; confidence is a softmax over the cosines at temperature 0.1. A sentence that does "
+                       "not read as feedback on the robot's motion (relevance: its highest cosine to a bank phrasing "
+                       "in the pretrained MiniLM space, below 0.35) is refused with an error.")
     p.add_argument("--model", required=True, type=Path, help="checkpoint directory")
     p.add_argument("text", help="free-form feedback, e.g. \"you're way too slow\"")
     p.add_argument("--json", action="store_true", help="print one JSON object")

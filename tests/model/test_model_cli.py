@@ -62,6 +62,7 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
 
 @pytest.mark.parametrize("argv,match", [
     (["embed", "--model", "MODEL", "   "], "empty"),
+    (["embed", "--model", "MODEL", "qwertyuiop"], "does not read as feedback"),
     (["evaluate", "--model", "NOPE", "--data", "DATA"], "does not exist"),
 ])
 def test_one_line_errors(trained, tiny_data, capsys, argv, match):

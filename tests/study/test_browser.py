@@ -136,6 +136,10 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, tmp_path)
     page.click("form.feedback button[type=submit]")  # empty feedback: a message, nothing sent
     assert "type your feedback" in page.inner_text("#answer-error")
     assert seq(page) == 1
+    page.fill("#feedback", "qwertyuiop")  # nonsense: the server's one-line message, the same step
+    page.press("#feedback", "Enter")
+    page.wait_for_function("() => document.getElementById('answer-error').textContent.includes('does not read')")
+    assert seq(page) == 1
     give_feedback(page, EVIL)
     wait_kind(page, "satisfaction", "improve")
     assert "understood your feedback as" in page.inner_text(".understood")

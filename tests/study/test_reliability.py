@@ -66,7 +66,7 @@ def test_wrong_kind_is_409(client, h):
         is_error(client.post(f"/api/participants/{pid}/answer", json=body, headers=headers), 409)
 
 
-def test_feedback_messages_say_what_to_do(client, h):
+def test_feedback_messages_say_what_to_do(client, h, study_state):
     pid, headers = h.join(client)
     to_kind(client, h, pid, headers, "language")
     url = f"/api/participants/{pid}/answer"
@@ -76,7 +76,15 @@ def test_feedback_messages_say_what_to_do(client, h):
     r = client.post(url, json={"feedback": "slower " * 80, "client_ms": 1}, headers=headers)
     is_error(r, 400)
     assert "500" in r.json()["error"]
-    assert client.post(url, json={"feedback": "ok " * 166, "client_ms": 1}, headers=headers).status_code == 200
+    before = snapshot(study_state)
+    for nonsense in ("asdf", "qwertyuiop", "I like pizza."):
+        r = client.post(url, json={"feedback": nonsense, "client_ms": 1}, headers=headers)
+        is_error(r, 400)
+        assert "does not read as feedback" in r.json()["error"]
+    assert snapshot(study_state) == before
+    text = ("Move a little faster please. " * 17).strip()
+    assert len(text) <= 500
+    assert client.post(url, json={"feedback": text, "client_ms": 1}, headers=headers).status_code == 200
 
 
 def test_participants_act_only_with_their_own_token(client, h, study_state):

@@ -40,6 +40,8 @@ log = logging.getLogger("langpref.study")
 HERE = Path(__file__).parent
 MAX_BODY = 64 * 1024
 TIME_TOLERANCE_MS = 1000.0
+NOT_FEEDBACK = ("That does not read as feedback on how the robot moves. Please say how it should move differently, "
+                "for example \"Move faster.\" or \"Stay lower.\"")
 """A client time per query may exceed the server's (step shown -> answer received) by this much (clock grain)."""
 
 
@@ -183,6 +185,8 @@ class StudyApp:
                 ans = parse_answer(data, step)
             except AnswerError as exc:
                 raise HttpError(exc.status, str(exc)) from None
+            if ans.kind == "language" and not self.engine.gate.score(ans.value).ok:
+                raise HttpError(400, NOT_FEEDBACK)
             received = time.time()
             try:
                 tr = advance(self.cfg, p, step, ans, self.robot)

@@ -1,7 +1,8 @@
 """The learning side of the study: a thin adapter over the library for live participants.
 
 - embedding feedback: `model.encode_texts` (psi), cached per text; "how the robot understood it" is
-  `langpref.model.evaluate.embed_text` (nearest meaning prototype) on the same psi;
+  `langpref.model.evaluate.embed_text` (nearest meaning prototype) on the same psi; text that does not read as
+  feedback on the robot's motion is refused first (`langpref.language.relevance.FeedbackGate`);
 - the improvement step of Study 1 (paper Eq. 4, `langpref.improve.improvement_step`) over the study set;
 - one reward learner per participant and method (`langpref.reward.RewardLearner`, explicit + implicit losses for
   language via `language_pairs`, Bradley-Terry for comparisons via `comparison_pairs`), refit after every answer;
@@ -25,6 +26,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
 from langpref.improve import improvement_step
+from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner, comparison_pairs, language_pairs
 from langpref.study.config import METHODS, StudyConfig
 from langpref.study.flow import Participant
@@ -97,6 +99,7 @@ class StudyEngine:
         success = np.asarray(dataset.success)[self.study]
         self.failed = self.study[~success] if (~success).any() else self.study
         self._understanding = _CachedModel(model, self.cache)
+        self.gate = FeedbackGate(self.env)
         self.understand("Move faster.")  # fail at start, not with the first participant, if prototypes are missing
 
     @classmethod

