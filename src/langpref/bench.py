@@ -175,6 +175,35 @@ def uses_table(envs: list[str], today: str) -> str:
     return "\n".join(lines)
 
 
+def gate_table(envs: list[str], today: str) -> str:
+    """The feedback gate on text it must let through (heldout/utterances.json, people-written phrasings outside the
+    bank) and on text it should refuse (heldout/not_feedback.json)."""
+    from langpref.language.bank import load_user_utterances
+    from langpref.language.relevance import RELEVANCE_FLOOR, FeedbackGate
+
+    nonsense = json.loads(Path("heldout/not_feedback.json").read_text())["texts"]
+    lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref.language.relevance` "
+             f"(highest cosine to a bank phrasing in the pretrained MiniLM space; refused below {RELEVANCE_FLOOR}, "
+             "or below 0.60 when no word is in the tokenizer's vocabulary) on the 12 x features x 2 held-out "
+             "phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
+             "| env | held-out phrasings let through | lowest held-out score | not-feedback texts refused "
+             "| highest score among those let through | check, median (ms) |", "|---|---|---|---|---|---|"]
+    for env_name in envs:
+        gate = FeedbackGate(env_name)
+        mapping = load_user_utterances(Path("heldout/utterances.json"), env_name)
+        held = [gate.score(t) for by_dir in mapping.values() for ts in by_dir.values() for t in ts]
+        junk, ms = [], []
+        for text in nonsense:
+            start = time.perf_counter()
+            junk.append(gate.score(text))
+            ms.append(1e3 * (time.perf_counter() - start))
+        passed = [r.score for r in junk if r.ok]
+        lines.append(f"| {env_name} | {sum(r.ok for r in held)} / {len(held)} | {min(r.score for r in held):.3f} "
+                     f"| {len(junk) - len(passed)} / {len(junk)} | {max(passed, default=float('nan')):.3f} "
+                     f"| {np.median(ms):.1f} |")
+    return "\n".join(lines)
+
+
 def sweep_table(envs: list[str], today: str) -> str:
     lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref experiment reward` "
              "(language vs comparisons, 3 humans x 3 seeds, Q = 40: one task per run) on the default dataset. "
@@ -314,6 +343,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="skip the reward-update and improvement-step latencies (need the default model)")
     p.add_argument("--no-sweep", dest="sweep", action="store_false",
                    help="skip the experiment-sweep projection (needs the default dataset data/ENV)")
+    p.add_argument("--no-gate", dest="gate", action="store_false",
+                   help="skip the feedback-gate table (held-out phrasings let through, nonsense refused)")
     p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
     args = p.parse_args(argv)
     today = dt.date.today().isoformat()
@@ -321,6 +352,8 @@ def main(argv: list[str] | None = None) -> None:
         generator_sections(args.envs, args.repeats, args.ray, today)
     if args.uses:
         write_section("uses-latency", uses_table(args.envs, today))
+    if args.gate:
+        write_section("feedback-gate", gate_table(args.envs, today))
     training = training_table(today)
     if training:
         write_section("training-time", training)
