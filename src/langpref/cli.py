@@ -139,9 +139,8 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
 
 
 def cmd_embed(args: argparse.Namespace) -> None:
-    from langpref.model.evaluate import embed_text
-
     from langpref.language.relevance import FeedbackGate
+    from langpref.model.evaluate import embed_text
 
     model, _ = _load(args, with_data=False)
     out = embed_text(model, args.text)  # an empty text fails here, before the gate is built

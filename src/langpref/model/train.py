@@ -20,6 +20,7 @@ import math
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -353,14 +354,34 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
                           extra_files={"training_curve.png": curve})
 
 
+@contextmanager
+def _deterministic_on_cpu(device: str):
+    """Multi-threaded CPU kernels may sum in a different order from run to run (differences of 1e-7 in the first
+    epoch's loss, a different model after ten); torch's deterministic algorithms make two runs with the same seed
+    bit-identical. CUDA keeps its fast kernels (documented there as not bit-reproducible)."""
+    previous = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(previous or resolve_device(device).type == "cpu", warn_only=True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(previous)
+
+
 def train(cfg: TrainConfig, *, train_phrasings: Phrasings | None = None, val_phrasings: Phrasings | None = None,
           progress: bool = True, stage1_out: str | Path | None = None) -> TrainResult:
     """Train and save a latent-space model into `cfg.out`.
 
     `stage1_out`, when given, also saves the stage-1 (frozen language model) checkpoint there: the frozen ablation
     and the co-finetuned model share stage 1, so one run yields both. Phrasings default to the bank's (train, val).
+    On CPU the same seed gives the same model bit for bit, in one process or two.
     """
     cfg.validate()
+    with _deterministic_on_cpu(cfg.device):
+        return _train(cfg, train_phrasings, val_phrasings, progress, stage1_out)
+
+
+def _train(cfg: TrainConfig, train_phrasings: Phrasings | None, val_phrasings: Phrasings | None, progress: bool,
+           stage1_out: str | Path | None) -> TrainResult:
     if stage1_out is not None and Path(stage1_out).exists() and not cfg.force:
         raise LangprefError(f"{stage1_out} already exists; pass --force to overwrite it")
     t_start = time.perf_counter()

@@ -40,9 +40,9 @@ log = logging.getLogger("langpref.study")
 HERE = Path(__file__).parent
 MAX_BODY = 64 * 1024
 TIME_TOLERANCE_MS = 1000.0
+"""A client time per query may exceed the server's (step shown -> answer received) by this much (clock grain)."""
 NOT_FEEDBACK = ("That does not read as feedback on how the robot moves. Please say how it should move differently, "
                 "for example \"Move faster.\" or \"Stay lower.\"")
-"""A client time per query may exceed the server's (step shown -> answer received) by this much (clock grain)."""
 
 
 class HttpError(Exception):
