@@ -179,12 +179,12 @@ def gate_table(envs: list[str], today: str) -> str:
     """The feedback gate on text it must let through (heldout/utterances.json, people-written phrasings outside the
     bank) and on text it should refuse (heldout/not_feedback.json)."""
     from langpref.language.bank import load_user_utterances
-    from langpref.language.relevance import RELEVANCE_FLOOR, FeedbackGate
+    from langpref.language.relevance import RELEVANCE_FLOOR, UNKNOWN_WORDS_FLOOR, FeedbackGate
 
     nonsense = json.loads(Path("heldout/not_feedback.json").read_text())["texts"]
     lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref.language.relevance` "
              f"(highest cosine to a bank phrasing in the pretrained MiniLM space; refused below {RELEVANCE_FLOOR}, "
-             "or below 0.60 when no word is in the tokenizer's vocabulary) on the 12 x features x 2 held-out "
+             f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary) on the 12 x features x 2 held-out "
              "phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
              "| env | held-out phrasings let through | lowest held-out score | not-feedback texts refused "
              "| highest score among those let through | check, median (ms) |", "|---|---|---|---|---|---|"]
@@ -226,9 +226,9 @@ def sweep_table(envs: list[str], today: str) -> str:
 
 def training_table(today: str) -> str | None:
     """Training time and throughput per env, from the runs of `langpref experiment alignment` (default config)."""
-    lines = []
     from langpref.experiments.alignment import RESULTS_ROOT
 
+    lines = []
     for path in sorted(RESULTS_ROOT.glob("*/alignment.json")):
         t = json.loads(path.read_text())["train"]
         st, sps = t["stage_seconds"], t["stage_samples_per_s"]

@@ -173,6 +173,7 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
 
 
 def _register_latent_commands(sub) -> None:
+    from langpref.language.relevance import RELEVANCE_FLOOR
     from langpref.model.config import DEFAULT_LANG_MODEL, ModelConfig, TrainConfig
 
     d, m = TrainConfig(), ModelConfig()
@@ -245,7 +246,7 @@ def _register_latent_commands(sub) -> None:
                        description="Nearest bank meaning by cosine: the mean psi of each feature/direction's training "
                        "phrasings; confidence is a softmax over the cosines at temperature 0.1. A sentence that does "
                        "not read as feedback on the robot's motion (relevance: its highest cosine to a bank phrasing "
-                       "in the pretrained MiniLM space, below 0.35) is refused with an error.")
+                       f"in the pretrained MiniLM space, below {RELEVANCE_FLOOR}) is refused with an error.")
     p.add_argument("--model", required=True, type=Path, help="checkpoint directory")
     p.add_argument("text", help="free-form feedback, e.g. \"you're way too slow\"")
     p.add_argument("--json", action="store_true", help="print one JSON object")

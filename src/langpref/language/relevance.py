@@ -58,6 +58,7 @@ class FeedbackGate:
         from langpref.model.encoders import LanguageEncoder, load_transformer
 
         tokenizer, transformer = load_transformer(GATE_LANG_MODEL)
+        # only its mean-pooled sentence embedding is read (`pooled_texts`); the linear head is never used
         self._encoder = LanguageEncoder(tokenizer, transformer, latent_dim=1).eval()
         self._vocab = set(tokenizer.get_vocab())
         self._torch = torch
