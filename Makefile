@@ -42,7 +42,7 @@ reproduce: install
 	  set -e; \
 	  test -f data/$$env/meta.json || $(BIN)/langpref generate --env $$env --out data/$$env --backend $(BACKEND); \
 	  test -f results/alignment/$$env/alignment.json || $(BIN)/langpref experiment alignment --env $$env; \
-	  for exp in improve reward ablation; do \
+	  for exp in improve reward ablation prior; do \
 	    $(BIN)/langpref experiment $$exp --env $$env --backend $(BACKEND); \
 	  done; \
 	done

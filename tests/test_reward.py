@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -103,13 +103,35 @@ def test_language_feedback_recovers_the_ranking_of_w(space, model):
     w = np.array([0.8, -0.5, 0.33])
     pool = space.split("train")
     human = LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, temperature=0.5, seed=0)
-    cfg = RewardConfig(model=model)
+    cfg = RewardConfig(model=model, weight_decay=1.0 if model == "linear" else 0.25)  # see RewardConfig.model
     learner, rng = RewardLearner(space.dim, cfg, seed=0), np.random.default_rng(1)
     for _ in range(40):
         learner.add(language_pairs(space, human.answer(LanguageQuery(int(rng.choice(pool)))), cfg, rng))
         learner.fit()
     rho = spearmanr(learner.predict(space.phi), space.theta @ w)[0]
     assert rho > (0.9 if model == "linear" else 0.8)
+
+
+def test_fit_depends_on_relative_pair_weights_only(space):
+    """The loss is the weighted mean over pairs: doubling every weight, or repeating all feedback, fits the same
+    r_xi, so the L2 prior weighs the same against each loss term whatever the method's pairs per query."""
+    rng = np.random.default_rng(0)
+    answer = LanguageAnswer(LanguageQuery(int(space.split("train")[0])), space.table("test").texts[0])
+    batch = language_pairs(space, answer, RewardConfig(), rng)
+    fits = []
+    for batches in ([batch], [replace(batch, weights=2 * batch.weights)], [batch, batch]):
+        learner = RewardLearner(space.dim)
+        for b in batches:
+            learner.add(b)
+        learner.fit()
+        fits.append(learner.predict(space.phi))
+    assert np.abs(fits[0]).max() > 0.1
+    np.testing.assert_allclose(fits[1], fits[0], atol=1e-6)
+    np.testing.assert_allclose(fits[2], fits[0], atol=1e-6)
+    stronger = RewardLearner(space.dim, RewardConfig(weight_decay=4.0))
+    stronger.add(batch)
+    stronger.fit()
+    assert np.abs(stronger.predict(space.phi)).max() < 0.5 * np.abs(fits[0]).max()  # a stronger prior, a humbler fit
 
 
 def test_comparisons_recover_the_ranking_of_w(space):
@@ -239,3 +261,19 @@ def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch)
     monkeypatch.setattr(reward_module, "run_reward_learning", lambda *a, **k: pytest.fail("rerun"))
     again = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
     assert again["methods"]["language"]["cross_entropy"] == res["methods"]["language"]["cross_entropy"]
+
+
+def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
+    from langpref.experiments.reward import PRIOR_METHODS, run_prior_experiment
+
+    data = write_dataset(tmp_path / "d", "metaworld", n=40)
+    cfg = LearnRewardConfig(queries=3, humans=1, seeds=1)
+    res = run_prior_experiment("metaworld", data, None, tmp_path / "p", perfect=True, config=cfg, progress=False,
+                               grid=(0.1, 10.0))
+    assert res["eval_split"] == "val" and res["seed"] != LearnRewardConfig().seed
+    assert set(res["picks"]) == set(PRIOR_METHODS)
+    for name, pick in res["picks"].items():
+        ce = {wd: np.mean(res["methods"][f"{name} wd={wd:g}"]["cross_entropy"][1:]) for wd in (0.1, 10.0)}
+        assert ce[pick] == min(ce.values())
+    assert (tmp_path / "p" / "prior.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| language |" in (tmp_path / "p" / "prior.md").read_text()

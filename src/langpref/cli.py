@@ -350,12 +350,13 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
         cfg = ImproveConfig(iterations=args.iterations or d.iterations, seeds=args.seeds or d.seeds)
         summary = run_improve_experiment(**kw, config=cfg)
     else:
-        from langpref.experiments.reward import run_ablation_experiment, run_reward_experiment
+        from langpref.experiments.reward import run_ablation_experiment, run_prior_experiment, run_reward_experiment
 
         d = LearnRewardConfig()
         cfg = LearnRewardConfig(queries=args.queries or d.queries, humans=args.humans or d.humans,
                                 seeds=args.seeds or d.seeds)
-        run = run_reward_experiment if args.experiment == "reward" else run_ablation_experiment
+        run = {"reward": run_reward_experiment, "ablation": run_ablation_experiment,
+               "prior": run_prior_experiment}[args.experiment]
         summary = run(**kw, config=cfg)
     md = Path(summary["figure"]).with_suffix(".md")
     _emit(summary, args.json, lambda s: md.read_text() + f"\n(wrote {md.parent}/: {md.stem}.json, .png, .md)")
@@ -388,7 +389,8 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
     p.add_argument("--reward-model", choices=MODELS, default=r.model,
                    help="r_xi on phi: linear (the authors') or a one-hidden-layer MLP (default %(default)s)")
     p.add_argument("--weight-decay", type=float, default=r.weight_decay,
-                   help="L2 penalty on r_xi's parameters (default %(default)s)")
+                   help="L2 prior on r_xi's parameters, against the weighted mean loss over feedback pairs; "
+                   "`langpref experiment prior` shows how the default was chosen (default %(default)s)")
     p.add_argument("--figure", type=Path, default=None, help="also draw the curve(s) into this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -428,7 +430,8 @@ def _register_latent_use_commands(sub) -> None:
         exp = exp_parser.add_subparsers(dest="experiment", required=True, metavar="EXPERIMENT")
     for name, text in (("improve", "Fig. 4: iterative improvement, paper and history strategies, 100 seeds"),
                        ("reward", "Fig. 5: reward learning, language vs comparisons, 3 humans x 3 seeds, Q = 40"),
-                       ("ablation", "Fig. 6: language reward loss, explicit + implicit vs each alone")):
+                       ("ablation", "Fig. 6: language reward loss, explicit + implicit vs each alone"),
+                       ("prior", "the L2 prior's strength per reward-learning method, chosen on the val split")):
         p = exp.add_parser(name, help=text, description=text + ". Writes NAME.json, NAME.png and NAME.md (a "
                            "section for docs/results.md); an interrupted run resumes without redoing finished seeds.")
         p.add_argument("--env", required=True, choices=ENVS)

@@ -10,8 +10,13 @@ pairs (winner embedding, loser embedding):
   model's reading, never the synthetic human's label), so a paraphrase of l_i is never a negative.
 - a comparison: the preferred trajectory's phi beats the other's (Bradley-Terry, Eq. 11).
 
-L = (1/n) sum_i [explicit_i + (1/k) sum_j implicit_ij] + (weight_decay / 2) |xi|^2, n the queries so far. After
-every query the model is refit on all feedback so far with full-batch L-BFGS, warm-started from the last fit. The
+L = sum_pairs weight * BT-loss / sum_pairs weight + (weight_decay / 2) |xi|^2: the weighted mean over every pair so
+far. A language query of L_Explicit + L_Implicit weighs 2 (its explicit pair, and k implicit pairs of weight 1/k),
+one of either loss alone or a comparison weighs 1. Eq. 9 divides by n, the number of queries, instead; for `both` that
+is our loss times 2, the same minimiser without a prior. With the prior, dividing by the total weight makes it weigh
+the same against every loss term of every method; divided by n, the language fit of `both` would meet a prior half as
+strong as the comparison fit's and be overconfident after one query. After every query the model is refit on all
+feedback so far with full-batch L-BFGS, warm-started from the last fit. The
 default r_xi is linear, r = xi . phi, as in the authors' code; then the loss is convex and the L2 term makes its
 minimum unique, so the result does not depend on optimiser details; `model="mlp"` gives a small network instead.
 With a linear r, r(phi + psi_l) - r(phi) = xi . psi_l: what language teaches does not depend on the shown trajectory.
@@ -43,13 +48,17 @@ class RewardConfig:
     """The reward model r_xi and how it is fit."""
 
     model: str = "linear"
-    """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units)."""
+    """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units). The mlp wants
+    a weaker prior (weight_decay 0.25): on its two layers the L2 term acts as a stronger penalty on the function, and
+    at 1.0 the fit can stall near the flat reward."""
     hidden: int = 32
     """Hidden units of the `mlp` model."""
-    weight_decay: float = 0.5
-    """L2 penalty (weight_decay / 2) |xi|^2 added to the mean loss over queries. It fixes the reward's scale, which
-    language feedback alone leaves open (its explicit pairs are separable), and so matters for the cross-entropy;
-    0.5 was chosen on the perfect latent space and one trained Meta-World model, the same for both methods."""
+    weight_decay: float = 1.0
+    """L2 penalty (weight_decay / 2) |xi|^2 added to the weighted mean loss over pairs: a Gaussian prior on xi. It
+    fixes the reward's scale, which language feedback alone leaves open (its explicit pairs are separable), and so
+    matters for the cross-entropy. 1.0 is what every method (language, comparisons, either loss alone) picks by its own
+    mean cross-entropy on the val split, with humans the test experiments never see, in both envs
+    (`langpref experiment prior --env ENV`)."""
     loss: str = "both"
     """`both` (L_Explicit + L_Implicit, Eq. 9), `explicit` or `implicit` (the ablation)."""
     num_negatives: int = 20
@@ -164,10 +173,11 @@ class RewardLearner:
         self._data = None
 
     def loss(self):
-        """The mean Bradley-Terry loss over queries plus the L2 term, as a torch scalar."""
+        """The weighted mean Bradley-Terry loss over all pairs plus the L2 term, as a torch scalar."""
         torch = self._torch
         if self._data is None:
-            w = np.concatenate([b.weights for b in self.batches]) / max(len(self.batches), 1)
+            w = np.concatenate([b.weights for b in self.batches])
+            w = w / w.sum()
             self._data = tuple(torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)) for a in (
                 np.concatenate([b.winners for b in self.batches]),
                 np.concatenate([b.losers for b in self.batches]), w))

@@ -1,5 +1,6 @@
-"""`langpref experiment reward|ablation --env ENV`: the paper's Fig. 5 (reward learning from language vs comparisons)
-and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic humans x 3 seeds, Q = 40 queries.
+"""`langpref experiment reward|ablation|prior --env ENV`: the paper's Fig. 5 (reward learning from language vs
+comparisons) and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic humans x 3 seeds, Q = 40 queries; and how
+the L2 prior's strength, which the paper does not have, was chosen (on the val split, with other humans).
 
 Each writes into its output directory (default `results/reward/ENV`, `results/ablation/ENV`): `NAME.json` (curves
 per method, summaries, the targets checked, the config), `NAME.png` (two panels: (a) cross-entropy, (b) normalised
@@ -169,3 +170,90 @@ def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfec
     }
     return _finish("ablation", "Ablation of the language reward loss", PAPER_FIG6, env, results, space, data, model,
                    out, base, targets)
+
+
+PRIOR_GRID = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+PRIOR_SEED = 1
+"""Seed of the prior experiment's humans and runs: the reward and ablation experiments use seed 0."""
+PRIOR_METHODS = {"language": ("language", "both"), "comparison": ("comparison", "both"),
+                 "explicit": ("language", "explicit"), "implicit": ("language", "implicit")}
+
+
+def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Path, title: str = "") -> Path:
+    """Mean cross-entropy over queries 1..Q (val split) against the weight decay, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    for name in PRIOR_METHODS:
+        ax.plot(grid, [_mean_ce(results[_prior_key(name, wd)]) for wd in grid], marker="o", label=name)
+    ax.set_xscale("log")
+    ax.minorticks_off()
+    ax.set_xticks(grid, [f"{wd:g}" for wd in grid])
+    ax.set_xlabel("weight_decay (L2 prior strength)")
+    ax.set_ylabel("mean CE, queries 1..Q (val)")
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def _prior_key(name: str, wd: float) -> str:
+    return f"{name} wd={wd:g}"
+
+
+def _mean_ce(result: dict) -> float:
+    return float(np.mean(result["cross_entropy"][1:]))
+
+
+def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
+                         force: bool = False, progress: bool = True, sweep: SweepConfig | None = None,
+                         grid: tuple[float, ...] = PRIOR_GRID) -> dict[str, Any]:
+    """Each method (language with both losses, comparisons, either language loss alone) at every weight decay of
+    `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet. Each
+    method's pick is the weight decay of its lowest mean cross-entropy over queries 1..Q; writes
+    prior.json/.png/.md."""
+    from langpref.reward import LearnRewardConfig
+
+    base = replace(config or LearnRewardConfig(), eval_split="val", seed=PRIOR_SEED)
+    methods = {_prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss,
+                                                                                weight_decay=wd))
+               for name, (fb, loss) in PRIOR_METHODS.items() for wd in grid}
+    results, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
+                                                    progress, sweep)
+    picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
+    figure = plot_prior(results, grid, out / "prior.png", f"L2 prior strength, {env}"
+                        + (" (perfect latent)" if model is None else ""))
+    summary = {
+        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
+        "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries,
+        "seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "default": LearnRewardConfig().reward.weight_decay,
+        "picks": picks, "methods": results, "figure": str(figure),
+        "command": command_line("prior", env, data, model, out), "date": datetime.date.today().isoformat(),
+    }
+    (out / "prior.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "prior.md").write_text(_prior_markdown(summary))
+    return summary
+
+
+def _prior_markdown(summary: dict[str, Any]) -> str:
+    grid, results = summary["grid"], summary["methods"]
+    lines = [f"### L2 prior strength, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"]
+                                                           else ""), "",
+             f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
+             f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments'; metrics on "
+             "the val split). Mean cross-entropy over queries 1..Q for each weight decay; the lowest of each method "
+             f"in bold. The default is {summary['default']:g}.", "",
+             "| method | " + " | ".join(f"wd {wd:g}" for wd in grid) + " | pick |", "|---|" + "---|" * (len(grid) + 1)]
+    for name, pick in summary["picks"].items():
+        cells = [f"{_mean_ce(results[_prior_key(name, wd)]):.3f}" for wd in grid]
+        cells = [f"**{c}**" if wd == pick else c for c, wd in zip(cells, grid)]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {pick:g} |")
+    lines += ["", f"![L2 prior strength {summary['env']}]({figure_link(summary['figure'])})"]
+    return "\n".join(lines) + "\n"
