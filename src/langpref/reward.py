@@ -10,14 +10,15 @@ pairs (winner embedding, loser embedding):
   model's reading, never the synthetic human's label), so a paraphrase of l_i is never a negative.
 - a comparison: the preferred trajectory's phi beats the other's (Bradley-Terry, Eq. 11).
 
-L = sum_pairs weight * BT-loss / sum_pairs weight + (weight_decay / 2) |xi|^2: the weighted mean over every pair so
-far. A language query of L_Explicit + L_Implicit weighs 2 (its explicit pair, and k implicit pairs of weight 1/k),
-one of either loss alone or a comparison weighs 1. Eq. 9 divides by n, the number of queries, instead; for `both` that
-is our loss times 2, the same minimiser without a prior. With the prior, dividing by the total weight makes it weigh
-the same against every loss term of every method; divided by n, the language fit of `both` would meet a prior half as
-strong as the comparison fit's and be overconfident after one query. After every query the model is refit on all
-feedback so far with full-batch L-BFGS, warm-started from the last fit. The
-default r_xi is linear, r = xi . phi, as in the authors' code; then the loss is convex and the L2 term makes its
+L = sum_pairs weight * BT-loss / sum_pairs weight + (weight_decay / 2) |xi|^2, the weighted mean over every pair so
+far plus a Gaussian prior. A language query of L_Explicit + L_Implicit weighs 2 (its explicit pair, and k implicit
+pairs of weight 1/k); one of either loss alone, or a comparison, weighs 1. Eq. 9 divides by the number of queries
+instead, which for `both` is our loss times 2: the same minimiser without a prior. With one, dividing by the total
+weight lets the prior weigh the same against every loss term of every method; divided by the queries, `both` would
+meet a prior half as strong as a comparison fit does, and be overconfident after one query.
+
+After every query the model is refit on all feedback so far with full-batch L-BFGS, warm-started from the last fit.
+The default r_xi is linear, r = xi . phi, as in the authors' code; then the loss is convex and the L2 term makes its
 minimum unique, so the result does not depend on optimiser details; `model="mlp"` gives a small network instead.
 With a linear r, r(phi + psi_l) - r(phi) = xi . psi_l: what language teaches does not depend on the shown trajectory.
 
