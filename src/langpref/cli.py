@@ -387,7 +387,8 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
                    help="implicit negatives: other meanings than the model reads in l, or any other text "
                    "(default %(default)s)")
     p.add_argument("--reward-model", choices=MODELS, default=r.model,
-                   help="r_xi on phi: linear (the authors') or a one-hidden-layer MLP (default %(default)s)")
+                   help="r_xi on phi: linear (the authors') or a one-hidden-layer MLP, which wants --weight-decay 0.25 "
+                   "(default %(default)s)")
     p.add_argument("--weight-decay", type=float, default=r.weight_decay,
                    help="L2 prior on r_xi's parameters, against the weighted mean loss over feedback pairs; "
                    "`langpref experiment prior` shows how the default was chosen (default %(default)s)")
