@@ -103,7 +103,7 @@ def test_language_feedback_recovers_the_ranking_of_w(space, model):
     w = np.array([0.8, -0.5, 0.33])
     pool = space.split("train")
     human = LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, temperature=0.5, seed=0)
-    cfg = RewardConfig(model=model, weight_decay=1.0 if model == "linear" else 0.25)  # see RewardConfig.model
+    cfg = RewardConfig(model=model)
     learner, rng = RewardLearner(space.dim, cfg, seed=0), np.random.default_rng(1)
     for _ in range(40):
         learner.add(language_pairs(space, human.answer(LanguageQuery(int(rng.choice(pool)))), cfg, rng))
@@ -271,6 +271,7 @@ def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
     res = run_prior_experiment("metaworld", data, None, tmp_path / "p", perfect=True, config=cfg, progress=False,
                                grid=(0.1, 10.0))
     assert res["eval_split"] == "val" and res["seed"] != LearnRewardConfig().seed
+    assert res["reward_model"] == "linear" and res["default"] == RewardConfig().weight_decay
     assert set(res["picks"]) == set(PRIOR_METHODS)
     for name, pick in res["picks"].items():
         ce = {wd: np.mean(res["methods"][f"{name} wd={wd:g}"]["cross_entropy"][1:]) for wd in (0.1, 10.0)}

@@ -337,7 +337,7 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
     from langpref.improve import ImproveConfig
-    from langpref.reward import LearnRewardConfig
+    from langpref.reward import LearnRewardConfig, RewardConfig
 
     from langpref.experiments.improve import SweepConfig
 
@@ -354,7 +354,7 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
 
         d = LearnRewardConfig()
         cfg = LearnRewardConfig(queries=args.queries or d.queries, humans=args.humans or d.humans,
-                                seeds=args.seeds or d.seeds)
+                                seeds=args.seeds or d.seeds, reward=RewardConfig(model=args.reward_model))
         run = {"reward": run_reward_experiment, "ablation": run_ablation_experiment,
                "prior": run_prior_experiment}[args.experiment]
         summary = run(**kw, config=cfg)
@@ -364,7 +364,7 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
 
 def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
     from langpref.feedback.humans import HumanConfig
-    from langpref.reward import LOSSES, MODELS, NEGATIVES, RewardConfig
+    from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES, RewardConfig
 
     h, r = HumanConfig(), RewardConfig()
     p.add_argument("--model", type=Path, default=None, help="checkpoint directory (`langpref train`)")
@@ -387,16 +387,18 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
                    help="implicit negatives: other meanings than the model reads in l, or any other text "
                    "(default %(default)s)")
     p.add_argument("--reward-model", choices=MODELS, default=r.model,
-                   help="r_xi on phi: linear (the authors') or a one-hidden-layer MLP, which wants --weight-decay 0.25 "
-                   "(default %(default)s)")
-    p.add_argument("--weight-decay", type=float, default=r.weight_decay,
-                   help="L2 prior on r_xi's parameters, against the weighted mean loss over feedback pairs; "
-                   "`langpref experiment prior` shows how the default was chosen (default %(default)s)")
+                   help="r_xi on phi: linear (the authors') or a one-hidden-layer MLP (default %(default)s)")
+    p.add_argument("--weight-decay", type=float, default=None,
+                   help="L2 prior on r_xi's parameters, against the weighted mean loss over feedback pairs (default "
+                   + ", ".join(f"{v:g} for {k}" for k, v in DEFAULT_WEIGHT_DECAY.items())
+                   + "; `langpref experiment prior` shows how the linear one was chosen)")
     p.add_argument("--figure", type=Path, default=None, help="also draw the curve(s) into this PNG")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def _register_latent_use_commands(sub) -> None:
+    from langpref.reward import MODELS
+
     p = sub.add_parser("improve", help="iterative trajectory improvement with a synthetic language human (Eq. 4)",
                        description="From a random trajectory of the candidate split, N rounds of synthetic language "
                        "feedback, each followed by the argmax of Eq. 4's cosine objective over the candidates "
@@ -448,6 +450,8 @@ def _register_latent_use_commands(sub) -> None:
         else:
             p.add_argument("--humans", type=int, default=None, help="override the 3 synthetic humans")
             p.add_argument("--queries", type=int, default=None, help="override Q = 40")
+            p.add_argument("--reward-model", choices=MODELS, default="linear",
+                           help="r_xi on phi: linear (the authors', default) or a one-hidden-layer MLP")
         p.add_argument("--force", action="store_true", help="discard finished runs in --out and start over")
         p.add_argument("--backend", choices=("local", "ray"), default="local",
                        help="run the seeds as local processes (default) or as Ray tasks, one per run")

@@ -42,6 +42,7 @@ from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageA
 LOSSES = ("both", "explicit", "implicit")
 NEGATIVES = ("other_meaning", "any")
 MODELS = ("linear", "mlp")
+DEFAULT_WEIGHT_DECAY = {"linear": 1.0, "mlp": 0.25}
 
 
 @dataclass
@@ -49,17 +50,17 @@ class RewardConfig:
     """The reward model r_xi and how it is fit."""
 
     model: str = "linear"
-    """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units). The mlp wants
-    a weaker prior (weight_decay 0.25): on its two layers the L2 term acts as a stronger penalty on the function, and
-    at 1.0 the fit can stall near the flat reward."""
+    """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units)."""
     hidden: int = 32
     """Hidden units of the `mlp` model."""
-    weight_decay: float = 1.0
+    weight_decay: float | None = None
     """L2 penalty (weight_decay / 2) |xi|^2 added to the weighted mean loss over pairs: a Gaussian prior on xi. It
     fixes the reward's scale, which language feedback alone leaves open (its explicit pairs are separable), and so
-    matters for the cross-entropy. 1.0 is what language, comparisons and L_Explicit alone each pick by their own mean
-    cross-entropy on the val split, with humans the test experiments never see, in both envs (L_Implicit alone picks
-    0.5, by 0.002); `langpref experiment prior --env ENV` reruns that choice."""
+    matters for the cross-entropy. None: the model's default in `DEFAULT_WEIGHT_DECAY`. For the linear model, 1.0 is
+    what language, comparisons and L_Explicit alone each pick by their own mean cross-entropy on the val split, with
+    humans the test experiments never see, in both envs (L_Implicit alone picks 0.5, by 0.002); `langpref experiment
+    prior --env ENV` reruns that choice. On the mlp's two layers the same L2 acts as a stronger penalty on the
+    function: at 1.0 it stays at the flat reward, hence its weaker default."""
     loss: str = "both"
     """`both` (L_Explicit + L_Implicit, Eq. 9), `explicit` or `implicit` (the ablation)."""
     num_negatives: int = 20
@@ -71,6 +72,10 @@ class RewardConfig:
     """Bank split the robot draws implicit negatives from."""
     max_iter: int = 100
     """L-BFGS iterations per refit."""
+
+    def __post_init__(self) -> None:
+        if self.weight_decay is None:
+            self.weight_decay = DEFAULT_WEIGHT_DECAY.get(self.model, DEFAULT_WEIGHT_DECAY["linear"])
 
     def validate(self) -> None:
         if self.model not in MODELS:

@@ -172,7 +172,7 @@ def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfec
                    out, base, targets)
 
 
-PRIOR_GRID = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+PRIOR_GRID = (0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 PRIOR_SEED = 1
 """Seed of the prior experiment's humans and runs: the reward and ablation experiments use seed 0."""
 PRIOR_METHODS = {"language": ("language", "both"), "comparison": ("comparison", "both"),
@@ -219,21 +219,23 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
     `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet. Each
     method's pick is the weight decay of its lowest mean cross-entropy over queries 1..Q; writes
     prior.json/.png/.md."""
-    from langpref.reward import LearnRewardConfig
+    from langpref.reward import DEFAULT_WEIGHT_DECAY, LearnRewardConfig
 
     base = replace(config or LearnRewardConfig(), eval_split="val", seed=PRIOR_SEED)
+    reward_model = base.reward.model
     methods = {_prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss,
                                                                                 weight_decay=wd))
                for name, (fb, loss) in PRIOR_METHODS.items() for wd in grid}
     results, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
                                                     progress, sweep)
     picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
-    figure = plot_prior(results, grid, out / "prior.png", f"L2 prior strength, {env}"
-                        + (" (perfect latent)" if model is None else ""))
+    title = f"L2 prior strength, {env}, {reward_model} reward" + (" (perfect latent)" if model is None else "")
+    figure = plot_prior(results, grid, out / "prior.png", title)
     summary = {
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
         "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries,
-        "seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "default": LearnRewardConfig().reward.weight_decay,
+        "seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "reward_model": reward_model,
+        "default": DEFAULT_WEIGHT_DECAY[reward_model],
         "picks": picks, "methods": results, "figure": str(figure),
         "command": command_line("prior", env, data, model, out), "date": datetime.date.today().isoformat(),
     }
@@ -244,12 +246,13 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
 
 def _prior_markdown(summary: dict[str, Any]) -> str:
     grid, results = summary["grid"], summary["methods"]
-    lines = [f"### L2 prior strength, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"]
-                                                           else ""), "",
+    lines = [f"### L2 prior strength, {summary['env']}" + ("" if summary["reward_model"] == "linear" else
+                                                           f", {summary['reward_model']} reward")
+             + (" (perfect latent space, oracle)" if summary["perfect"] else ""), "",
              f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
              f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments'; metrics on "
              "the val split). Mean cross-entropy over queries 1..Q for each weight decay; the lowest of each method "
-             f"in bold. The default is {summary['default']:g}.", "",
+             f"in bold. The default for the {summary['reward_model']} reward is {summary['default']:g}.", "",
              "| method | " + " | ".join(f"wd {wd:g}" for wd in grid) + " | pick |", "|---|" + "---|" * (len(grid) + 1)]
     for name, pick in summary["picks"].items():
         cells = [f"{_mean_ce(results[_prior_key(name, wd)]):.3f}" for wd in grid]
