@@ -15,6 +15,7 @@ import hashlib
 import multiprocessing as mp
 import os
 import pickle
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -35,8 +36,12 @@ def _call_setup(setup: Callable[..., Any] | None, setup_args: tuple) -> Any:
     return _SETUP_CACHE[key]
 
 
-def _local_init(setup, setup_args) -> None:
+def _local_init(setup, setup_args, threads: int) -> None:
+    """Build the worker's state, then share the cores among the workers: torch's default of one thread per core in
+    every worker makes small-tensor work (an L-BFGS refit) several times slower than one worker alone."""
     _call_setup(setup, setup_args)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(threads)
 
 
 def _local_run(payload):
@@ -77,7 +82,8 @@ def run_jobs(
         for job in jobs:
             yield fn(state, job)
     else:
-        with mp.get_context("spawn").Pool(workers, _local_init, (setup, setup_args)) as pool:
+        threads = max(1, (os.cpu_count() or 1) // workers)
+        with mp.get_context("spawn").Pool(workers, _local_init, (setup, setup_args, threads)) as pool:
             yield from pool.imap_unordered(_local_run, [(fn, setup, setup_args, job) for job in jobs])
 
 

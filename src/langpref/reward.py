@@ -30,6 +30,7 @@ Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged 
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -193,6 +194,8 @@ class RewardLearner:
         return (weight * torch.nn.functional.softplus(-margin)).sum() + 0.5 * self.cfg.weight_decay * reg
 
     def fit(self) -> None:
+        """Refit on all pairs so far. On one thread: the problem is small, and the fit (the mlp's above all, which is
+        not convex) then does not depend on how many threads or sweep workers the machine has."""
         if not self.batches:
             return
         torch = self._torch
@@ -205,11 +208,22 @@ class RewardLearner:
             value.backward()
             return value
 
-        opt.step(closure)
+        with _one_thread(torch):
+            opt.step(closure)
 
     def predict(self, phi: np.ndarray) -> np.ndarray:
-        with self._torch.no_grad():
+        with self._torch.no_grad(), _one_thread(self._torch):
             return self._reward(self._torch.from_numpy(np.asarray(phi, dtype=np.float64))).numpy().copy()
+
+
+@contextmanager
+def _one_thread(torch):
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 # ---- metrics ------------------------------------------------------------------------------------------------------
