@@ -39,6 +39,7 @@ def _call_setup(setup: Callable[..., Any] | None, setup_args: tuple) -> Any:
 def _local_init(setup, setup_args, threads: int) -> None:
     """Build the worker's state, then share the cores among the workers: torch's default of one thread per core in
     every worker makes small-tensor work (an L-BFGS refit) several times slower than one worker alone."""
+    os.environ["OMP_NUM_THREADS"] = str(threads)  # read when torch is first imported, which setup usually does
     _call_setup(setup, setup_args)
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(threads)
