@@ -278,3 +278,15 @@ def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
         assert ce[pick] == min(ce.values())
     assert (tmp_path / "p" / "prior.png").read_bytes()[:4] == b"\x89PNG"
     assert "| language |" in (tmp_path / "p" / "prior.md").read_text()
+
+
+def test_experiment_records_the_command_that_reproduces_it(tmp_path, monkeypatch):
+    from langpref.experiments.reward import run_reward_experiment
+
+    monkeypatch.chdir(tmp_path)
+    data = write_dataset(tmp_path / "d", "metaworld", n=40)
+    cfg = LearnRewardConfig(queries=2, humans=1, seeds=1, reward=RewardConfig(model="mlp"))
+    res = run_reward_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
+    assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-mlp")  # not the linear model's runs
+    for flag in ("--perfect-latent", "--queries 2", "--humans 1", "--seeds 1", "--reward-model mlp"):
+        assert flag in res["command"]

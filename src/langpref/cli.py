@@ -443,7 +443,8 @@ def _register_latent_use_commands(sub) -> None:
                        help="checkpoint (default results/alignment/ENV/cofinetuned, from `experiment alignment`)")
         p.add_argument("--perfect-latent", action="store_true", help="ORACLE latent space instead of a model")
         p.add_argument("--out", type=Path, default=None,
-                       help=f"output directory (default results/{name}/ENV, or ENV-perfect)")
+                       help=f"output directory (default results/{name}/ENV, or ENV-perfect"
+                       + (")" if name == "improve" else ", ENV-mlp)"))
         p.add_argument("--seeds", type=int, default=None, help="override the paper's seeds (100 / 3 per human)")
         if name == "improve":
             p.add_argument("--iterations", type=int, default=None, help="override N = 15")

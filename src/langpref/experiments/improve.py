@@ -101,12 +101,13 @@ def _improvement_job(space, job) -> tuple[str, dict]:
 
 
 def default_paths(kind: str, env: str, data: str | Path | None, model: str | Path | None, out: str | Path | None,
-                  perfect: bool) -> tuple[Path, Path | None, Path]:
+                  perfect: bool, variant: str = "") -> tuple[Path, Path | None, Path]:
     """data/ENV, the co-finetuned model of `langpref experiment alignment` (results/alignment/ENV/cofinetuned) and
-    results/KIND/ENV (results/KIND/ENV-perfect for the oracle space) unless given."""
+    results/KIND/ENV (ENV-perfect for the oracle space, then -VARIANT if given, e.g. ENV-mlp) unless given."""
     data = Path(data) if data else Path("data") / env
     model = None if perfect else (Path(model) if model else default_model(env))
-    out = Path(out) if out else Path("results") / kind / (f"{env}-perfect" if perfect else env)
+    name = env + ("-perfect" if perfect else "") + (f"-{variant}" if variant else "")
+    out = Path(out) if out else Path("results") / kind / name
     return data, model, out
 
 

@@ -61,7 +61,8 @@ def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out,
     from langpref.feedback.space import load_space
     from langpref.reward import Curves, summarise
 
-    data, model, out = default_paths(kind, env, data, model, out, perfect)
+    reward_models = {cfg.reward.model for cfg in methods.values()} - {"linear"}
+    data, model, out = default_paths(kind, env, data, model, out, perfect, "-".join(sorted(reward_models)))
     space = load_space(data, model, env=env, perfect=perfect)
     cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
                      force=force)
@@ -111,15 +112,27 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets,
-            extra: str = "") -> dict[str, Any]:
+def _cli_flags(base) -> str:
+    """The `langpref experiment` options that reproduce `base` where it differs from the defaults."""
+    from langpref.reward import LearnRewardConfig
+
+    d = LearnRewardConfig()
+    flags = [f" --{k} {getattr(base, k)}" for k in ("humans", "seeds", "queries") if getattr(base, k) != getattr(d, k)]
+    if base.reward.model != d.reward.model:
+        flags.append(f" --reward-model {base.reward.model}")
+    return "".join(flags)
+
+
+def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets
+            ) -> dict[str, Any]:
     figure = plot_reward_curves(results, out / f"{kind}.png",
                                 f"{title}, {env}" + (" (perfect latent)" if model is None else ""))
     summary = {
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
         "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries,
         "methods": results, "targets": targets, "figure": str(figure), "paper": paper,
-        "command": command_line(kind, env, data, model, out, extra), "date": datetime.date.today().isoformat(),
+        "command": command_line(kind, env, data, model, out, _cli_flags(base)),
+        "date": datetime.date.today().isoformat(),
     }
     (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / f"{kind}.md").write_text(_markdown(title, summary, paper))
@@ -237,7 +250,8 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
         "seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "reward_model": reward_model,
         "default": DEFAULT_WEIGHT_DECAY[reward_model],
         "picks": picks, "methods": results, "figure": str(figure),
-        "command": command_line("prior", env, data, model, out), "date": datetime.date.today().isoformat(),
+        "command": command_line("prior", env, data, model, out, _cli_flags(base)),
+        "date": datetime.date.today().isoformat(),
     }
     (out / "prior.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "prior.md").write_text(_prior_markdown(summary))
