@@ -37,8 +37,8 @@ def _call_setup(setup: Callable[..., Any] | None, setup_args: tuple) -> Any:
 
 
 def _local_init(setup, setup_args, threads: int) -> None:
-    """Build the worker's state, then share the cores among the workers: torch's default of one thread per core in
-    every worker makes small-tensor work (an L-BFGS refit) several times slower than one worker alone."""
+    """Give the worker its share of the cores, then build its state: torch's default of one thread per core in every
+    worker oversubscribes them, and made a sweep of small fits (mlp rewards) 3x slower on 2 workers than on 1."""
     os.environ["OMP_NUM_THREADS"] = str(threads)  # read when torch is first imported, which setup usually does
     _call_setup(setup, setup_args)
     if "torch" in sys.modules:
