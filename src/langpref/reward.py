@@ -30,6 +30,7 @@ Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged 
 from __future__ import annotations
 
 import sys
+import threading
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 
@@ -216,14 +217,20 @@ class RewardLearner:
             return self._reward(self._torch.from_numpy(np.asarray(phi, dtype=np.float64))).numpy().copy()
 
 
+_THREADS = threading.Lock()
+
+
 @contextmanager
 def _one_thread(torch):
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
+    """torch on one thread, one such section at a time: the thread count is process-wide, and concurrent fits (the
+    study server answers participants on several threads) must not interleave its save and restore."""
+    with _THREADS:
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            yield
+        finally:
+            torch.set_num_threads(threads)
 
 
 # ---- metrics ------------------------------------------------------------------------------------------------------
