@@ -123,20 +123,26 @@ def _cli_flags(base) -> str:
     return "".join(flags)
 
 
-def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets
-            ) -> dict[str, Any]:
-    figure = plot_reward_curves(results, out / f"{kind}.png",
-                                f"{title}, {env}" + (" (perfect latent)" if model is None else ""))
+def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown) -> dict[str, Any]:
+    """The summary of an experiment (what every kind records, then `fields`), written as KIND.json and, through
+    `markdown(summary)`, KIND.md."""
     summary = {
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
-        "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries,
-        "methods": results, "targets": targets, "figure": str(figure), "paper": paper,
+        "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries, **fields,
         "command": command_line(kind, env, data, model, out, _cli_flags(base)),
         "date": datetime.date.today().isoformat(),
     }
     (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / f"{kind}.md").write_text(_markdown(title, summary, paper))
+    (out / f"{kind}.md").write_text(markdown(summary))
     return summary
+
+
+def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets
+            ) -> dict[str, Any]:
+    figure = plot_reward_curves(results, out / f"{kind}.png",
+                                f"{title}, {env}" + (" (perfect latent)" if model is None else ""))
+    fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper}
+    return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper))
 
 
 def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
@@ -244,18 +250,10 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
     picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
     title = f"L2 prior strength, {env}, {reward_model} reward" + (" (perfect latent)" if model is None else "")
     figure = plot_prior(results, grid, out / "prior.png", title)
-    summary = {
-        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
-        "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries,
-        "seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "reward_model": reward_model,
-        "default": DEFAULT_WEIGHT_DECAY[reward_model],
-        "picks": picks, "methods": results, "figure": str(figure),
-        "command": command_line("prior", env, data, model, out, _cli_flags(base)),
-        "date": datetime.date.today().isoformat(),
-    }
-    (out / "prior.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "prior.md").write_text(_prior_markdown(summary))
-    return summary
+    fields = {"seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "reward_model": reward_model,
+              "default": DEFAULT_WEIGHT_DECAY[reward_model], "picks": picks, "methods": results,
+              "figure": str(figure)}
+    return _save("prior", env, data, model, out, space, base, fields, _prior_markdown)
 
 
 def _prior_markdown(summary: dict[str, Any]) -> str:
