@@ -136,3 +136,12 @@ def test_experiment_improve_writes_and_resumes(tmp_path, monkeypatch, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert len(summary["strategies"]["history"]["curve"]) == 5
     assert asdict(ImproveConfig())["seeds"] == 100 and ImproveConfig().iterations == 15
+
+
+@pytest.mark.parametrize("kind, flag", [("improve", "--seeds"), ("reward", "--queries"), ("prior", "--humans")])
+def test_experiment_refuses_a_zero_override_and_writes_nothing(tmp_path, capsys, kind, flag):
+    data = write_features_dataset(tmp_path / "d")
+    out = tmp_path / "res"
+    assert main(["experiment", kind, "--env", "metaworld", "--data", str(data), "--perfect-latent",
+                 "--out", str(out), flag, "0"]) == 2  # 0 is a value, not "use the paper's setting"
+    assert "must" in capsys.readouterr().err and not out.exists()

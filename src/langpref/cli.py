@@ -335,6 +335,11 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
           + f"{r['queries_to_0.95']} queries" + (f"; figure {r['figure']}" if "figure" in r else ""))
 
 
+def _or_default(value: int | None, default: int) -> int:
+    """An override flag's value, or the paper's setting when it was not given (0 is a value, and is refused)."""
+    return default if value is None else value
+
+
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
     from langpref.improve import ImproveConfig
     from langpref.reward import LearnRewardConfig, RewardConfig
@@ -347,14 +352,15 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
         from langpref.experiments.improve import run_improve_experiment
 
         d = ImproveConfig()
-        cfg = ImproveConfig(iterations=args.iterations or d.iterations, seeds=args.seeds or d.seeds)
+        cfg = ImproveConfig(iterations=_or_default(args.iterations, d.iterations),
+                            seeds=_or_default(args.seeds, d.seeds))
         summary = run_improve_experiment(**kw, config=cfg)
     else:
         from langpref.experiments.reward import run_ablation_experiment, run_prior_experiment, run_reward_experiment
 
         d = LearnRewardConfig()
-        cfg = LearnRewardConfig(queries=args.queries or d.queries, humans=args.humans or d.humans,
-                                seeds=args.seeds or d.seeds, reward=RewardConfig(model=args.reward_model))
+        cfg = LearnRewardConfig(queries=_or_default(args.queries, d.queries), humans=_or_default(args.humans, d.humans),
+                                seeds=_or_default(args.seeds, d.seeds), reward=RewardConfig(model=args.reward_model))
         run = {"reward": run_reward_experiment, "ablation": run_ablation_experiment,
                "prior": run_prior_experiment}[args.experiment]
         summary = run(**kw, config=cfg)
