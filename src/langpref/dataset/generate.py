@@ -62,9 +62,9 @@ class GenerateConfig:
         cfg = GenerateConfig(
             env=self.env,
             out=Path(self.out),
-            num_trajectories=self.num_trajectories or spec.default_num_trajectories,
-            horizon=self.horizon or spec.default_horizon,
-            workers=self.workers or os.cpu_count() or 1,
+            num_trajectories=spec.default_num_trajectories if self.num_trajectories is None else self.num_trajectories,
+            horizon=spec.default_horizon if self.horizon is None else self.horizon,
+            workers=(os.cpu_count() or 1) if self.workers is None else self.workers,
             seed=self.seed,
             force=self.force,
             backend=self.backend,
