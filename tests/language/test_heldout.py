@@ -55,3 +55,19 @@ def test_heldout_disjoint_from_bank(env: str) -> None:
         if normalise(text) in bank_keys
     ]
     assert not collisions, "held-out phrasings also in the bank:\n" + "\n".join(collisions)
+
+
+PROBES = Path(__file__).resolve().parents[2] / "docs" / "probes"
+
+
+@pytest.mark.parametrize("env", ENV_NAMES)
+def test_probe_phrasings_are_train_only_candidates(env: str) -> None:
+    """A probe file (docs/probes, phrasings tried for the train split and reported in docs/results.md) loads with
+    the user loader and repeats no bank phrasing nor any held-out one: its numbers measure unseen phrasings."""
+    mapping = load_user_utterances(PROBES / f"contrast-completion-{env}.json", env)
+    probe = {normalise(t) for by_dir in mapping.values() for texts in by_dir.values() for t in texts}
+    bank = load_bank(env)
+    shipped = {normalise(t) for split in ("train", "val", "test") for t, _, _ in bank.all_of_split(split)}
+    heldout = {normalise(t) for by_dir in load_user_utterances(HELDOUT, env).values()
+               for texts in by_dir.values() for t in texts}
+    assert probe and not probe & shipped and not probe & heldout
