@@ -145,3 +145,18 @@ def test_experiment_refuses_a_zero_override_and_writes_nothing(tmp_path, capsys,
     assert main(["experiment", kind, "--env", "metaworld", "--data", str(data), "--perfect-latent",
                  "--out", str(out), flag, "0"]) == 2  # 0 is a value, not "use the paper's setting"
     assert "must" in capsys.readouterr().err and not out.exists()
+
+
+def test_experiment_command_records_every_non_default_option(tmp_path, monkeypatch):
+    """The command an experiment writes into its .md/.json reproduces it: --seeds, --iterations and --phrasings."""
+    from langpref.experiments.improve import run_improve_experiment
+    from langpref.feedback import HumanConfig
+
+    monkeypatch.chdir(tmp_path)
+    data = write_features_dataset(tmp_path / "d")
+    phrasings = Path(__file__).resolve().parents[1] / "heldout" / "utterances.json"
+    cfg = ImproveConfig(seeds=2, iterations=2, human=HumanConfig(phrasings=str(phrasings)))
+    res = run_improve_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
+    assert Path(res["figure"]).parent == Path("results/improve/metaworld-perfect-phrasings")
+    for flag in ("--seeds 2", "--iterations 2", f"--phrasings {phrasings}"):
+        assert flag in res["command"]

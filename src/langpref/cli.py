@@ -285,6 +285,7 @@ def _human_config(args: argparse.Namespace):
     from langpref.feedback.humans import HumanConfig
 
     return HumanConfig(temperature=args.temperature, phrasing_split=args.phrasing_split,
+                       phrasings=str(args.phrasings) if args.phrasings else None,
                        rationality=getattr(args, "rationality", HumanConfig.rationality))
 
 
@@ -298,7 +299,7 @@ def _reward_config(args: argparse.Namespace):
 def _space(args: argparse.Namespace):
     from langpref.feedback.space import load_space
 
-    return load_space(args.data, args.model, perfect=args.perfect_latent)
+    return load_space(args.data, args.model, perfect=args.perfect_latent, phrasings=args.phrasings)
 
 
 def cmd_improve(args: argparse.Namespace) -> None:
@@ -341,11 +342,13 @@ def _or_default(value: int | None, default: int) -> int:
 
 
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
+    from langpref.feedback.humans import HumanConfig
     from langpref.improve import ImproveConfig
     from langpref.reward import LearnRewardConfig, RewardConfig
 
     from langpref.experiments.improve import SweepConfig
 
+    human = HumanConfig(phrasings=str(args.phrasings) if args.phrasings else None)
     kw = dict(env=args.env, data=args.data, model=args.model, out=args.out, perfect=args.perfect_latent,
               force=args.force, sweep=SweepConfig(args.backend, args.workers, args.ray_address))
     if args.experiment == "improve":
@@ -353,14 +356,15 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
 
         d = ImproveConfig()
         cfg = ImproveConfig(iterations=_or_default(args.iterations, d.iterations),
-                            seeds=_or_default(args.seeds, d.seeds))
+                            seeds=_or_default(args.seeds, d.seeds), human=human)
         summary = run_improve_experiment(**kw, config=cfg)
     else:
         from langpref.experiments.reward import run_ablation_experiment, run_prior_experiment, run_reward_experiment
 
         d = LearnRewardConfig()
         cfg = LearnRewardConfig(queries=_or_default(args.queries, d.queries), humans=_or_default(args.humans, d.humans),
-                                seeds=_or_default(args.seeds, d.seeds), reward=RewardConfig(model=args.reward_model))
+                                seeds=_or_default(args.seeds, d.seeds), reward=RewardConfig(model=args.reward_model),
+                                human=human)
         run = {"reward": run_reward_experiment, "ablation": run_ablation_experiment,
                "prior": run_prior_experiment}[args.experiment]
         summary = run(**kw, config=cfg)
@@ -382,6 +386,9 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
                    help="language human's softmax temperature over features, Eq. 10 (default %(default)s)")
     p.add_argument("--phrasing-split", choices=("train", "val", "test"), default=h.phrasing_split,
                    help="bank split the language human phrases its feedback from (default %(default)s)")
+    p.add_argument("--phrasings", type=Path, default=None,
+                   help="utterance file (DESIGN.md schema) the language human phrases its feedback from instead of "
+                   "the bank, e.g. heldout/utterances.json (phrasings written by people who never saw the bank)")
     if reward:
         p.add_argument("--rationality", type=float, default=h.rationality,
                        help="comparison human's beta in sigmoid(beta (R_A - R_B)), Eq. 11 (default %(default)s)")
@@ -452,6 +459,9 @@ def _register_latent_use_commands(sub) -> None:
                        help=f"output directory (default results/{name}/ENV, or ENV-perfect"
                        + (")" if name == "improve" else ", ENV-mlp)"))
         p.add_argument("--seeds", type=int, default=None, help="override the paper's seeds (100 / 3 per human)")
+        p.add_argument("--phrasings", type=Path, default=None,
+                       help="utterance file the language human phrases its feedback from instead of the bank's test "
+                       "split, e.g. heldout/utterances.json (default out: ENV-phrasings)")
         if name == "improve":
             p.add_argument("--iterations", type=int, default=None, help="override N = 15")
         else:

@@ -95,7 +95,7 @@ def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_s
     cands = space.split(cfg.candidate_split)
     R = true_reward(w, space.theta)
     rng_start, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
-    human = LanguageHuman(w, space.theta, space.table(cfg.human.phrasing_split), cands, space.feature_names,
+    human = LanguageHuman(w, space.theta, space.table(cfg.human.phrase_source), cands, space.feature_names,
                           cfg.human.temperature, rng_human)
     learner = RewardLearner(space.dim, cfg.reward, seed=int(run_seed[-1])) if cfg.strategy == "history" else None
     phi_c = space.phi[cands]

@@ -327,7 +327,7 @@ def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfi
     curves = Curves()
     curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
     if cfg.feedback == "language":
-        lang = LanguageHuman(w, space.theta, space.table(cfg.human.phrasing_split), pool, space.feature_names,
+        lang = LanguageHuman(w, space.theta, space.table(cfg.human.phrase_source), pool, space.feature_names,
                              cfg.human.temperature, rng_human)
     else:
         comp = ComparisonHuman(w, space.theta, cfg.human.rationality, rng_human)

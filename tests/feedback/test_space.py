@@ -45,3 +45,35 @@ def test_toy_space_is_an_isometric_perfect_space():
         small.table("val")  # only the test and train phrasings were embedded
     with pytest.raises(LangprefError):
         small.split("nope")
+
+
+def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
+    """--phrasings FILE: the space embeds the file's phrasings (in the oracle space, as the file labels them) and
+    the language human says only those; a text the file and the bank file under different meanings is refused."""
+    import json
+
+    from langpref.feedback import HumanConfig, LanguageHuman, load_space
+    from langpref.feedback.types import LanguageQuery
+    from tests.test_improve import write_features_dataset
+
+    data = write_features_dataset(tmp_path / "d")
+    mine = {"speed": {"increase": ["Zoom zoom."], "decrease": ["Easy, tiger."]},
+            "height": {"increase": ["Up you go."], "decrease": ["Get down."]}}
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({"metaworld": mine}))
+    space = load_space(data, perfect=True, phrasings=path)
+    human = HumanConfig(phrasings=str(path))
+    table = space.table(human.phrase_source)
+    assert set(table.texts) == {"Zoom zoom.", "Easy, tiger.", "Up you go.", "Get down."}
+    speed = space.feature_names.index("speed")
+    assert np.allclose(table.psi[table.texts.index("Easy, tiger.")][:3], -np.eye(3)[speed])
+    w = np.zeros(3)
+    w[speed] = 1.0  # wants speed only: every answer is a speed phrasing of the file
+    test = space.split("test")
+    said = {LanguageHuman(w, space.theta, table, test, space.feature_names, temperature=0.05, seed=s)
+            .answer(LanguageQuery(int(test[np.argmin(space.theta[test, speed])]))).text for s in range(5)}
+    assert said == {"Zoom zoom."}
+    assert load_space(data, perfect=True).table("val")  # every bank split is embedded, val included
+    path.write_text(json.dumps({"metaworld": {"speed": {"increase": ["Move slower."]}}}))
+    with pytest.raises(LangprefError, match="two meanings"):
+        load_space(data, perfect=True, phrasings=path)

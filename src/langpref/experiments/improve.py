@@ -66,10 +66,10 @@ class SweepConfig:
     """A running Ray cluster to join; default a local instance."""
 
 
-def worker_space(data: Path, model: Path | None, env: str, perfect: bool):
+def worker_space(data: Path, model: Path | None, env: str, perfect: bool, phrasings: str | None = None):
     from langpref.feedback.space import load_space
 
-    return load_space(data, model, env=env, perfect=perfect)
+    return load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
 
 
 def run_sweep(job_fn, todo: list, space, space_args: tuple, cache: RunCache, sweep: SweepConfig, desc: str,
@@ -116,6 +116,20 @@ def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path,
     return f"langpref experiment {kind} --env {env} --data {data} {where} --out {out}{extra}"
 
 
+def _cli_flags(base) -> str:
+    """The `langpref experiment improve` options that reproduce `base` where it differs from the defaults."""
+    from langpref.improve import ImproveConfig
+
+    d = ImproveConfig()
+    flags = [f" --{k} {getattr(base, k)}" for k in ("seeds", "iterations") if getattr(base, k) != getattr(d, k)]
+    return "".join(flags) + phrasings_flag(base.human)
+
+
+def phrasings_flag(human) -> str:
+    """The `--phrasings FILE` option of an experiment whose language human speaks from a file, else nothing."""
+    return f" --phrasings {human.phrasings}" if human.phrasings else ""
+
+
 def figure_link(figure: str | Path) -> str:
     """A figure's path as seen from docs/results.md (relative paths are relative to the repository root)."""
     figure = Path(figure)
@@ -155,9 +169,10 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     from langpref.improve import ImproveConfig, ImprovementRun, plot_improvement
     from langpref.improve import summarise as summarise_runs
 
-    data, model, out = default_paths("improve", env, data, model, out, perfect)
-    space = load_space(data, model, env=env, perfect=perfect)
     base = config or ImproveConfig()
+    phrasings = base.human.phrasings
+    data, model, out = default_paths("improve", env, data, model, out, perfect, "phrasings" if phrasings else "")
+    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
     cfgs = {s: replace(base, strategy=s) for s in strategies}
     cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
                      force=force)
@@ -165,7 +180,7 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
         cfg.validate()
     todo = [(f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds)
             if f"{name}/{s}" not in cache]
-    run_sweep(_improvement_job, todo, space, (data, model, env, perfect), cache, sweep or SweepConfig(),
+    run_sweep(_improvement_job, todo, space, (data, model, env, perfect, phrasings), cache, sweep or SweepConfig(),
               f"improve {env}", progress)
     results = {name: {**summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
                       "config": asdict(cfg)} for name, cfg in cfgs.items()}
@@ -176,7 +191,7 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
         "space": space.description, "seeds": base.seeds, "iterations": base.iterations,
         "candidate_split": base.candidate_split, "strategies": results, "figure": str(figure),
-        "paper": PAPER_FIG4, "command": command_line("improve", env, data, model, out),
+        "paper": PAPER_FIG4, "command": command_line("improve", env, data, model, out, _cli_flags(base)),
         "date": datetime.date.today().isoformat(),
     }
     (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")

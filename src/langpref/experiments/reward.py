@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.improve import RunCache, SweepConfig, command_line, default_paths, figure_link, run_sweep
+from langpref.experiments.improve import (RunCache, SweepConfig, command_line, default_paths, figure_link,
+                                         phrasings_flag, run_sweep)
 
 PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
               "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
@@ -62,15 +63,17 @@ def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out,
     from langpref.reward import Curves, summarise
 
     reward_models = {cfg.reward.model for cfg in methods.values()} - {"linear"}
-    data, model, out = default_paths(kind, env, data, model, out, perfect, "-".join(sorted(reward_models)))
-    space = load_space(data, model, env=env, perfect=perfect)
+    phrasings = next(iter(methods.values())).human.phrasings
+    variant = "-".join(sorted(reward_models) + (["phrasings"] if phrasings else []))
+    data, model, out = default_paths(kind, env, data, model, out, perfect, variant)
+    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
     cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
                      force=force)
     for cfg in methods.values():
         cfg.validate()
     todo = [(f"{name}/{h}/{s}", cfg, h, s) for name, cfg in methods.items() for h in range(cfg.humans)
             for s in range(cfg.seeds) if f"{name}/{h}/{s}" not in cache]
-    run_sweep(_reward_job, todo, space, (data, model, env, perfect), cache, sweep or SweepConfig(),
+    run_sweep(_reward_job, todo, space, (data, model, env, perfect, phrasings), cache, sweep or SweepConfig(),
               f"{kind} {env}", progress)
     results = {name: {**summarise([Curves(**cache.runs[f"{name}/{h}/{s}"]) for h in range(cfg.humans)
                                    for s in range(cfg.seeds)]), "config": asdict(cfg)}
@@ -120,7 +123,7 @@ def _cli_flags(base) -> str:
     flags = [f" --{k} {getattr(base, k)}" for k in ("humans", "seeds", "queries") if getattr(base, k) != getattr(d, k)]
     if base.reward.model != d.reward.model:
         flags.append(f" --reward-model {base.reward.model}")
-    return "".join(flags)
+    return "".join(flags) + phrasings_flag(base.human)
 
 
 def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.space import PhraseTable
+from langpref.feedback.space import PhraseTable, file_table_name
 from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
 from langpref.language.bank import DIRECTIONS
 
@@ -69,8 +69,16 @@ class HumanConfig:
     """Of the language human's softmax over features (Eq. 10 is temperature 1); small = always the best feature."""
     phrasing_split: str = "test"
     """Bank split the language human draws its phrasings from (test: unseen by the model)."""
+    phrasings: str | None = None
+    """An utterance file (DESIGN.md schema) the language human draws from instead of the bank, e.g.
+    heldout/utterances.json, phrasings written by people who never saw the bank."""
     rationality: float = 1.0
     """Of the comparison human, beta in sigmoid(beta (R_A - R_B)); 1 is Eq. 11, large is noiseless."""
+
+    @property
+    def phrase_source(self) -> str:
+        """The name of the space's phrase table the language human draws from."""
+        return file_table_name(self.phrasings) if self.phrasings else self.phrasing_split
 
     def validate(self) -> None:
         if not self.temperature > 0:
@@ -111,7 +119,7 @@ class LanguageHuman:
         direction = self.direction(feature)
         rows = self.phrases.rows(feature, direction)
         if len(rows) == 0:
-            raise LangprefError(f"the bank split has no phrasing of {self.feature_names[feature]}/"
+            raise LangprefError(f"the phrasings this human speaks from have none of {self.feature_names[feature]}/"
                                 f"{DIRECTIONS[direction]}")
         row = int(rows[self.rng.integers(len(rows))])
         return LanguageAnswer(query, self.phrases.texts[row], self.feature_names[feature], DIRECTIONS[direction])

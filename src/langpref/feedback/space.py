@@ -12,13 +12,16 @@ reward R = w . theta weighs features in units of their spread). `phi` holds the 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.language.bank import DIRECTIONS, Bank, load_bank
+from langpref.language.bank import DIRECTIONS, Bank, load_bank, load_user_utterances
+
+BANK_SPLITS = ("train", "val", "test")
+"""The bank splits a space embeds by default: any of them can be the synthetic humans' phrasings."""
 
 Encoder = Callable[[Sequence[str]], np.ndarray]
 
@@ -81,10 +84,25 @@ class PhraseTable:
 
 def phrase_table(bank: Bank, split: str, feature_names: Sequence[str], encode: Encoder) -> PhraseTable:
     """Every phrasing of `split` of the bank, in the bank's order, embedded with `encode`."""
-    entries = bank.all_of_split(split)
+    return _table(bank.all_of_split(split), feature_names, encode, f"the {bank.env} bank")
+
+
+def file_entries(path: str | Path, env: str) -> list[tuple[str, str, str]]:
+    """(text, feature, direction) of every phrasing of `env` in a user utterance file (DESIGN.md schema)."""
+    mapping = load_user_utterances(path, env)
+    return [(t, f, d) for f, by_dir in mapping.items() for d, texts in by_dir.items() for t in texts]
+
+
+def file_table_name(path: str | Path) -> str:
+    """The key under which a space holds the phrasings of an utterance file."""
+    return f"file:{path}"
+
+
+def _table(entries: Sequence[tuple[str, str, str]], feature_names: Sequence[str], encode: Encoder, where: str
+           ) -> PhraseTable:
     missing = sorted({f for _, f, _ in entries} - set(feature_names))
     if missing:
-        raise LangprefError(f"the {bank.env} bank has features {missing} the dataset lacks ({list(feature_names)})")
+        raise LangprefError(f"{where} has features {missing} the dataset lacks ({list(feature_names)})")
     texts = tuple(t for t, _, _ in entries)
     psi = _as_numpy(encode(list(texts)))
     if psi.shape[0] != len(texts):
@@ -137,9 +155,17 @@ class LatentSpace:
         return rows
 
     def table(self, split: str) -> PhraseTable:
+        """The phrasings of a bank split, or of an utterance file (`file_table_name`)."""
         if split not in self.phrases:
-            raise LangprefError(f"no phrasings of bank split {split!r} were embedded; have {', '.join(self.phrases)}")
+            raise LangprefError(f"no phrasings of {split!r} were embedded; have {', '.join(self.phrases)}")
         return self.phrases[split]
+
+    def with_file(self, path: str | Path) -> LatentSpace:
+        """This space plus the phrasings of an utterance file, embedded with its encoder, as `file_table_name(path)`."""
+        if self.encode is None:
+            raise LangprefError("this space has no language encoder to embed an utterance file with")
+        table = _table(file_entries(path, self.env), self.feature_names, self.encode, f"utterance file {path}")
+        return replace(self, phrases={**self.phrases, file_table_name(path): table})
 
     def psi_of(self, text: str) -> np.ndarray:
         """psi of an utterance: looked up in the embedded tables, else embedded with `encode`."""
@@ -156,7 +182,7 @@ def _normalised_theta(dataset) -> np.ndarray:
     return FeatureScale.fit(feats[dataset.split("train")])(feats)
 
 
-def build_latent_space(model, dataset, bank_splits: Sequence[str] = ("test", "train"), name: str = "a model"
+def build_latent_space(model, dataset, bank_splits: Sequence[str] = BANK_SPLITS, name: str = "a model"
                        ) -> LatentSpace:
     """phi of every trajectory of `dataset` and psi of the bank's phrasings of `bank_splits`, from a trained model.
 
@@ -172,12 +198,17 @@ def build_latent_space(model, dataset, bank_splits: Sequence[str] = ("test", "tr
                        description=f"{name} on {dataset.root}")
 
 
-def perfect_encoder(feature_names: Sequence[str], bank: Bank, scale: float = 1.0) -> Encoder:
-    """An oracle language encoder: any phrasing of feature f maps to +scale e_f (increase) or -scale e_f."""
+def perfect_encoder(feature_names: Sequence[str], bank: Bank, scale: float = 1.0,
+                    extra: Sequence[tuple[str, str, str]] = ()) -> Encoder:
+    """An oracle language encoder: any phrasing of feature f maps to +scale e_f (increase) or -scale e_f. It knows
+    the bank's phrasings and the (text, feature, direction) entries of `extra` (e.g. an utterance file's)."""
     meaning = {}
-    for split in ("train", "val", "test"):
-        for text, f, d in bank.all_of_split(split):
-            meaning[text] = (list(feature_names).index(f), 1.0 if d == "increase" else -1.0)
+    for text, f, d in [e for split in BANK_SPLITS for e in bank.all_of_split(split)] + list(extra):
+        if f not in feature_names:
+            raise LangprefError(f"feature {f!r} of {text!r} is not one of {list(feature_names)}")
+        new = (list(feature_names).index(f), 1.0 if d == "increase" else -1.0)
+        if meaning.setdefault(text, new) != new:
+            raise LangprefError(f"{text!r} is filed under two meanings (the bank's and the utterance file's)")
 
     def encode(texts: Sequence[str]) -> np.ndarray:
         out = np.zeros((len(texts), len(feature_names)))
@@ -191,14 +222,15 @@ def perfect_encoder(feature_names: Sequence[str], bank: Bank, scale: float = 1.0
     return encode
 
 
-def perfect_latent_space(dataset, bank_splits: Sequence[str] = ("test", "train"), scale: float = 1.0,
-                         offset: float = 3.0) -> LatentSpace:
+def perfect_latent_space(dataset, bank_splits: Sequence[str] = BANK_SPLITS, scale: float = 1.0,
+                         offset: float = 3.0, phrasings: str | Path | None = None) -> LatentSpace:
     """An ideal latent space (an oracle upper bound, not a learned model): phi = (normalised features, offset),
     psi = (+-scale e_f, 0). The constant last coordinate keeps |phi| away from 0, where Eq. 4's cosine would
     blow up; it cancels in every difference of embeddings."""
     bank = load_bank(dataset.env)
     theta = _normalised_theta(dataset)
-    base = perfect_encoder(dataset.feature_names, bank, scale)
+    extra = file_entries(phrasings, dataset.env) if phrasings else []
+    base = perfect_encoder(dataset.feature_names, bank, scale, extra)
 
     def encode(texts: Sequence[str]) -> np.ndarray:
         psi = base(texts)
@@ -206,25 +238,29 @@ def perfect_latent_space(dataset, bank_splits: Sequence[str] = ("test", "train")
 
     tables = {s: phrase_table(bank, s, dataset.feature_names, encode) for s in dict.fromkeys(bank_splits)}
     phi = np.concatenate([theta, np.full((len(theta), 1), float(offset))], axis=1)
-    return LatentSpace(dataset.env, tuple(dataset.feature_names), theta, phi,
-                       {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables, encode=encode,
-                       description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}")
+    space = LatentSpace(dataset.env, tuple(dataset.feature_names), theta, phi,
+                        {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables, encode=encode,
+                        description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}")
+    return space.with_file(phrasings) if phrasings else space
 
 
 def load_space(data: str | Path, model: str | Path | None = None, *, env: str | None = None,
-               perfect: bool = False, bank_splits: Sequence[str] = ("test", "train")) -> LatentSpace:
+               perfect: bool = False, bank_splits: Sequence[str] = BANK_SPLITS,
+               phrasings: str | Path | None = None) -> LatentSpace:
     """Open a dataset and the latent space a command runs in: the trained `model`'s, or with `perfect` the oracle
-    `perfect_latent_space` (labelled as such). Fails with one line when the model's env differs from the data's."""
+    `perfect_latent_space` (labelled as such), with the phrasings of the utterance file `phrasings` when given.
+    Fails with one line when the model's env differs from the data's."""
     from langpref.dataset.storage import load_dataset
 
     dataset = load_dataset(data, env=env)
     if perfect:
-        return perfect_latent_space(dataset, bank_splits)
+        return perfect_latent_space(dataset, bank_splits, phrasings=phrasings)
     if model is None:
         raise LangprefError("give --model MODEL (a `langpref train` checkpoint) or --perfect-latent (the oracle space)")
     from langpref.model.checkpoint import load_model
 
-    return build_latent_space(load_model(model, dataset=dataset), dataset, bank_splits, name=f"model {model}")
+    space = build_latent_space(load_model(model, dataset=dataset), dataset, bank_splits, name=f"model {model}")
+    return space.with_file(phrasings) if phrasings else space
 
 
 def toy_latent_space(env: str = "metaworld", n: int = 60, dim: int | None = None, seed: int = 0,
