@@ -45,6 +45,9 @@ reproduce: install
 	  for exp in improve reward ablation prior; do \
 	    $(BIN)/langpref experiment $$exp --env $$env --backend $(BACKEND); \
 	  done; \
+	  for exp in improve reward; do \
+	    $(BIN)/langpref experiment $$exp --env $$env --phrasings heldout/utterances.json --backend $(BACKEND); \
+	  done; \
 	done
 	@echo "figures and tables: results/*/*/ (see docs/results.md)"
 

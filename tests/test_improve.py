@@ -160,3 +160,14 @@ def test_experiment_command_records_every_non_default_option(tmp_path, monkeypat
     assert Path(res["figure"]).parent == Path("results/improve/metaworld-perfect-phrasings")
     for flag in ("--seeds 2", "--iterations 2", f"--phrasings {phrasings}"):
         assert flag in res["command"]
+
+
+def test_run_cache_outlives_an_option_added_later_but_not_a_changed_one(tmp_path):
+    from langpref.experiments.improve import RunCache
+
+    path = tmp_path / "runs.json"
+    RunCache(path, {"seeds": 3, "human": {"temperature": 1.0}}).put("paper/0", [0.5])
+    again = RunCache(path, {"seeds": 3, "human": {"temperature": 1.0, "phrasings": None}})  # a new, unset option
+    assert "paper/0" in again
+    with pytest.raises(LangprefError, match="another configuration"):
+        RunCache(path, {"seeds": 3, "human": {"temperature": 1.0, "phrasings": "mine.json"}})

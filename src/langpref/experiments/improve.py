@@ -26,12 +26,21 @@ PAPER_FIG4 = ("Fig. 4 (no numbers printed): in both envs the true reward rises c
               "between good, non-optimal trajectories.")
 
 
+def _unset_dropped(value: Any) -> Any:
+    """`value` without the dict entries that are None, so an option added later (unset by default) keeps the caches
+    made before it valid."""
+    if isinstance(value, dict):
+        return {k: _unset_dropped(v) for k, v in value.items() if v is not None}
+    return value
+
+
 class RunCache:
     """Finished runs of an experiment, keyed by name, saved atomically after each; tied to one configuration."""
 
     def __init__(self, path: Path, config: dict[str, Any], force: bool = False):
         self.path = Path(path)
-        self.key = hashlib.sha256(json.dumps(config, sort_keys=True, default=str).encode()).hexdigest()[:16]
+        self.key = hashlib.sha256(json.dumps(_unset_dropped(config), sort_keys=True, default=str).encode()
+                                  ).hexdigest()[:16]
         self.runs: dict[str, Any] = {}
         if self.path.is_file() and not force:
             try:
