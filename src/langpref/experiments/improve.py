@@ -125,18 +125,11 @@ def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path,
     return f"langpref experiment {kind} --env {env} --data {data} {where} --out {out}{extra}"
 
 
-def _cli_flags(base) -> str:
-    """The `langpref experiment improve` options that reproduce `base` where it differs from the defaults."""
-    from langpref.improve import ImproveConfig
-
-    d = ImproveConfig()
-    flags = [f" --{k} {getattr(base, k)}" for k in ("seeds", "iterations") if getattr(base, k) != getattr(d, k)]
-    return "".join(flags) + phrasings_flag(base.human)
-
-
-def phrasings_flag(human) -> str:
-    """The `--phrasings FILE` option of an experiment whose language human speaks from a file, else nothing."""
-    return f" --phrasings {human.phrasings}" if human.phrasings else ""
+def cli_flags(base, default, names: tuple[str, ...]) -> str:
+    """The `langpref experiment` options that reproduce the config `base`: each of `names` where it differs from
+    `default`, and `--phrasings` when its language human speaks from a file."""
+    flags = "".join(f" --{k} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k))
+    return flags + (f" --phrasings {base.human.phrasings}" if base.human.phrasings else "")
 
 
 def figure_link(figure: str | Path) -> str:
@@ -200,7 +193,8 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
         "space": space.description, "seeds": base.seeds, "iterations": base.iterations,
         "candidate_split": base.candidate_split, "strategies": results, "figure": str(figure),
-        "paper": PAPER_FIG4, "command": command_line("improve", env, data, model, out, _cli_flags(base)),
+        "paper": PAPER_FIG4, "command": command_line("improve", env, data, model, out,
+                                                         cli_flags(base, ImproveConfig(), ("seeds", "iterations"))),
         "date": datetime.date.today().isoformat(),
     }
     (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")

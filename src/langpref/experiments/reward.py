@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.improve import (RunCache, SweepConfig, command_line, default_paths, figure_link,
-                                         phrasings_flag, run_sweep)
+from langpref.experiments.improve import (RunCache, SweepConfig, cli_flags, command_line, default_paths, figure_link,
+                                         run_sweep)
 
 PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
               "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
@@ -120,10 +120,8 @@ def _cli_flags(base) -> str:
     from langpref.reward import LearnRewardConfig
 
     d = LearnRewardConfig()
-    flags = [f" --{k} {getattr(base, k)}" for k in ("humans", "seeds", "queries") if getattr(base, k) != getattr(d, k)]
-    if base.reward.model != d.reward.model:
-        flags.append(f" --reward-model {base.reward.model}")
-    return "".join(flags) + phrasings_flag(base.human)
+    model = f" --reward-model {base.reward.model}" if base.reward.model != d.reward.model else ""
+    return cli_flags(base, d, ("humans", "seeds", "queries")) + model
 
 
 def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown) -> dict[str, Any]:

@@ -237,11 +237,12 @@ def perfect_latent_space(dataset, bank_splits: Sequence[str] = BANK_SPLITS, scal
         return np.concatenate([psi, np.zeros((len(psi), 1))], axis=1)
 
     tables = {s: phrase_table(bank, s, dataset.feature_names, encode) for s in dict.fromkeys(bank_splits)}
+    if phrasings:
+        tables[file_table_name(phrasings)] = _table(extra, dataset.feature_names, encode, f"utterance file {phrasings}")
     phi = np.concatenate([theta, np.full((len(theta), 1), float(offset))], axis=1)
-    space = LatentSpace(dataset.env, tuple(dataset.feature_names), theta, phi,
-                        {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables, encode=encode,
-                        description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}")
-    return space.with_file(phrasings) if phrasings else space
+    return LatentSpace(dataset.env, tuple(dataset.feature_names), theta, phi,
+                       {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables, encode=encode,
+                       description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}")
 
 
 def load_space(data: str | Path, model: str | Path | None = None, *, env: str | None = None,
