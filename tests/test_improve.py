@@ -20,6 +20,7 @@ from langpref.improve import (
     improve,
     improvement_step,
     plot_improvement,
+    printed_objective,
     run_improvement,
 )
 
@@ -44,11 +45,22 @@ def write_features_dataset(root: Path, env: str = "metaworld", n: int = 40, seed
 def test_cosine_objective_and_argmax_on_hand_built_embeddings():
     phi = np.array([[1.0, 0.0], [0.0, 1.0], [2.0, 2.0], [-1.0, 0.5]])
     current = np.array([1.0, 0.0])
-    psi = np.array([0.0, 1.0])  # "more of dimension 2"
-    expected = (phi - current) @ psi / (np.linalg.norm(phi, axis=1) * 1.0)
-    assert np.allclose(cosine_objective(phi, current, psi), expected)
-    assert improvement_step(phi, current, psi) == 1  # 1/1 beats 2/sqrt(8) and 0.5/sqrt(1.25)
+    psi = np.array([0.0, 2.0])  # "more of dimension 2"; its norm must not matter
+    # cos(phi' - phi^t, psi): 0 for the current one itself, then 1/sqrt(2), 2/sqrt(5), 0.5/sqrt(4.25)
+    assert np.allclose(cosine_objective(phi, current, psi), [0.0, 1 / 2**0.5, 2 / 5**0.5, 0.5 / 4.25**0.5])
+    assert improvement_step(phi, current, psi) == 2
     assert improvement_step(phi, current, -psi) == 0  # nothing lowers dim 2 below the current one: stay
+
+
+def test_printed_objective_favours_small_embeddings_against_the_feedback():
+    # Eq. 4 as printed divides by |phi'|: a short candidate that barely moves along psi beats a long one that moves
+    # far along it; the cosine of the difference follows the feedback.
+    phi = np.array([[0.0, 0.0], [0.1, 0.1], [0.0, 5.0]])
+    current, psi = np.array([0.0, -0.2]), np.array([0.0, 1.0])
+    assert np.allclose(printed_objective(phi, current, psi), (phi - current) @ psi / np.maximum(
+        np.linalg.norm(phi, axis=1), 1e-12) / 0.2)
+    assert improvement_step(phi[1:], current, psi, "printed") == 0
+    assert improvement_step(phi[1:], current, psi, "cosine") == 1
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +68,10 @@ def space():
     return toy_latent_space(n=100, seed=0)
 
 
-@pytest.mark.parametrize("strategy", ["paper", "history"])
-def test_improvement_with_a_perfect_latent_space_raises_the_reward(space, strategy):
-    result = improve(space, ImproveConfig(strategy=strategy, seeds=20, iterations=8), progress=False)
+@pytest.mark.parametrize("strategy,objective", [("paper", "cosine"), ("paper", "printed"), ("history", "cosine")])
+def test_improvement_with_a_perfect_latent_space_raises_the_reward(space, strategy, objective):
+    result = improve(space, ImproveConfig(strategy=strategy, objective=objective, seeds=20, iterations=8),
+                     progress=False)
     assert len(result["curve"]) == len(result["curve_std"]) == 9
     assert result["optimal"] == 1.0
     assert result["curve"][-1] - result["curve"][0] > 0.25
@@ -88,6 +101,8 @@ def test_exclude_shown_never_repeats(space):
 def test_bad_config_is_a_one_line_error(space):
     with pytest.raises(LangprefError, match="strategy"):
         improve(space, ImproveConfig(strategy="greedy"), progress=False)
+    with pytest.raises(LangprefError, match="objective"):
+        improve(space, ImproveConfig(objective="dot"), progress=False)
     with pytest.raises(LangprefError, match="split"):
         improve(space, ImproveConfig(candidate_split="holdout", seeds=1), progress=False)
 
@@ -118,7 +133,8 @@ def test_experiment_improve_writes_and_resumes(tmp_path, monkeypatch, capsys):
     cfg = ImproveConfig(seeds=3, iterations=3)
     first = run_improve_experiment("metaworld", data, None, out, perfect=True, config=cfg, progress=False)
     assert {p.name for p in out.iterdir()} >= {"improve.json", "improve.png", "improve.md", "runs.json"}
-    assert set(first["strategies"]) == {"paper", "history"}
+    assert set(first["strategies"]) == {"paper", "paper-printed", "history"}
+    assert first["strategies"]["paper-printed"]["config"]["objective"] == "printed"
     assert "| paper |" in (out / "improve.md").read_text()
 
     def boom(*args, **kwargs):

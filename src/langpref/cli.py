@@ -306,7 +306,8 @@ def cmd_improve(args: argparse.Namespace) -> None:
     from langpref.improve import ImproveConfig, improve, plot_improvement
 
     cfg = ImproveConfig(iterations=args.iterations, seeds=args.seeds, seed=args.seed, candidate_split=args.candidates,
-                        strategy=args.strategy, exclude_shown=args.exclude_shown, human=_human_config(args),
+                        strategy=args.strategy, objective=args.objective, exclude_shown=args.exclude_shown,
+                        human=_human_config(args),
                         reward=_reward_config(args))
     cfg.validate()
     result = improve(_space(args), cfg)
@@ -410,11 +411,12 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
 
 
 def _register_latent_use_commands(sub) -> None:
+    from langpref.improve import OBJECTIVES
     from langpref.reward import MODELS
 
     p = sub.add_parser("improve", help="iterative trajectory improvement with a synthetic language human (Eq. 4)",
                        description="From a random trajectory of the candidate split, N rounds of synthetic language "
-                       "feedback, each followed by the argmax of Eq. 4's cosine objective over the candidates "
+                       "feedback, each followed by the argmax over the candidates of Eq. 4's cosine objective "
                        "(strategy paper) or of the reward learned from all feedback so far (strategy history). "
                        "Reports the mean normalised true reward per iteration (0 = worst, 1 = best candidate).")
     _add_use_options(p, reward=False)
@@ -422,6 +424,9 @@ def _register_latent_use_commands(sub) -> None:
     p.add_argument("--seeds", type=int, default=100, help="runs, each a new human and start (default %(default)s)")
     p.add_argument("--strategy", choices=("paper", "history"), default="paper",
                    help="paper: Eq. 4 on the last feedback; history: reward learned from all feedback so far")
+    p.add_argument("--objective", choices=OBJECTIVES, default="cosine",
+                   help="paper: cosine: cos(phi' - phi^t, psi_l), Eq. 4 as the paper's text describes it (default); "
+                   "printed: psi_l . (phi' - phi^t) / (|phi'| |phi^t|), the formula as printed")
     p.add_argument("--candidates", choices=("train", "val", "test"), default="test",
                    help="split searched by the argmax (default %(default)s)")
     p.add_argument("--exclude-shown", action="store_true", help="history: never show a trajectory twice")
@@ -444,7 +449,8 @@ def _register_latent_use_commands(sub) -> None:
     exp = next((a for a in exp_parser._actions if isinstance(a, argparse._SubParsersAction)), None)
     if exp is None:
         exp = exp_parser.add_subparsers(dest="experiment", required=True, metavar="EXPERIMENT")
-    for name, text in (("improve", "Fig. 4: iterative improvement, paper and history strategies, 100 seeds"),
+    for name, text in (("improve", "Fig. 4: iterative improvement, Eq. 4 (cosine and as printed) and the history strategy, "
+                        "100 seeds"),
                        ("reward", "Fig. 5: reward learning, language vs comparisons, 3 humans x 3 seeds, Q = 40"),
                        ("ablation", "Fig. 6: language reward loss, explicit + implicit vs each alone"),
                        ("prior", "the L2 prior's strength per reward-learning method, chosen on the val split")):

@@ -1,11 +1,15 @@
 """Iterative trajectory improvement with language feedback (paper Sec. 4.2.1, Eq. 4), and a history-aware variant.
 
-Strategy `paper` (Eq. 4): shown tau^t and feedback l^t, the next trajectory is
+Strategy `paper` (Eq. 4): shown tau^t and feedback l^t, the next trajectory is the candidate tau' of the set C whose
+difference with tau^t best aligns with psi_l "based on cosine similarity", as the paper's text puts it. Two readings:
 
-    tau^{t+1} = argmax_{tau' in C} psi_l . (phi' - phi^t) / (|phi'| |phi^t|)
+    objective `cosine`  (default)  argmax_{tau' in C} psi_l . (phi' - phi^t) / (|psi_l| |phi' - phi^t|)
+    objective `printed`            argmax_{tau' in C} psi_l . (phi' - phi^t) / (|phi'| |phi^t|)
 
-over a candidate set C (a dataset split, default `test`). Each step sees only the last feedback, so the loop can
-cycle between good but non-optimal trajectories (as the paper notes).
+`cosine` is the cosine similarity the text describes; `printed` is the formula as the paper prints it, which is not a
+cosine of anything: its denominator favours candidates of small |phi'| whatever the feedback says. With a trained
+model, whose |phi| varies, `cosine` gains clearly more (docs/results.md). Each step sees only the last feedback,
+so the loop can cycle between good but non-optimal trajectories (as the paper notes).
 
 Strategy `history`: after every feedback, fit the language reward of `langpref.reward` (L_Explicit + L_Implicit)
 on *all* feedback so far and show the candidate it ranks best (optionally never one already shown). Neither
@@ -30,6 +34,7 @@ from langpref.feedback.types import LanguageQuery
 from langpref.reward import RewardConfig, RewardLearner, language_pairs
 
 STRATEGIES = ("paper", "history")
+OBJECTIVES = ("cosine", "printed")
 
 
 @dataclass
@@ -45,6 +50,8 @@ class ImproveConfig:
     """The candidate set C the argmax searches (and whose best/worst define the normalised reward)."""
     strategy: str = "paper"
     """`paper` (Eq. 4, last feedback only) or `history` (reward learned from all feedback so far)."""
+    objective: str = "cosine"
+    """`paper` only: Eq. 4 as the text describes it (`cosine`) or as printed (`printed`); see the module docstring."""
     exclude_shown: bool = False
     """`history` only: never show a trajectory twice (off: once at the best, staying there is right)."""
     human: HumanConfig = field(default_factory=HumanConfig)
@@ -53,6 +60,8 @@ class ImproveConfig:
     def validate(self) -> None:
         if self.strategy not in STRATEGIES:
             raise LangprefError(f"unknown strategy {self.strategy!r}: choose one of {', '.join(STRATEGIES)}")
+        if self.objective not in OBJECTIVES:
+            raise LangprefError(f"unknown objective {self.objective!r}: choose one of {', '.join(OBJECTIVES)}")
         if self.iterations < 0 or self.seeds < 1:
             raise LangprefError(f"iterations must be >= 0 and seeds >= 1, got {self.iterations} and {self.seeds}")
         self.human.validate()
@@ -60,16 +69,26 @@ class ImproveConfig:
 
 
 def cosine_objective(phi_candidates: np.ndarray, phi_current: np.ndarray, psi: np.ndarray) -> np.ndarray:
-    """Eq. 4 for every candidate: psi . (phi' - phi^t) / (|phi'| |phi^t|)."""
+    """Eq. 4 as the text describes it, for every candidate: cos(phi' - phi^t, psi_l). A candidate equal to the
+    current trajectory scores 0, so the loop stays put only when no candidate moves along psi."""
+    delta = np.asarray(phi_candidates, dtype=np.float64) - phi_current
+    den = np.linalg.norm(delta, axis=1) * max(float(np.linalg.norm(psi)), 1e-12)
+    return np.where(den > 1e-12, delta @ psi / np.maximum(den, 1e-12), 0.0)
+
+
+def printed_objective(phi_candidates: np.ndarray, phi_current: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """Eq. 4 as printed, for every candidate: psi_l . (phi' - phi^t) / (|phi'| |phi^t|)."""
     phi_c = np.asarray(phi_candidates, dtype=np.float64)
     num = (phi_c - phi_current) @ psi
     den = np.maximum(np.linalg.norm(phi_c, axis=1), 1e-12) * max(float(np.linalg.norm(phi_current)), 1e-12)
     return num / den
 
 
-def improvement_step(phi_candidates: np.ndarray, phi_current: np.ndarray, psi: np.ndarray) -> int:
-    """Row of `phi_candidates` maximising Eq. 4 (the first one on ties)."""
-    return int(np.argmax(cosine_objective(phi_candidates, phi_current, psi)))
+def improvement_step(phi_candidates: np.ndarray, phi_current: np.ndarray, psi: np.ndarray,
+                     objective: str = "cosine") -> int:
+    """Row of `phi_candidates` maximising Eq. 4 (`objective`: `cosine` or `printed`; the first one on ties)."""
+    score = cosine_objective if objective == "cosine" else printed_objective
+    return int(np.argmax(score(phi_candidates, phi_current, psi)))
 
 
 def human_weights(num_features: int, seed: int, run: int) -> np.ndarray:
@@ -105,7 +124,7 @@ def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_s
         answer = human.answer(LanguageQuery(cur))
         said.append(answer.text)
         if learner is None:
-            cur = int(cands[improvement_step(phi_c, space.phi[cur], space.psi_of(answer.text))])
+            cur = int(cands[improvement_step(phi_c, space.phi[cur], space.psi_of(answer.text), cfg.objective)])
         else:
             learner.add(language_pairs(space, answer, cfg.reward, rng_neg))
             learner.fit()

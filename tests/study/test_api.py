@@ -120,14 +120,14 @@ def test_study_1_stops_when_satisfied(client, h):
 
 
 def test_improvement_follows_equation_4(engine):
-    """The improved trajectory is the study-set argmax of psi . (phi' - phi0) / (|phi'| |phi0|)."""
+    """The improved trajectory is the study-set argmax of cos(phi' - phi0, psi) (the current one scores 0)."""
     import numpy as np
 
     phi, psi = engine.space.phi, engine.psi("Move faster.")
     for start in engine.study[:4]:
         got = engine.improve(int(start), "Move faster.")
-        scores = [(phi[j] - phi[start]) @ psi / (np.linalg.norm(phi[j]) * np.linalg.norm(phi[start]))
-                  for j in engine.study]
+        scores = [0.0 if j == start else (phi[j] - phi[start]) @ psi
+                  / (np.linalg.norm(phi[j] - phi[start]) * np.linalg.norm(psi)) for j in engine.study]
         assert got == int(engine.study[int(np.argmax(scores))])
 
 

@@ -1,5 +1,5 @@
-"""`langpref experiment improve --env ENV`: the paper's Fig. 4 (iterative improvement, N = 15, 100 seeds), with the
-history strategy beside the paper's.
+"""`langpref experiment improve --env ENV`: the paper's Fig. 4 (iterative improvement, N = 15, 100 seeds): Eq. 4 as
+the paper's text describes it (`paper`) and as it prints it (`paper-printed`), and the history strategy beside them.
 
 Writes into the output directory (default `results/improve/ENV`): `improve.json` (both curves and the config),
 `improve.png` (mean +- std per iteration, dashed optimum), `improve.md` (a section for docs/results.md) and
@@ -24,6 +24,16 @@ from langpref.experiments.alignment import default_model
 PAPER_FIG4 = ("Fig. 4 (no numbers printed): in both envs the true reward rises consistently over 15 iterations but "
               "stays below the dashed average optimum, because each step uses only the last feedback and can loop "
               "between good, non-optimal trajectories.")
+
+
+CURVES: dict[str, dict[str, str]] = {
+    "paper": {"strategy": "paper", "objective": "cosine"},
+    "paper-printed": {"strategy": "paper", "objective": "printed"},
+    "history": {"strategy": "history"},
+}
+"""The curves of the experiment: name -> the `ImproveConfig` fields that make it."""
+CURVE_LABELS = {"paper": "Eq. 4, cosine of the difference", "paper-printed": "Eq. 4 as printed",
+                "history": "feedback history"}
 
 
 def _unset_dropped(value: Any) -> Any:
@@ -153,7 +163,7 @@ def improve_markdown(summary: dict[str, Any]) -> str:
         f"{summary['candidate_split']} split). Mean normalised true reward (0 = worst, 1 = best candidate) of the "
         "trajectory shown at each iteration, std in the figure.",
         "",
-        "| strategy | " + " | ".join(f"it. {i}" for i in at) + " | gain 0 to N |",
+        "| curve | " + " | ".join(f"it. {i}" for i in at) + " | gain 0 to N |",
         "|---|" + "---|" * (len(at) + 1),
     ]
     for name, res in strategies.items():
@@ -164,9 +174,10 @@ def improve_markdown(summary: dict[str, Any]) -> str:
 
 def run_improve_experiment(env: str, data: str | Path | None = None, model: str | Path | None = None,
                            out: str | Path | None = None, *, perfect: bool = False, config=None,
-                           strategies: tuple[str, ...] = ("paper", "history"), force: bool = False,
+                           curves: tuple[str, ...] = tuple(CURVES), force: bool = False,
                            progress: bool = True, sweep: SweepConfig | None = None) -> dict[str, Any]:
-    """Both strategies with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and markdown."""
+    """The `curves` (default all of `CURVES`) with the paper's settings (or `config`, an `ImproveConfig`); writes
+    JSON, PNG and markdown."""
     from langpref.feedback.space import load_space
     from langpref.improve import ImproveConfig, ImprovementRun, plot_improvement
     from langpref.improve import summarise as summarise_runs
@@ -175,7 +186,10 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     phrasings = base.human.phrasings
     data, model, out = default_paths("improve", env, data, model, out, perfect, "phrasings" if phrasings else "")
     space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
-    cfgs = {s: replace(base, strategy=s) for s in strategies}
+    unknown = sorted(set(curves) - set(CURVES))
+    if unknown:
+        raise LangprefError(f"unknown improvement curves {unknown}: choose from {', '.join(CURVES)}")
+    cfgs = {name: replace(base, **CURVES[name]) for name in curves}
     cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
                      force=force)
     for cfg in cfgs.values():
@@ -186,8 +200,7 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
               f"improve {env}", progress)
     results = {name: {**summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
                       "config": asdict(cfg)} for name, cfg in cfgs.items()}
-    figure = plot_improvement({f"{n} ({'Eq. 4' if n == 'paper' else 'feedback history'})": r
-                               for n, r in results.items()}, out / "improve.png",
+    figure = plot_improvement({f"{n} ({CURVE_LABELS[n]})": r for n, r in results.items()}, out / "improve.png",
                               f"Iterative improvement, {env}" + (" (perfect latent)" if perfect else ""))
     summary = {
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
