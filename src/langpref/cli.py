@@ -135,7 +135,11 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
     out = evaluate_split(model, dataset, args.split, phrasings)
     out["utterances"] = str(args.utterances) if args.utterances else f"bank:{phrasing_split}"
     _emit(out, args.json, lambda o: f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
-          f"{o['utterances']}); " + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items()))
+          f"{o['utterances']}); " + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items())
+          + (f"\nread as their own meaning by `langpref embed`: {o['reading_accuracy']:.3f} of "
+             f"{o['num_phrasings']} phrasings" + "".join(f"\n  misread: {m['text']!r} ({m['meaning']}) as "
+                                                        f"{m['read_as']}" for m in o["misread"])
+             if "reading_accuracy" in o else ""))
 
 
 def cmd_embed(args: argparse.Namespace) -> None:

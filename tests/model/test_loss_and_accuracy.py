@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from langpref.language.pairs import Pairs
-from langpref.model.evaluate import alignment_counts, summarise
+from langpref.language.pairs import Pairs, Phrasings
+from langpref.model.evaluate import alignment_counts, reading, summarise
 from langpref.model.loss import align_loss, latent_loss, norm_loss
 
 
@@ -55,3 +55,13 @@ def test_accuracy_chunks_give_the_same_counts():
         g = 2 * pairs.feature[i] + pairs.direction[i]
         want[pairs.feature[i]] += int(np.sum(s[groups[g], pairs.b[i]] - s[groups[g], pairs.a[i]] > 0))
     assert big[0].tolist() == want.tolist()
+
+
+def test_reading_accuracy_counts_phrasings_nearest_their_own_prototype():
+    # prototypes of (f0 up, f0 down, f1 up, f1 down); one phrasing per meaning, the f1-down one points like f0 down
+    protos = torch.tensor([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    psi = torch.tensor([[2.0, 0.1], [-0.5, 0.0], [0.1, 3.0], [-1.0, -0.5]])
+    phrasings = Phrasings(("a", "b", "c", "d"), ("f0", "f1"), tuple(np.array([i]) for i in range(4)))
+    out = reading(psi, protos, phrasings)
+    assert out["reading_accuracy"] == pytest.approx(0.75)
+    assert out["misread"] == [{"text": "d", "meaning": "f1/decrease", "read_as": "f0/decrease"}]

@@ -39,10 +39,15 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     assert code == 0, err
     res = json.loads(out)
     assert list(res["per_feature"]) == ["speed"]
+    hurry = res["reading_accuracy"]
 
-    code, out, err = run(capsys, "embed", "--model", str(model), "Move faster.", "--json")
+    code, out, err = run(capsys, "embed", "--model", str(model), "Hurry up!", "--json")
     assert code == 0, err
-    assert set(json.loads(out)) >= {"feature", "direction", "confidence"}
+    read = json.loads(out)
+    assert set(read) >= {"feature", "direction", "confidence"}
+    # evaluate's reading accuracy is embed's reading of each phrasing, scored against the file's label
+    assert hurry == float((read["feature"], read["direction"]) == ("speed", "increase"))
+    assert len(res["misread"]) == 1 - hurry
 
     code, out, err = run(capsys, "visualize", "--model", str(model), "--data", str(tiny_data), "--out",
                          str(tmp_path / "v.png"))

@@ -4,6 +4,9 @@ Accuracy: over every ordered pair (tau_A, tau_B) of a split, every feature whose
 than the model's tie threshold), and every phrasing of that feature in the direction that takes tau_A to tau_B, the
 share with psi_l . (phi_B - phi_A) > 0. The score is psi_l . phi_B - psi_l . phi_A, so S = Psi @ Phi^T is computed
 once and every sample is two lookups.
+
+Reading accuracy: the share of the phrasings that `embed_text` (`langpref embed`) reads as their own meaning, i.e.
+whose psi is closest in cosine to that meaning's prototype; what a person typing one sentence sees.
 """
 
 from __future__ import annotations
@@ -65,6 +68,20 @@ def summarise(correct: np.ndarray, total: np.ndarray, feature_names: Sequence[st
     }
 
 
+def reading(psi: torch.Tensor, prototypes: torch.Tensor, phrasings: Phrasings) -> dict:
+    """{"reading_accuracy", "misread"}: the share of `phrasings` whose nearest prototype (cosine; row g = 2 * feature
+    + direction, as the phrasing groups) is their own meaning, and those that are not, with what they were read as."""
+    cos = torch.nn.functional.normalize(psi.double(), dim=-1) @ torch.nn.functional.normalize(
+        prototypes.double(), dim=-1).T
+    read = cos.argmax(dim=1).cpu().numpy()
+    misread, n = [], 0
+    for g, ids in enumerate(phrasings.group_ids):
+        n += len(ids)
+        misread += [{"text": phrasings.texts[i], "meaning": "/".join(phrasings.group_name(g)),
+                     "read_as": "/".join(phrasings.group_name(int(read[i])))} for i in ids if read[i] != g]
+    return {"reading_accuracy": 1.0 - len(misread) / n if n else float("nan"), "misread": misread}
+
+
 def evaluate_split(model, dataset, split: str, phrasings: Phrasings) -> dict:
     """Alignment accuracy of a `LatentModel` on one split of a dataset with the given phrasings."""
     model.check_dataset(dataset)
@@ -82,6 +99,8 @@ def evaluate_split(model, dataset, split: str, phrasings: Phrasings) -> dict:
     out = summarise(correct, total, model.feature_names)
     out.update(split=split, num_trajectories=len(idx), num_phrasings=len(phrasings.texts),
                num_pairs=len(pairs))
+    if bool(model.prototypes.abs().sum() > 0):
+        out.update(reading(psi, model.prototypes.cpu(), phrasings))
     return out
 
 
