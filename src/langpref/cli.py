@@ -311,8 +311,7 @@ def cmd_improve(args: argparse.Namespace) -> None:
 
     cfg = ImproveConfig(iterations=args.iterations, seeds=args.seeds, seed=args.seed, candidate_split=args.candidates,
                         strategy=args.strategy, objective=args.objective, exclude_shown=args.exclude_shown,
-                        human=_human_config(args),
-                        reward=_reward_config(args))
+                        human=_human_config(args), reward=_reward_config(args))
     cfg.validate()
     result = improve(_space(args), cfg)
     if args.figure:
@@ -453,8 +452,8 @@ def _register_latent_use_commands(sub) -> None:
     exp = next((a for a in exp_parser._actions if isinstance(a, argparse._SubParsersAction)), None)
     if exp is None:
         exp = exp_parser.add_subparsers(dest="experiment", required=True, metavar="EXPERIMENT")
-    for name, text in (("improve", "Fig. 4: iterative improvement, Eq. 4 (cosine and as printed) and the history strategy, "
-                        "100 seeds"),
+    for name, text in (("improve", "Fig. 4: iterative improvement, Eq. 4 (cosine and as printed) and the history "
+                        "strategy, 100 seeds"),
                        ("reward", "Fig. 5: reward learning, language vs comparisons, 3 humans x 3 seeds, Q = 40"),
                        ("ablation", "Fig. 6: language reward loss, explicit + implicit vs each alone"),
                        ("prior", "the L2 prior's strength per reward-learning method, chosen on the val split")):
