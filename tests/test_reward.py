@@ -252,6 +252,8 @@ def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch)
     cfg = LearnRewardConfig(queries=4, humans=2, seeds=1)
     res = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
     assert set(res["methods"]) == {"language", "comparison"} and len(res["targets"]) == 3
+    assert len(res["ce_difference"]["mean"]) == 5 and "paired by human and seed" in (tmp_path / "r" / "reward.md"
+                                                                                      ).read_text()
     abl = run_ablation_experiment("metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, progress=False)
     assert set(abl["methods"]) == {"both", "explicit", "implicit"}
     for out, name in ((tmp_path / "r", "reward"), (tmp_path / "a", "ablation")):
@@ -261,6 +263,18 @@ def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch)
     monkeypatch.setattr(reward_module, "run_reward_learning", lambda *a, **k: pytest.fail("rerun"))
     again = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
     assert again["methods"]["language"]["cross_entropy"] == res["methods"]["language"]["cross_entropy"]
+
+
+def test_paired_difference_on_hand_built_numbers():
+    from langpref.experiments.reward import paired_difference
+
+    b = np.zeros((3, 2))
+    a = np.array([[1.0, 0.5], [2.0, 0.5], [3.0, 0.5]])
+    d = paired_difference(a, b)
+    half = 4.302653 / np.sqrt(3)  # t(0.975, 2) * sd 1 / sqrt(3)
+    assert d["mean"] == pytest.approx([2.0, 0.5])
+    assert d["low"] == pytest.approx([2.0 - half, 0.5], rel=1e-6) and d["high"] == pytest.approx([2.0 + half, 0.5],
+                                                                                                  rel=1e-6)
 
 
 def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):

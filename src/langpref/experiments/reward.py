@@ -57,8 +57,10 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
 
 
 def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out, perfect: bool, force: bool,
-                 progress: bool, sweep: SweepConfig | None) -> tuple[dict[str, dict], Any, Path, Path | None, Path]:
-    """Run every (method, human, seed) not yet in the cache; the summary of each method."""
+                 progress: bool, sweep: SweepConfig | None
+                 ) -> tuple[dict[str, dict], dict[str, dict], Any, Path, Path | None, Path]:
+    """Run every (method, human, seed) not yet in the cache; the summary of each method and every run's curves
+    (keyed METHOD/HUMAN/SEED)."""
     from langpref.feedback.space import load_space
     from langpref.reward import Curves, summarise
 
@@ -78,7 +80,7 @@ def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out,
     results = {name: {**summarise([Curves(**cache.runs[f"{name}/{h}/{s}"]) for h in range(cfg.humans)
                                    for s in range(cfg.seeds)]), "config": asdict(cfg)}
                for name, cfg in methods.items()}
-    return results, space, data, model, out
+    return results, cache.runs, space, data, model, out
 
 
 def _reward_job(space, job) -> tuple[str, dict]:
@@ -87,6 +89,29 @@ def _reward_job(space, job) -> tuple[str, dict]:
     key, cfg, h, s = job
     w = human_weights(len(space.feature_names), cfg.seed, h)
     return key, asdict(run_reward_learning(space, w, cfg, (cfg.seed, h, s)))
+
+
+def paired_difference(a: np.ndarray, b: np.ndarray, confidence: float = 0.95) -> dict[str, list]:
+    """Mean of a - b per column over paired rows (runs of the same human and seed), with the two-sided t-interval
+    at `confidence`: how far one method's curve lies from another's, and whether that is more than run-to-run noise."""
+    from scipy import stats
+
+    d = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
+    n = len(d)
+    mean = d.mean(axis=0)
+    half = (stats.t.ppf(0.5 + confidence / 2, n - 1) * d.std(axis=0, ddof=1) / np.sqrt(n) if n > 1
+            else np.full_like(mean, np.inf))
+    return {"mean": mean.tolist(), "low": (mean - half).tolist(), "high": (mean + half).tolist()}
+
+
+def _ce_difference_line(diff: dict[str, list]) -> str:
+    mean, low, high = (np.array(diff[k][1:]) for k in ("mean", "low", "high"))
+    q = len(mean)
+    worst = int(np.argmax(mean)) + 1
+    return (f"Language minus comparison CE, paired by human and seed, 95% t-interval per query count: language "
+            f"significantly lower at {int((high < 0).sum())} of {q}, comparisons significantly lower at "
+            f"{int((low > 0).sum())} of {q}; most in comparisons' favour at q = {worst} "
+            f"({mean[worst - 1]:+.3f}, interval {low[worst - 1]:+.3f} to {high[worst - 1]:+.3f}).")
 
 
 def _table(results: dict[str, dict], at: list[int]) -> list[str]:
@@ -110,8 +135,10 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
              "over all test pairs; best: normalised true reward of the test trajectory r_xi ranks first; AUC: the "
              "mean of the best curve over query counts 0..Q.", ""]
     lines += _table(summary["methods"], at)
-    lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items()),
-              "", f"![{title} {summary['env']}]({figure_link(summary['figure'])})", "", f"Paper: {paper}"]
+    lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
+    if "ce_difference" in summary:
+        lines += ["", _ce_difference_line(summary["ce_difference"])]
+    lines += ["", f"![{title} {summary['env']}]({figure_link(summary['figure'])})", "", f"Paper: {paper}"]
     return "\n".join(lines) + "\n"
 
 
@@ -138,11 +165,11 @@ def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, 
     return summary
 
 
-def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets
-            ) -> dict[str, Any]:
+def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets,
+            **extra: Any) -> dict[str, Any]:
     figure = plot_reward_curves(results, out / f"{kind}.png",
                                 f"{title}, {env}" + (" (perfect latent)" if model is None else ""))
-    fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper}
+    fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}
     return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper))
 
 
@@ -155,8 +182,8 @@ def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect:
 
     base = config or LearnRewardConfig()
     methods = {"language": replace(base, feedback="language"), "comparison": replace(base, feedback="comparison")}
-    results, space, data, model, out = _run_methods("reward", env, methods, data, model, out, perfect, force,
-                                                    progress, sweep)
+    results, runs, space, data, model, out = _run_methods("reward", env, methods, data, model, out, perfect,
+                                                          force, progress, sweep)
     lang, comp = results["language"], results["comparison"]
     lq, cq = lang["queries_to_0.95"], comp["queries_to_0.95"]
     targets = {
@@ -165,8 +192,10 @@ def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect:
         "language AUC of true reward > comparison": lang["auc_true_reward"] > comp["auc_true_reward"],
         "language reaches 0.95 in fewer queries": lq is not None and (cq is None or lq < cq),
     }
+    keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
+    ce = {m: np.array([runs[f"{m}/{k}"]["cross_entropy"] for k in keys]) for m in methods}
     return _finish("reward", "Reward learning: language vs comparisons", PAPER_FIG5, env, results, space, data,
-                   model, out, base, targets)
+                   model, out, base, targets, ce_difference=paired_difference(ce["language"], ce["comparison"]))
 
 
 def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
@@ -179,8 +208,8 @@ def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfec
     base = replace(config or LearnRewardConfig(), feedback="language")
     methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit",
                                                                                          "implicit")}
-    results, space, data, model, out = _run_methods("ablation", env, methods, data, model, out, perfect, force,
-                                                    progress, sweep)
+    results, _, space, data, model, out = _run_methods("ablation", env, methods, data, model, out, perfect, force,
+                                                       progress, sweep)
     b, e, i = results["both"], results["explicit"], results["implicit"]
     targets = {
         "both has a higher AUC of true reward than explicit and implicit alone":
@@ -246,8 +275,8 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
     methods = {_prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss,
                                                                                 weight_decay=wd))
                for name, (fb, loss) in PRIOR_METHODS.items() for wd in grid}
-    results, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
-                                                    progress, sweep)
+    results, _, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
+                                                       progress, sweep)
     picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
     title = f"L2 prior strength, {env}, {reward_model} reward" + (" (perfect latent)" if model is None else "")
     figure = plot_prior(results, grid, out / "prior.png", title)
