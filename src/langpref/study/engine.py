@@ -3,7 +3,8 @@
 - embedding feedback: `model.encode_texts` (psi), cached per text; "how the robot understood it" is
   `langpref.model.evaluate.embed_text` (nearest meaning prototype) on the same psi; text that does not read as
   feedback on the robot's motion is refused first (`langpref.language.relevance.FeedbackGate`);
-- the improvement step of Study 1 (paper Eq. 4, `langpref.improve.improvement_step`) over the study set;
+- the improvement step of Study 1 (paper Eq. 4, its cosine reading: `langpref.improve.improvement_step`) over the
+  study set;
 - one reward learner per participant and method (`langpref.reward.RewardLearner`, explicit + implicit losses for
   language via `language_pairs`, Bradley-Terry for comparisons via `comparison_pairs`), refit after every answer;
 - which trajectories each query shows (random, as in the paper, fixed by the study and participant seeds).
