@@ -388,8 +388,9 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
     p.add_argument("--seed", type=int, default=0, help="the same seed gives the same numbers (default 0)")
     p.add_argument("--temperature", type=float, default=h.temperature,
                    help="language human's softmax temperature over features, Eq. 10 (default %(default)s)")
-    p.add_argument("--phrasing-split", choices=("train", "val", "test"), default=h.phrasing_split,
-                   help="bank split the language human phrases its feedback from (default %(default)s)")
+    p.add_argument("--phrasing-split", choices=("train", "val", "test", "all"), default=h.phrasing_split,
+                   help="bank split the language human phrases its feedback from (default %(default)s: phrasings "
+                   "the model never trained on; all: every split, as the paper's synthetic human)")
     p.add_argument("--phrasings", type=Path, default=None,
                    help="utterance file (DESIGN.md schema) the language human phrases its feedback from instead of "
                    "the bank, e.g. heldout/utterances.json (phrasings written by people who never saw the bank)")

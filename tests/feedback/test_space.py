@@ -77,3 +77,18 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
     path.write_text(json.dumps({"metaworld": {"speed": {"increase": ["Move slower."]}}}))
     with pytest.raises(LangprefError, match="two meanings"):
         load_space(data, perfect=True, phrasings=path)
+
+
+def test_the_all_table_is_every_bank_split_in_order(tmp_path):
+    """--phrasing-split all (the paper's human): train, val and test phrasings with their meanings and psi."""
+    from langpref.feedback import load_space
+    from tests.test_improve import write_features_dataset
+
+    space = load_space(write_features_dataset(tmp_path / "d"), perfect=True)
+    parts = [space.table(s) for s in ("train", "val", "test")]
+    every = space.table("all")
+    assert every.texts == parts[0].texts + parts[1].texts + parts[2].texts
+    assert np.array_equal(every.group, np.concatenate([p.group for p in parts]))
+    assert np.allclose(every.psi, np.concatenate([p.psi for p in parts]))
+    with pytest.raises(LangprefError, match="no phrasings of 'holdout'"):
+        space.table("holdout")

@@ -68,7 +68,8 @@ class HumanConfig:
     temperature: float = 1.0
     """Of the language human's softmax over features (Eq. 10 is temperature 1); small = always the best feature."""
     phrasing_split: str = "test"
-    """Bank split the language human draws its phrasings from (test: unseen by the model)."""
+    """Bank split the language human draws its phrasings from (test: unseen by the model; `all`: every split, as the
+    paper's human, which speaks "all language utterances of that feature")."""
     phrasings: str | None = None
     """An utterance file (DESIGN.md schema) the language human draws from instead of the bank, e.g.
     heldout/utterances.json, phrasings written by people who never saw the bank."""

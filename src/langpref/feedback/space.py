@@ -22,6 +22,8 @@ from langpref.language.bank import DIRECTIONS, Bank, load_bank, load_user_uttera
 
 BANK_SPLITS = ("train", "val", "test")
 """The bank splits a space embeds by default: any of them can be the synthetic humans' phrasings."""
+ALL_SPLITS = "all"
+"""The table name of every bank split together (what the paper's synthetic human speaks from)."""
 
 Encoder = Callable[[Sequence[str]], np.ndarray]
 
@@ -155,7 +157,11 @@ class LatentSpace:
         return rows
 
     def table(self, split: str) -> PhraseTable:
-        """The phrasings of a bank split, or of an utterance file (`file_table_name`)."""
+        """The phrasings of a bank split, of all of them (`ALL_SPLITS`), or of an utterance file (`file_table_name`)."""
+        if split == ALL_SPLITS and split not in self.phrases and all(s in self.phrases for s in BANK_SPLITS):
+            parts = [self.phrases[s] for s in BANK_SPLITS]
+            return PhraseTable(tuple(t for p in parts for t in p.texts), np.concatenate([p.feature for p in parts]),
+                               np.concatenate([p.direction for p in parts]), np.concatenate([p.psi for p in parts]))
         if split not in self.phrases:
             raise LangprefError(f"no phrasings of {split!r} were embedded; have {', '.join(self.phrases)}")
         return self.phrases[split]
