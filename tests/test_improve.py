@@ -187,3 +187,15 @@ def test_run_cache_outlives_an_option_added_later_but_not_a_changed_one(tmp_path
     assert "paper/0" in again
     with pytest.raises(LangprefError, match="another configuration"):
         RunCache(path, {"seeds": 3, "human": {"temperature": 1.0, "phrasings": "mine.json"}})
+
+
+def test_experiment_improve_with_another_phrasing_split(tmp_path, monkeypatch, capsys):
+    """--phrasing-split all: its own default output, and the command that reproduces it."""
+    data = write_features_dataset(tmp_path / "d")
+    monkeypatch.chdir(tmp_path)
+    assert main(["experiment", "improve", "--env", "metaworld", "--data", str(data), "--perfect-latent",
+                 "--seeds", "2", "--iterations", "2", "--phrasing-split", "all", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert Path(summary["figure"]).parent == Path("results/improve/metaworld-perfect-bank-all")
+    assert summary["command"].endswith("--phrasing-split all")
+    assert summary["strategies"]["paper"]["config"]["human"]["phrasing_split"] == "all"

@@ -304,3 +304,7 @@ def test_experiment_records_the_command_that_reproduces_it(tmp_path, monkeypatch
     assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-mlp")  # not the linear model's runs
     for flag in ("--perfect-latent", "--queries 2", "--humans 1", "--seeds 1", "--reward-model mlp"):
         assert flag in res["command"]
+    cfg = LearnRewardConfig(queries=2, humans=1, seeds=1, human=HumanConfig(phrasing_split="all"))
+    res = run_reward_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
+    assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-bank-all")
+    assert res["command"].endswith("--phrasing-split all")

@@ -352,7 +352,7 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
 
     from langpref.experiments.improve import SweepConfig
 
-    human = HumanConfig(phrasings=str(args.phrasings) if args.phrasings else None)
+    human = HumanConfig(phrasing_split=args.phrasing_split, phrasings=str(args.phrasings) if args.phrasings else None)
     kw = dict(env=args.env, data=args.data, model=args.model, out=args.out, perfect=args.perfect_latent,
               force=args.force, sweep=SweepConfig(args.backend, args.workers, args.ray_address))
     if args.experiment == "improve":
@@ -469,9 +469,13 @@ def _register_latent_use_commands(sub) -> None:
                        help=f"output directory (default results/{name}/ENV, or ENV-perfect"
                        + (")" if name == "improve" else ", ENV-mlp)"))
         p.add_argument("--seeds", type=int, default=None, help="override the paper's seeds (100 / 3 per human)")
+        p.add_argument("--phrasing-split", choices=("train", "val", "test", "all"), default="test",
+                       help="bank split the language human phrases its feedback from (default %(default)s: phrasings "
+                       "the model never trained on; all: every split, as the paper's human; default out: "
+                       "ENV-bank-SPLIT)")
         p.add_argument("--phrasings", type=Path, default=None,
-                       help="utterance file the language human phrases its feedback from instead of the bank's test "
-                       "split, e.g. heldout/utterances.json (default out: ENV-phrasings)")
+                       help="utterance file the language human phrases its feedback from instead of the bank, e.g. "
+                       "heldout/utterances.json (default out: ENV-phrasings)")
         if name == "improve":
             p.add_argument("--iterations", type=int, default=None, help="override N = 15")
         else:

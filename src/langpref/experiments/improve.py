@@ -137,9 +137,21 @@ def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path,
 
 def cli_flags(base, default, names: tuple[str, ...]) -> str:
     """The `langpref experiment` options that reproduce the config `base`: each of `names` where it differs from
-    `default`, and `--phrasings` when its language human speaks from a file."""
+    `default`, and where its language human's phrasings come from when that is not the default."""
     flags = "".join(f" --{k} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k))
-    return flags + (f" --phrasings {base.human.phrasings}" if base.human.phrasings else "")
+    if base.human.phrasings:
+        return flags + f" --phrasings {base.human.phrasings}"
+    if base.human.phrasing_split != default.human.phrasing_split:
+        return flags + f" --phrasing-split {base.human.phrasing_split}"
+    return flags
+
+
+def phrasing_variant(human) -> list[str]:
+    """The part of an experiment's default output name that says where its human's phrasings come from (none for
+    the bank's test split, the default): `phrasings` for an utterance file, `bank-SPLIT` for another bank split."""
+    if human.phrasings:
+        return ["phrasings"]
+    return [] if human.phrasing_split == "test" else [f"bank-{human.phrasing_split}"]
 
 
 def figure_link(figure: str | Path) -> str:
@@ -184,7 +196,7 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
 
     base = config or ImproveConfig()
     phrasings = base.human.phrasings
-    data, model, out = default_paths("improve", env, data, model, out, perfect, "phrasings" if phrasings else "")
+    data, model, out = default_paths("improve", env, data, model, out, perfect, "-".join(phrasing_variant(base.human)))
     space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
     unknown = sorted(set(curves) - set(CURVES))
     if unknown:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.improve import (RunCache, SweepConfig, cli_flags, command_line, default_paths, figure_link,
-                                         run_sweep)
+                                         phrasing_variant, run_sweep)
 
 PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
               "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
@@ -65,8 +65,9 @@ def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out,
     from langpref.reward import Curves, summarise
 
     reward_models = {cfg.reward.model for cfg in methods.values()} - {"linear"}
-    phrasings = next(iter(methods.values())).human.phrasings
-    variant = "-".join(sorted(reward_models) + (["phrasings"] if phrasings else []))
+    human = next(iter(methods.values())).human
+    phrasings = human.phrasings
+    variant = "-".join(sorted(reward_models) + phrasing_variant(human))
     data, model, out = default_paths(kind, env, data, model, out, perfect, variant)
     space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
     cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
