@@ -48,6 +48,9 @@ reproduce: install
 	  for exp in improve reward; do \
 	    $(BIN)/langpref experiment $$exp --env $$env --phrasings heldout/utterances.json --backend $(BACKEND); \
 	  done; \
+	  for exp in improve reward ablation; do \
+	    $(BIN)/langpref experiment $$exp --env $$env --phrasing-split all --backend $(BACKEND); \
+	  done; \
 	done
 	@echo "figures and tables: results/*/*/ (see docs/results.md)"
 
