@@ -154,6 +154,17 @@ def phrasing_variant(human) -> list[str]:
     return [] if human.phrasing_split == "test" else [f"bank-{human.phrasing_split}"]
 
 
+def title_suffix(perfect: bool, human) -> str:
+    """What sets an experiment's figure apart from the default one, for its title: the oracle space, and where the
+    human's phrasings come from."""
+    parts = ["perfect latent"] if perfect else []
+    if human.phrasings:
+        parts.append(f"phrasings: {human.phrasings}")
+    elif human.phrasing_split != "test":
+        parts.append("all bank phrasings" if human.phrasing_split == "all" else f"bank {human.phrasing_split} phrasings")
+    return f" ({', '.join(parts)})" if parts else ""
+
+
 def figure_link(figure: str | Path) -> str:
     """A figure's path as seen from docs/results.md (relative paths are relative to the repository root)."""
     figure = Path(figure)
@@ -213,7 +224,7 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     results = {name: {**summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
                       "config": asdict(cfg)} for name, cfg in cfgs.items()}
     figure = plot_improvement({f"{n} ({CURVE_LABELS[n]})": r for n, r in results.items()}, out / "improve.png",
-                              f"Iterative improvement, {env}" + (" (perfect latent)" if perfect else ""))
+                              f"Iterative improvement, {env}" + title_suffix(perfect, base.human))
     summary = {
         "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
         "space": space.description, "seeds": base.seeds, "iterations": base.iterations,

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.improve import (RunCache, SweepConfig, cli_flags, command_line, default_paths, figure_link,
-                                         phrasing_variant, run_sweep)
+                                         phrasing_variant, run_sweep, title_suffix)
 
 PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
               "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
@@ -169,7 +169,7 @@ def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, 
 def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets,
             **extra: Any) -> dict[str, Any]:
     figure = plot_reward_curves(results, out / f"{kind}.png",
-                                f"{title}, {env}" + (" (perfect latent)" if model is None else ""))
+                                f"{title}, {env}" + title_suffix(model is None, base.human))
     fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}
     return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper))
 
@@ -279,7 +279,7 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
     results, _, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
                                                        progress, sweep)
     picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
-    title = f"L2 prior strength, {env}, {reward_model} reward" + (" (perfect latent)" if model is None else "")
+    title = f"L2 prior strength, {env}, {reward_model} reward" + title_suffix(model is None, base.human)
     figure = plot_prior(results, grid, out / "prior.png", title)
     fields = {"seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "reward_model": reward_model,
               "default": DEFAULT_WEIGHT_DECAY[reward_model], "picks": picks, "methods": results,
