@@ -3,7 +3,8 @@ comparisons) and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic human
 the L2 prior's strength, which the paper does not have, was chosen (on the val split, with other humans).
 
 Each writes into its output directory (default `results/reward/ENV`, `results/ablation/ENV`): `NAME.json` (curves
-per method, summaries, the targets checked, the config), `NAME.png` (two panels: (a) cross-entropy, (b) normalised
+per method, summaries, the targets checked, the config; for `reward` also `ce_difference`, language minus comparison
+cross-entropy per query count with a paired 95% interval), `NAME.png` (two panels: (a) cross-entropy, (b) normalised
 true reward of r_xi's best test trajectory; mean with a +-std band), `NAME.md` (a section for docs/results.md) and
 `runs.json` (finished runs; an interrupted experiment resumes without rerunning them).
 """
