@@ -288,8 +288,7 @@ def _register_latent_commands(sub) -> None:
 def _human_config(args: argparse.Namespace):
     from langpref.feedback.humans import HumanConfig
 
-    return HumanConfig(temperature=args.temperature, phrasing_split=args.phrasing_split,
-                       phrasings=str(args.phrasings) if args.phrasings else None,
+    return HumanConfig(temperature=args.temperature, **_phrasing_source(args),
                        rationality=getattr(args, "rationality", HumanConfig.rationality))
 
 
@@ -352,7 +351,7 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
 
     from langpref.experiments.improve import SweepConfig
 
-    human = HumanConfig(phrasing_split=args.phrasing_split, phrasings=str(args.phrasings) if args.phrasings else None)
+    human = HumanConfig(**_phrasing_source(args))
     kw = dict(env=args.env, data=args.data, model=args.model, out=args.out, perfect=args.perfect_latent,
               force=args.force, sweep=SweepConfig(args.backend, args.workers, args.ray_address))
     if args.experiment == "improve":
@@ -376,6 +375,26 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
     _emit(summary, args.json, lambda s: md.read_text() + f"\n(wrote {md.parent}/: {md.stem}.json, .png, .md)")
 
 
+def _add_phrasing_options(p: argparse.ArgumentParser, *, experiment: bool = False) -> None:
+    """Where the synthetic language human's phrasings come from: a bank split, or an utterance file."""
+    from langpref.feedback.humans import HumanConfig
+    from langpref.feedback.space import PHRASING_SPLITS
+
+    p.add_argument("--phrasing-split", choices=PHRASING_SPLITS, default=HumanConfig.phrasing_split,
+                   help="bank split the language human phrases its feedback from (default %(default)s: phrasings "
+                   "the model never trained on; all: every split, as the paper's synthetic human)"
+                   + ("; default out: ENV-bank-SPLIT" if experiment else ""))
+    p.add_argument("--phrasings", type=Path, default=None,
+                   help="utterance file (DESIGN.md schema) the language human phrases its feedback from instead of "
+                   "the bank, e.g. heldout/utterances.json (phrasings written by people who never saw the bank)"
+                   + ("; default out: ENV-phrasings" if experiment else ""))
+
+
+def _phrasing_source(args: argparse.Namespace) -> dict:
+    """The `HumanConfig` fields of `_add_phrasing_options`."""
+    return {"phrasing_split": args.phrasing_split, "phrasings": str(args.phrasings) if args.phrasings else None}
+
+
 def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
     from langpref.feedback.humans import HumanConfig
     from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES, RewardConfig
@@ -388,12 +407,7 @@ def _add_use_options(p: argparse.ArgumentParser, *, reward: bool) -> None:
     p.add_argument("--seed", type=int, default=0, help="the same seed gives the same numbers (default 0)")
     p.add_argument("--temperature", type=float, default=h.temperature,
                    help="language human's softmax temperature over features, Eq. 10 (default %(default)s)")
-    p.add_argument("--phrasing-split", choices=("train", "val", "test", "all"), default=h.phrasing_split,
-                   help="bank split the language human phrases its feedback from (default %(default)s: phrasings "
-                   "the model never trained on; all: every split, as the paper's synthetic human)")
-    p.add_argument("--phrasings", type=Path, default=None,
-                   help="utterance file (DESIGN.md schema) the language human phrases its feedback from instead of "
-                   "the bank, e.g. heldout/utterances.json (phrasings written by people who never saw the bank)")
+    _add_phrasing_options(p)
     if reward:
         p.add_argument("--rationality", type=float, default=h.rationality,
                        help="comparison human's beta in sigmoid(beta (R_A - R_B)), Eq. 11 (default %(default)s)")
@@ -469,13 +483,7 @@ def _register_latent_use_commands(sub) -> None:
                        help=f"output directory (default results/{name}/ENV, or ENV-perfect"
                        + (")" if name == "improve" else ", ENV-mlp)"))
         p.add_argument("--seeds", type=int, default=None, help="override the paper's seeds (100 / 3 per human)")
-        p.add_argument("--phrasing-split", choices=("train", "val", "test", "all"), default="test",
-                       help="bank split the language human phrases its feedback from (default %(default)s: phrasings "
-                       "the model never trained on; all: every split, as the paper's human; default out: "
-                       "ENV-bank-SPLIT)")
-        p.add_argument("--phrasings", type=Path, default=None,
-                       help="utterance file the language human phrases its feedback from instead of the bank, e.g. "
-                       "heldout/utterances.json (default out: ENV-phrasings)")
+        _add_phrasing_options(p, experiment=True)
         if name == "improve":
             p.add_argument("--iterations", type=int, default=None, help="override N = 15")
         else:

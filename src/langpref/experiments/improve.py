@@ -1,7 +1,7 @@
 """`langpref experiment improve --env ENV`: the paper's Fig. 4 (iterative improvement, N = 15, 100 seeds): Eq. 4 as
 the paper's text describes it (`paper`) and as it prints it (`paper-printed`), and the history strategy beside them.
 
-Writes into the output directory (default `results/improve/ENV`): `improve.json` (both curves and the config),
+Writes into the output directory (default `results/improve/ENV`): `improve.json` (the curves and the config),
 `improve.png` (mean +- std per iteration, dashed optimum), `improve.md` (a section for docs/results.md) and
 `runs.json`, the finished runs. Interrupted, it resumes: a finished seed is not rerun. `RunCache` is shared with the
 reward-learning experiments.
@@ -197,10 +197,10 @@ def improve_markdown(summary: dict[str, Any]) -> str:
 
 def run_improve_experiment(env: str, data: str | Path | None = None, model: str | Path | None = None,
                            out: str | Path | None = None, *, perfect: bool = False, config=None,
-                           curves: tuple[str, ...] = tuple(CURVES), force: bool = False,
+                           force: bool = False,
                            progress: bool = True, sweep: SweepConfig | None = None) -> dict[str, Any]:
-    """The `curves` (default all of `CURVES`) with the paper's settings (or `config`, an `ImproveConfig`); writes
-    JSON, PNG and markdown."""
+    """Every curve of `CURVES` with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and
+    markdown."""
     from langpref.feedback.space import load_space
     from langpref.improve import ImproveConfig, ImprovementRun, plot_improvement
     from langpref.improve import summarise as summarise_runs
@@ -209,10 +209,7 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     phrasings = base.human.phrasings
     data, model, out = default_paths("improve", env, data, model, out, perfect, "-".join(phrasing_variant(base.human)))
     space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
-    unknown = sorted(set(curves) - set(CURVES))
-    if unknown:
-        raise LangprefError(f"unknown improvement curves {unknown}: choose from {', '.join(CURVES)}")
-    cfgs = {name: replace(base, **CURVES[name]) for name in curves}
+    cfgs = {name: replace(base, **fields) for name, fields in CURVES.items()}
     cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
                      force=force)
     for cfg in cfgs.values():

@@ -24,6 +24,8 @@ BANK_SPLITS = ("train", "val", "test")
 """The bank splits a space embeds by default: any of them can be the synthetic humans' phrasings."""
 ALL_SPLITS = "all"
 """The table name of every bank split together (what the paper's synthetic human speaks from)."""
+PHRASING_SPLITS = (*BANK_SPLITS, ALL_SPLITS)
+"""What a synthetic human's `phrasing_split` may name."""
 
 Encoder = Callable[[Sequence[str]], np.ndarray]
 
