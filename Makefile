@@ -13,11 +13,12 @@ export HF_HUB_OFFLINE ?= 1
 install: $(STAMP)
 
 # torch goes in first, exactly 2.13.0 (the CPU wheel); the constraints file keeps anything from swapping it.
-$(STAMP): pyproject.toml requirements/constraints.txt
+$(STAMP): pyproject.toml requirements/constraints.txt examples/plugin/pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[test,ray]"
+	$(BIN)/pip install --quiet -c requirements/constraints.txt -e examples/plugin  # example task plugin (metaworld-reach)
 	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here).
 	command -v chromium >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
 	  || echo "warning: could not install Debian's chromium; the browser test will be skipped"

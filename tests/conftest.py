@@ -27,9 +27,9 @@ def write_synthetic_dataset(root: Path, n: int = 12, horizon: int = 20, env: str
     """A dataset in the real on-disk format whose features are the means of the first observation dims."""
     from langpref.dataset.generate import assign_splits
     from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
-    from langpref.envs import get_spec
+    from langpref.tasks import get_task
 
-    spec = get_spec(env)
+    spec = get_task(env)
     rng = np.random.default_rng(seed)
     nf = len(spec.features)
     feats = np.zeros((n, nf))

@@ -86,7 +86,7 @@ def test_rerun_skips_what_is_done(tmp_path):
 
 
 def test_reward_sweep_on_two_nodes_equals_local(cluster, tmp_path):
-    from langpref.experiments.improve import SweepConfig
+    from langpref.experiments.common import SweepConfig
     from langpref.experiments.reward import run_reward_experiment
     from langpref.reward import LearnRewardConfig
 

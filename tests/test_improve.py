@@ -30,14 +30,14 @@ torch.set_num_threads(1)
 def write_features_dataset(root: Path, env: str = "metaworld", n: int = 40, seed: int = 0) -> Path:
     """A dataset directory with meta.json and features.npy only (enough for --perfect-latent)."""
     from langpref.dataset.storage import DatasetMeta, write_meta
-    from langpref.language.bank import FEATURES
+    from langpref.tasks import get_task
 
     rng = np.random.default_rng(seed)
-    feats = rng.normal(size=(n, len(FEATURES[env])))
+    feats = rng.normal(size=(n, len(get_task(env).features)))
     order = rng.permutation(n).tolist()
     splits = {"train": sorted(order[: n // 2]), "val": sorted(order[n // 2: 3 * n // 4]),
               "test": sorted(order[3 * n // 4:])}
-    meta = DatasetMeta(env, 10, [{"name": "obs", "start": 0, "stop": 4}], 2, list(FEATURES[env]), splits, n)
+    meta = DatasetMeta(env, 10, [{"name": "obs", "start": 0, "stop": 4}], 2, list(get_task(env).features), splits, n)
     write_meta(root, meta, feats)
     return root
 
@@ -179,7 +179,7 @@ def test_experiment_command_records_every_non_default_option(tmp_path, monkeypat
 
 
 def test_run_cache_outlives_an_option_added_later_but_not_a_changed_one(tmp_path):
-    from langpref.experiments.improve import RunCache
+    from langpref.experiments.common import RunCache
 
     path = tmp_path / "runs.json"
     RunCache(path, {"seeds": 3, "human": {"temperature": 1.0}}).put("paper/0", [0.5])

@@ -23,15 +23,14 @@ from langpref.feedback import (
     sample_weights,
     toy_latent_space,
 )
+from langpref.feedback.comparison import comparison_pairs
+from langpref.feedback.language import language_pairs, read_meaning
 from langpref.reward import (
     LearnRewardConfig,
     RewardConfig,
     RewardLearner,
-    comparison_pairs,
     cross_entropy,
-    language_pairs,
     learn_reward,
-    read_meaning,
     reward_of_best,
     run_reward_learning,
 )
@@ -180,9 +179,9 @@ def test_bad_configs_are_one_line_errors(space):
 def write_dataset(root: Path, env: str, n: int = 24, horizon: int = 8, seed: int = 0) -> Path:
     """A dataset in the real on-disk format (real observation layout of `env`), split 50/25/25."""
     from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
-    from langpref.envs import get_spec
+    from langpref.tasks import get_task
 
-    spec = get_spec(env)
+    spec = get_task(env)
     rng = np.random.default_rng(seed)
     nf = len(spec.features)
     feats = []
@@ -215,12 +214,12 @@ def test_cli_learn_reward_json(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def untrained_model(tmp_path_factory):
     """A real (untrained) checkpoint of a metaworld model: encoders exercised end to end."""
-    from langpref.envs import get_spec
+    from langpref.tasks import get_task
     from langpref.model.checkpoint import build_model, save_model
     from langpref.model.config import ModelConfig
     from langpref.model.latent import DataInfo
 
-    spec = get_spec("metaworld")
+    spec = get_task("metaworld")
     info = DataInfo(env="metaworld", feature_names=list(spec.features),
                     obs_layout=[asdict(f) for f in spec.obs_layout], obs_dim=spec.obs_dim,
                     action_dim=spec.action_dim, horizon=8, schema_version=1,

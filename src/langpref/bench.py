@@ -26,7 +26,7 @@ RESULTS = Path("docs/results.md")
 
 def env_steps_per_s(env_name: str, episodes: list[tuple[int, np.ndarray]]) -> float:
     """`env.step` (plus the step features) alone over the given episodes, each (reset seed, actions (T, A))."""
-    from langpref.envs import make_env
+    from langpref.tasks import make_env
 
     horizon = len(episodes[0][1])
     env = make_env(env_name, horizon)
@@ -43,10 +43,10 @@ def env_steps_per_s(env_name: str, episodes: list[tuple[int, np.ndarray]]) -> fl
 
 def raw_steps_per_s(env_name: str, episodes: int, horizon: int) -> float:
     """`env.step` with uniform random actions, in episodes of `horizon` steps, each from a reset (as the generator)."""
-    from langpref.envs import get_spec
+    from langpref.tasks import get_task
 
     rng = np.random.default_rng(0)
-    dim = get_spec(env_name).action_dim
+    dim = get_task(env_name).action_dim
     return env_steps_per_s(env_name, [(e, rng.uniform(-1, 1, (horizon, dim))) for e in range(episodes)])
 
 
@@ -88,7 +88,7 @@ def sweep_timings(env_name: str, workers: int) -> dict:
     and model, on 1 worker, then on `workers` local processes and Ray tasks: the projection from per-task time
     against the measured wall time. Uses the oracle latent space where no default model exists yet."""
     from langpref.experiments.alignment import default_model
-    from langpref.experiments.improve import SweepConfig, worker_space
+    from langpref.experiments.common import SweepConfig, worker_space
     from langpref.experiments.reward import run_reward_experiment
 
     data, model = Path("data") / env_name, default_model(env_name)
@@ -119,11 +119,12 @@ def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
     `queries` (language with L_Explicit + L_Implicit, and comparisons), one improvement step (Eq. 4 argmax over the
     test split), and embedding one new free-form sentence with the model. Milliseconds per trial."""
     from langpref.experiments.alignment import default_model
-    from langpref.feedback.humans import ComparisonHuman, LanguageHuman, sample_weights
+    from langpref.feedback.comparison import ComparisonHuman, ComparisonQuery, comparison_pairs
+    from langpref.feedback.humans import sample_weights
+    from langpref.feedback.language import LanguageHuman, LanguageQuery, language_pairs
     from langpref.feedback.space import load_space
-    from langpref.feedback.types import ComparisonQuery, LanguageQuery
     from langpref.improve import improvement_step
-    from langpref.reward import RewardConfig, RewardLearner, comparison_pairs, language_pairs
+    from langpref.reward import RewardConfig, RewardLearner
 
     space = load_space(Path("data") / env_name, default_model(env_name), env=env_name)
     pool, cands = space.split("train"), space.split("test")
@@ -331,6 +332,38 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
         write_section("ray-overhead", "\n".join(lines))
 
 
+def import_table(today: str, repeats: int) -> str:
+    """`langpref import` of a plain recording without videos (300 episodes of 200 steps, 39-dim observations, features
+    from a task-file function), best of `repeats`; target >= 50 episodes/s on 2 cores."""
+    from langpref.dataset.importer import ImportConfig, import_recording
+    from langpref.language.bank import split_bank
+    from langpref.tasks.taskfile import read_task_file
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        rec = root / "rec"
+        rec.mkdir()
+        rng = np.random.default_rng(0)
+        for i in range(300):
+            np.savez_compressed(rec / f"ep{i:04d}.npz", observations=rng.normal(size=(200, 39)).astype(np.float32),
+                                actions=rng.normal(size=(200, 4)).astype(np.float32), success=np.array(True))
+        (root / "features.py").write_text("import numpy as np\n\ndef f(o, a):\n    return np.stack([o[:, 0], "
+                                          "np.linalg.norm(a, axis=1)], axis=1)\n")
+        words = {f: {d: [f"{d} the {f} {k}." for k in range(5)] for d in ("increase", "decrease")} for f in "ab"}
+        (root / "bank.json").write_text(json.dumps(words))
+        (root / "task.toml").write_text('name = "bench"\ndescription = "x"\nfeatures = ["a", "b"]\n'
+                                        'features_from = "features.py:f"\nutterances = "bank.json"\n')
+        task = read_task_file(root / "task.toml")
+        bank = split_bank(task.utterances, task.features)
+        rates = []
+        for r in range(repeats):
+            cfg = ImportConfig(src=rec, task=root / "task.toml", out=root / f"ds{r}")
+            rates.append(import_recording(cfg, task, bank, progress=False)["episodes_per_s"])
+    return (f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref import` of a plain recording "
+            "(300 episodes x 200 steps, 39-dim observations, 4-dim actions, features from the task file's function, no "
+            f"videos), best of {repeats}, one process.\n\n| episodes/s (target >= 50) |\n|---|\n| {max(rates):.0f} |")
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--envs", nargs="+", default=["metaworld", "robosuite"])
@@ -345,11 +378,14 @@ def main(argv: list[str] | None = None) -> None:
                    help="skip the experiment-sweep projection (needs the default dataset data/ENV)")
     p.add_argument("--no-gate", dest="gate", action="store_false",
                    help="skip the feedback-gate table (held-out phrasings let through, nonsense refused)")
+    p.add_argument("--no-import", dest="import_", action="store_false", help="skip the `langpref import` rate")
     p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
     args = p.parse_args(argv)
     today = dt.date.today().isoformat()
     if args.generator:
         generator_sections(args.envs, args.repeats, args.ray, today)
+    if args.import_:
+        write_section("import-throughput", import_table(today, args.repeats))
     if args.uses:
         write_section("uses-latency", uses_table(args.envs, today))
     if args.gate:

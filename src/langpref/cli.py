@@ -20,7 +20,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
 
-ENVS = ("metaworld", "robosuite")
+TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
 
 
 def _emit(obj: Any, as_json: bool, human: Callable[[Any], str] | None = None) -> None:
@@ -58,8 +58,45 @@ def cmd_inspect(args: argparse.Namespace) -> None:
     _emit(describe(args.dir), args.json, format_description)
 
 
+def cmd_import(args: argparse.Namespace) -> None:
+    from langpref.dataset.importer import ImportConfig, import_recording
+    from langpref.language.bank import check_bank, split_bank
+    from langpref.tasks.taskfile import read_task_file
+
+    task = read_task_file(args.task)
+    bank = split_bank(task.utterances, task.features, seed=args.seed)
+    check_bank(bank, task.name, task.features, f"utterances file {task.utterances}")
+    shares = tuple(float(x) for x in args.splits.split(",")) if args.splits else None
+    if shares is not None and (len(shares) != 3 or min(shares) <= 0):
+        raise LangprefError(f"--splits {args.splits!r} must be three positive shares TRAIN,VAL,TEST, e.g. 0.8,0.1,0.1")
+    cfg = ImportConfig(src=args.src, task=args.task, out=args.out, seed=args.seed, force=args.force,
+                       state_key=args.state_key, action_key=args.action_key, camera=args.camera,
+                       **({"splits": shares} if shares else {}))
+    summary = import_recording(cfg, task, bank)
+    _emit(summary, args.json, lambda s: f"imported {s['num_trajectories']} episodes of task {s['task']} into "
+          f"{s['out']} (splits {s['splits']}, videos: {'yes' if s['videos'] else 'no'}, {s['wall_s']:.1f} s)")
+
+
+def cmd_tasks(args: argparse.Namespace) -> None:
+    from langpref.tasks import get_task, task_names
+
+    if args.data:
+        from langpref.dataset.storage import load_dataset
+
+        load_dataset(args.data)
+    out = {}
+    for name in task_names():
+        task = get_task(name)
+        out[name] = {"source": task.source, "simulator": task.simulator is not None,
+                     "features": dict(zip(task.features, task.feature_descriptions)), "description": task.description,
+                     "obs_dim": task.obs_dim, "action_dim": task.action_dim}
+    _emit(out, args.json, lambda o: "\n".join(
+        f"{n:<16} {'simulated' if d['simulator'] else 'recorded '} {d['source']:<9} features: "
+        f"{', '.join(d['features'])}" for n, d in o.items()))
+
+
 def cmd_render(args: argparse.Namespace) -> None:
-    from langpref.envs.render import render_trajectory
+    from langpref.dataset.render import render_trajectory
 
     out = render_trajectory(args.dir, args.index, args.out, width=args.width, height=args.height, fps=args.fps)
     _emit({"video": str(out)}, args.json, lambda o: f"wrote {o['video']}")
@@ -265,7 +302,7 @@ def _register_latent_commands(sub) -> None:
     p.set_defaults(func=cmd_visualize)
 
     p = sub.add_parser("utterances", help="print the shipped utterance bank of an env (all splits merged)")
-    p.add_argument("--env", required=True, choices=ENVS)
+    p.add_argument("--env", required=True, metavar="TASK", help=TASK_HELP)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_utterances)
 
@@ -274,7 +311,7 @@ def _register_latent_commands(sub) -> None:
     p = exp.add_parser("alignment", help="Appendix C: test accuracy, co-finetuned vs frozen language model",
                        description="Trains once (the frozen model is stage 1 of the co-finetuned one), evaluates both "
                        "on the test split with the bank's test phrasings, writes alignment.md/.json.")
-    p.add_argument("--env", required=True, choices=ENVS)
+    p.add_argument("--env", required=True, metavar="TASK", help=TASK_HELP)
     p.add_argument("--data", type=Path, default=None, help="dataset directory (default data/ENV)")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/alignment/ENV)")
     p.add_argument("--force", action="store_true", help="overwrite models already in --out")
@@ -345,11 +382,10 @@ def _or_default(value: int | None, default: int) -> int:
 
 
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
+    from langpref.experiments.common import SweepConfig
     from langpref.feedback.humans import HumanConfig
     from langpref.improve import ImproveConfig
     from langpref.reward import LearnRewardConfig, RewardConfig
-
-    from langpref.experiments.improve import SweepConfig
 
     human = HumanConfig(**_phrasing_source(args))
     kw = dict(env=args.env, data=args.data, model=args.model, out=args.out, perfect=args.perfect_latent,
@@ -474,7 +510,7 @@ def _register_latent_use_commands(sub) -> None:
                        ("prior", "the L2 prior's strength per reward-learning method, chosen on the val split")):
         p = exp.add_parser(name, help=text, description=text + ". Writes NAME.json, NAME.png and NAME.md (a "
                            "section for docs/results.md); an interrupted run resumes without redoing finished seeds.")
-        p.add_argument("--env", required=True, choices=ENVS)
+        p.add_argument("--env", required=True, metavar="TASK", help=TASK_HELP)
         p.add_argument("--data", type=Path, default=None, help="dataset directory (default data/ENV)")
         p.add_argument("--model", type=Path, default=None,
                        help="checkpoint (default results/alignment/ENV/cofinetuned, from `experiment alignment`)")
@@ -516,7 +552,7 @@ def cmd_study_serve(args: argparse.Namespace) -> None:
     serve(ServeConfig(model=str(args.model), data=str(args.data), db=str(args.db),
                       videos=str(args.videos) if args.videos else None, host=args.host, port=args.port,
                       admin_token=args.admin_token, prerender=not args.no_prerender, torch_threads=args.torch_threads,
-                      study=study, video=video))
+                      on_show=args.on_show, on_show_timeout=args.on_show_timeout, study=study, video=video))
 
 
 def cmd_study_export(args: argparse.Namespace) -> None:
@@ -528,9 +564,9 @@ def cmd_study_export(args: argparse.Namespace) -> None:
 
 
 def _register_study_commands(sub) -> None:
-    from langpref.study.config import StudyConfig, VideoConfig
+    from langpref.study.config import ServeConfig, StudyConfig, VideoConfig
 
-    d, v = StudyConfig(), VideoConfig()
+    d, v, s = StudyConfig(), VideoConfig(), ServeConfig()
     p = sub.add_parser("study", help="the web app for user studies with real people (paper Sec. 5.2)")
     st = p.add_subparsers(dest="study_command", required=True, metavar="SUBCOMMAND")
     p = st.add_parser("serve", help="serve a study in the browser (Study 1: improvement, Study 2: language vs "
@@ -539,7 +575,8 @@ def _register_study_commands(sub) -> None:
                       "restart on the same --db continues every participant where they were. Protocol options "
                       "are fixed when the database is created.")
     p.add_argument("--model", required=True, type=Path, help="checkpoint directory (`langpref train`)")
-    p.add_argument("--data", required=True, type=Path, help="dataset directory (`langpref generate`)")
+    p.add_argument("--data", required=True, type=Path, help="dataset directory (`langpref generate`, or `langpref "
+                   "import`: the study then shows the recorded videos)")
     p.add_argument("--split", default=None, choices=("train", "val", "test", "all"),
                    help=f"trajectories the study shows and searches (default {d.split})")
     p.add_argument("--db", type=Path, default=Path("study.sqlite"), help="SQLite database (default %(default)s)")
@@ -558,14 +595,24 @@ def _register_study_commands(sub) -> None:
     p.add_argument("--num-negatives", type=int, default=None,
                    help=f"k, implicit negatives per language answer (default {d.num_negatives})")
     p.add_argument("--seed", type=int, default=None, help=f"study seed (default {d.seed})")
-    p.add_argument("--no-prerender", action="store_true", help="render videos only when first asked for")
+    p.add_argument("--no-prerender", action="store_true", help="make videos only when first asked for")
     p.add_argument("--video-format", choices=("webm", "mp4"), default=v.format,
-                   help="webm (VP9, default) or mp4 (H.264; some Chromium builds cannot play it)")
-    p.add_argument("--video-width", type=int, default=v.width)
+                   help="webm (VP9, default) or mp4 (H.264; some Chromium builds cannot play it); recorded videos "
+                   "in another format are transcoded once")
+    p.add_argument("--video-width", type=int, default=v.width, help="rendered videos only (also height, fps, "
+                   "stride); recorded ones keep their own")
     p.add_argument("--video-height", type=int, default=v.height)
     p.add_argument("--video-fps", type=int, default=v.fps)
     p.add_argument("--video-stride", type=int, default=v.stride, help="one frame per N stored steps")
     p.add_argument("--torch-threads", type=int, default=1, help="torch threads per request (default %(default)s)")
+    p.add_argument("--on-show", metavar="CMD", default=None,
+                   help="run CMD before each trajectory is shown to a participant, e.g. to replay it on the real "
+                   "robot: one command line, split like a shell does but run without one, with LANGPREF_TRAJECTORY, "
+                   "LANGPREF_EPISODE, LANGPREF_PARTICIPANT, LANGPREF_DATA, LANGPREF_KIND and LANGPREF_POSITION in "
+                   "its environment; runs one at a time in the background, failures and timeouts are logged and "
+                   "shown on the dashboard")
+    p.add_argument("--on-show-timeout", metavar="SECONDS", type=float, default=s.on_show_timeout,
+                   help="kill an --on-show run after this long (default %(default)g)")
     p.set_defaults(func=cmd_study_serve)
 
     p = st.add_parser("export", help="CSV tables, analyses and figures of a study (HTML report + JSON)")
@@ -586,10 +633,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("generate", help="roll out scripted policies in the simulator and store a trajectory dataset",
                        description="Roll out closed-loop controllers whose parameters are drawn by Latin hypercube "
                        "sampling so that every feature is covered, and store the trajectories with their features.")
-    p.add_argument("--env", required=True, choices=ENVS, help="simulated environment")
+    p.add_argument("--env", required=True, metavar="TASK", help="a task with a simulator: metaworld, robosuite, or a plugin's (see `langpref tasks`)")
     p.add_argument("--out", required=True, type=Path, help="dataset directory to create")
     p.add_argument("--num-trajectories", type=int, default=None,
-                   help="number of rollouts (default: the paper's, 324 metaworld / 448 robosuite)")
+                   help="number of rollouts (default: the task's; the paper's 324 metaworld / 448 robosuite)")
     p.add_argument("--horizon", type=int, default=None, help="steps per rollout (default 500, the paper's T)")
     p.add_argument("--workers", type=int, default=None, help="parallel worker processes (default: all cores)")
     p.add_argument("--seed", type=int, default=0, help="the same seed gives the same dataset, whatever --workers")
@@ -600,6 +647,32 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --backend ray: join this cluster (auto, HOST:PORT); default a local Ray instance")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("import", help="a robot recording (plain folder of episodes or LeRobotDataset) into a dataset",
+                       description="Read a recording of your own robot into a langpref dataset of the task described "
+                       "by a task file (TOML: name, description, features, features_from, utterances). A plain folder "
+                       "holds NAME.npz episodes (observations (T, obs_dim), actions (T, A), optional features and "
+                       "success) with an optional NAME.mp4/.webm video each; a LeRobotDataset (v3) is read with "
+                       "pyarrow and PyAV. Episodes may differ in length. See README, 'Your own robot'.")
+    p.add_argument("src", type=Path, help="the recording: a plain folder of episodes or a LeRobotDataset folder")
+    p.add_argument("--task", required=True, type=Path, help="task file (TOML)")
+    p.add_argument("--out", required=True, type=Path, help="dataset directory to create")
+    p.add_argument("--seed", type=int, default=0, help="seed of the trajectory split and of an unsplit bank's split")
+    p.add_argument("--splits", default=None, help="train,val,test shares of the episodes (default 0.8,0.1,0.1)")
+    p.add_argument("--state-key", default="observation.state", help="LeRobotDataset: feature read as observations")
+    p.add_argument("--action-key", default="action", help="LeRobotDataset: feature read as actions")
+    p.add_argument("--camera", default=None, help="LeRobotDataset: video feature kept per episode (default the "
+                   "first; '' for none)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing dataset in --out")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("tasks", help="list the tasks langpref knows: built-in, plugins, and a dataset's own",
+                       description="Built-in tasks, tasks of installed plugins (entry-point group langpref.tasks), "
+                       "and with --data the recorded task a dataset carries.")
+    p.add_argument("--data", type=Path, default=None, help="also the task of this dataset")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_tasks)
 
     p = sub.add_parser("inspect", help="describe a dataset: sizes, splits, feature ranges and correlations")
     p.add_argument("dir", type=Path, help="dataset directory")

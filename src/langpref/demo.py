@@ -17,7 +17,7 @@ def _banner(text: str) -> None:
 def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100) -> dict:
     from langpref.dataset.generate import GenerateConfig, generate
     from langpref.dataset.inspect import describe, format_description
-    from langpref.envs.render import render_trajectory
+    from langpref.dataset.render import render_trajectory
 
     start = time.time()
     out = Path(out)

@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.humans import HumanConfig, LanguageHuman, normalised_reward, sample_weights, true_reward
+from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
+from langpref.feedback.language import LanguageHuman, LanguageQuery, language_pairs
 from langpref.feedback.space import LatentSpace
-from langpref.feedback.types import LanguageQuery
-from langpref.reward import RewardConfig, RewardLearner, language_pairs
+from langpref.reward import RewardConfig, RewardLearner
 
 STRATEGIES = ("paper", "history")
 OBJECTIVES = ("cosine", "printed")

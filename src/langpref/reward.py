@@ -1,14 +1,9 @@
 """Reward learning from comparative language feedback (paper Eq. 5-9) and the comparison baseline, with metrics.
 
-r_xi is a function of the frozen trajectory embedding phi. Every piece of feedback becomes weighted Bradley-Terry
-pairs (winner embedding, loser embedding):
-
-- language feedback l_i about tau_i: the imagined improvement phi_i + psi_l beats phi_i (L_Explicit, Eq. 7), and beats
-  phi_i + psi_l~ for k other utterances l~ of the robot's own pool (L_Implicit, Eq. 9). The pool is a split of the
-  bank (default `train`, the phrasings the model was trained on); by default the negatives are drawn among pool
-  utterances of *other meanings* than the one the model reads l_i as (nearest meaning prototype by cosine: the
-  model's reading, never the synthetic human's label), so a paraphrase of l_i is never a negative.
-- a comparison: the preferred trajectory's phi beats the other's (Bradley-Terry, Eq. 11).
+r_xi is a function of the frozen trajectory embedding phi. Every answer, of any kind, becomes weighted Bradley-Terry
+pairs (winner embedding, loser embedding) by its kind's `pairs` (`langpref.feedback.kind`): language feedback by
+L_Explicit and L_Implicit (Eq. 7, 9; `langpref.feedback.language`), a comparison by one pair, preferred beats rejected
+(Eq. 11; `langpref.feedback.comparison`). The loop, the fit and the metrics are the same for every kind.
 
 L = sum_pairs weight * BT-loss / sum_pairs weight + (weight_decay / 2) |xi|^2, the weighted mean over every pair so
 far plus a Gaussian prior. A language query of L_Explicit + L_Implicit weighs 2 (its explicit pair, and k implicit
@@ -37,9 +32,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.humans import ComparisonHuman, HumanConfig, LanguageHuman, sample_weights, true_reward
+from langpref.feedback import bradley_terry
+from langpref.feedback.bradley_terry import PairBatch
+from langpref.feedback.humans import HumanConfig, sample_weights, true_reward
+from langpref.feedback.kind import get_kind, random_query
 from langpref.feedback.space import LatentSpace
-from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
 
 LOSSES = ("both", "explicit", "implicit")
 NEGATIVES = ("other_meaning", "any")
@@ -92,60 +89,6 @@ class RewardConfig:
             raise LangprefError("weight_decay must be >= 0, hidden and max_iter >= 1")
 
 
-@dataclass
-class PairBatch:
-    """Bradley-Terry pairs of one query: winners[j] is preferred to losers[j] with weight weights[j]."""
-
-    winners: np.ndarray
-    losers: np.ndarray
-    weights: np.ndarray
-
-
-def _prototypes(psi: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    groups = np.unique(group)
-    protos = np.stack([psi[group == g].mean(axis=0) for g in groups])
-    return groups, protos / np.maximum(np.linalg.norm(protos, axis=1, keepdims=True), 1e-12)
-
-
-def read_meaning(space: LatentSpace, psi: np.ndarray, split: str = "train") -> int:
-    """The meaning (2 * feature + direction) whose mean psi in `split` is closest in cosine to `psi`."""
-    table = space.table(split)
-    groups, protos = _prototypes(table.psi, table.group)
-    return int(groups[np.argmax(protos @ (psi / max(float(np.linalg.norm(psi)), 1e-12)))])
-
-
-def language_pairs(space: LatentSpace, answer: LanguageAnswer, cfg: RewardConfig,
-                   rng: np.random.Generator) -> PairBatch:
-    """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read)."""
-    phi = space.phi[answer.query.shown]
-    psi = space.psi_of(answer.text)
-    hat = phi + psi
-    winners, losers, weights = [], [], []
-    if cfg.loss in ("both", "explicit"):
-        winners.append(hat)
-        losers.append(phi)
-        weights.append(1.0)
-    if cfg.loss in ("both", "implicit"):
-        pool = space.table(cfg.negative_split)
-        if cfg.negatives == "other_meaning":
-            allowed = np.flatnonzero(pool.group != read_meaning(space, psi, cfg.negative_split))
-        else:
-            allowed = np.array([i for i, t in enumerate(pool.texts) if t != answer.text], dtype=np.int64)
-        if len(allowed) == 0:
-            raise LangprefError(f"bank split {cfg.negative_split!r} has no utterance to use as an implicit negative")
-        chosen = rng.choice(allowed, size=min(cfg.num_negatives, len(allowed)), replace=False)
-        for j in chosen:
-            winners.append(hat)
-            losers.append(phi + pool.psi[j])
-            weights.append(1.0 / len(chosen))
-    return PairBatch(np.array(winners), np.array(losers), np.array(weights))
-
-
-def comparison_pairs(space: LatentSpace, answer: ComparisonAnswer) -> PairBatch:
-    """The one Bradley-Terry pair of a comparison: preferred beats rejected."""
-    return PairBatch(space.phi[[answer.preferred]], space.phi[[answer.rejected]], np.ones(1))
-
-
 class RewardLearner:
     """r_xi on phi, refit on all pairs so far after every query (`add` then `fit`)."""
 
@@ -192,7 +135,7 @@ class RewardLearner:
         win, lose, weight = self._data
         margin = self._reward(win) - self._reward(lose)
         reg = sum((p * p).sum() for p in self.params)
-        return (weight * torch.nn.functional.softplus(-margin)).sum() + 0.5 * self.cfg.weight_decay * reg
+        return (weight * bradley_terry.nll(margin)).sum() + 0.5 * self.cfg.weight_decay * reg
 
     def fit(self) -> None:
         """Refit on all pairs so far. On one thread: the problem is small, and the fit (the mlp's above all, which is
@@ -236,10 +179,6 @@ def _one_thread(torch):
 # ---- metrics ------------------------------------------------------------------------------------------------------
 
 
-def _log_sigmoid(z: np.ndarray) -> np.ndarray:
-    return -np.logaddexp(0.0, -z)
-
-
 def cross_entropy(true_values: np.ndarray, learned_values: np.ndarray, rationality: float = 1.0) -> float:
     """CE(P_w, P_xi) averaged over all unordered pairs (i < j): P_w = sigmoid(rationality (R_i - R_j)) and
     P_xi = sigmoid(r_i - r_j)."""
@@ -248,9 +187,9 @@ def cross_entropy(true_values: np.ndarray, learned_values: np.ndarray, rationali
     if R.shape != r.shape or R.ndim != 1 or len(R) < 2:
         raise LangprefError(f"cross-entropy needs two equal vectors of >= 2 rewards, got {R.shape} and {r.shape}")
     i, j = np.triu_indices(len(R), k=1)
-    p = 0.5 * (1.0 + np.tanh(0.5 * rationality * (R[i] - R[j])))
+    p = bradley_terry.probability(rationality * (R[i] - R[j]))
     d = r[i] - r[j]
-    return float(np.mean(-(p * _log_sigmoid(d) + (1.0 - p) * _log_sigmoid(-d))))
+    return float(np.mean(-(p * bradley_terry.log_likelihood(d) + (1.0 - p) * bradley_terry.log_likelihood(-d))))
 
 
 def reward_of_best(true_values: np.ndarray, learned_values: np.ndarray) -> float:
@@ -278,15 +217,13 @@ class Curves:
 
 # ---- simulated sessions (`langpref learn-reward`) -----------------------------------------------------------------
 
-FEEDBACK = ("language", "comparison")
-
-
 @dataclass
 class LearnRewardConfig:
     """`langpref learn-reward`: synthetic humans x seeds, Q queries each, metrics after every query."""
 
     feedback: str = "language"
-    """`language` (one trajectory shown, comparative feedback) or `comparison` (a pair shown, one choice)."""
+    """The kind of feedback (`langpref.feedback.KINDS`): `language` (one trajectory shown, comparative feedback),
+    `comparison` (a pair shown, one choice), or any registered kind."""
     queries: int = 40
     """Q, queries per run."""
     humans: int = 3
@@ -302,8 +239,7 @@ class LearnRewardConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def validate(self) -> None:
-        if self.feedback not in FEEDBACK:
-            raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(FEEDBACK)}")
+        get_kind(self.feedback)
         if self.queries < 1 or self.humans < 1 or self.seeds < 1:
             raise LangprefError("queries, humans and seeds must each be >= 1")
         self.human.validate()
@@ -319,6 +255,7 @@ def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfi
                         ) -> Curves:
     """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each."""
     cfg.validate()
+    kind = get_kind(cfg.feedback)
     pool = space.split(cfg.query_split)
     eval_rows = space.split(cfg.eval_split)
     R_eval = true_reward(w, space.theta[eval_rows])
@@ -326,18 +263,10 @@ def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfi
     learner = RewardLearner(space.dim, cfg.reward, seed=int(np.random.default_rng([*run_seed, 4]).integers(2**31)))
     curves = Curves()
     curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
-    if cfg.feedback == "language":
-        lang = LanguageHuman(w, space.theta, space.table(cfg.human.phrase_source), pool, space.feature_names,
-                             cfg.human.temperature, rng_human)
-    else:
-        comp = ComparisonHuman(w, space.theta, cfg.human.rationality, rng_human)
+    human = kind.make_human(w, space, pool, cfg.human, rng_human)
     for _ in range(cfg.queries):
-        if cfg.feedback == "language":
-            answer = lang.answer(LanguageQuery(int(rng_query.choice(pool))))
-            learner.add(language_pairs(space, answer, cfg.reward, rng_neg))
-        else:
-            a, b = rng_query.choice(pool, size=2, replace=False)
-            learner.add(comparison_pairs(space, comp.answer(ComparisonQuery(int(a), int(b)))))
+        answer = human.answer(random_query(kind, pool, rng_query))
+        learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
         learner.fit()
         curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
     return curves

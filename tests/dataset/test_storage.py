@@ -58,3 +58,43 @@ def test_mismatched_features_table(synthetic_dataset):
 def test_unknown_split(synthetic_dataset):
     with pytest.raises(LangprefError, match="no split 'tset'"):
         load_dataset(synthetic_dataset).split("tset")
+
+
+def test_schema_1_datasets_still_load(synthetic_dataset):
+    """A dataset written before schema 2 (every trajectory simulated, one length) reads as it did."""
+    meta = json.loads((synthetic_dataset / "meta.json").read_text())
+    meta["schema_version"] = 1
+    for key in ("lengths", "videos"):
+        meta.pop(key)
+    (synthetic_dataset / "meta.json").write_text(json.dumps(meta))
+    ds = load_dataset(synthetic_dataset)
+    assert ds.meta.schema_version == 1 and ds.lengths("train") is None and ds.video_path(0) is None
+    traj = ds.load(3)
+    assert traj.seed == 3 and traj.qpos.shape == (20, 3) and traj.source is None
+
+
+def test_trajectories_of_different_lengths_pad_with_their_last_step(synthetic_dataset):
+    from langpref.dataset.storage import Trajectory, save_trajectory
+
+    meta = json.loads((synthetic_dataset / "meta.json").read_text())
+    lengths = [20] * 12
+    lengths[5] = 7
+    traj = load_dataset(synthetic_dataset).load(5)
+    short = Trajectory(5, traj.observations[:7], traj.actions[:7], traj.step_features[:7], None, None, True, None,
+                       source="episode-5")
+    save_trajectory(synthetic_dataset, short)
+    meta["lengths"] = lengths
+    (synthetic_dataset / "meta.json").write_text(json.dumps(meta))
+    ds = load_dataset(synthetic_dataset)
+    obs, _ = ds.arrays(None)
+    assert obs.shape[1] == 20 and ds.lengths(None)[5] == 7
+    np.testing.assert_array_equal(obs[5, 7:], np.repeat(obs[5, 6:7], 13, axis=0))
+    assert ds.load(5).source == "episode-5" and ds.load(5).qpos is None
+
+
+def test_lengths_that_do_not_fit_the_horizon(synthetic_dataset):
+    meta = json.loads((synthetic_dataset / "meta.json").read_text())
+    meta["lengths"] = [5] * 12
+    (synthetic_dataset / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(LangprefError, match="'lengths'"):
+        load_dataset(synthetic_dataset)

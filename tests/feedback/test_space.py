@@ -52,8 +52,7 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
     the language human says only those; a text the file and the bank file under different meanings is refused."""
     import json
 
-    from langpref.feedback import HumanConfig, LanguageHuman, load_space
-    from langpref.feedback.types import LanguageQuery
+    from langpref.feedback import HumanConfig, LanguageHuman, LanguageQuery, load_space
     from tests.test_improve import write_features_dataset
 
     data = write_features_dataset(tmp_path / "d")

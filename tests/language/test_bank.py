@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from langpref.errors import LangprefError
+from langpref.tasks import get_task
 from langpref.language.bank import (
     DIRECTIONS,
-    FEATURES,
     SPLITS,
     Bank,
     load_bank,
@@ -105,14 +105,15 @@ APPENDIX_E = {
     },
 }
 
-ENVS = tuple(FEATURES)
+ENVS = ("metaworld", "robosuite")
+FEATURES = {env: get_task(env).features for env in ENVS}
 
 
 @pytest.fixture(scope="module")
 def raw_bank() -> dict:
     """The shipped JSON as stored (the loader drops exact repeats, so duplicate checks read the raw file)."""
-    text = resources.files("langpref.language").joinpath("data", "utterances.json").read_text(encoding="utf-8")
-    return json.loads(text)
+    raw = {env: json.loads(get_task(env).utterances.read_text(encoding="utf-8")) for env in ENVS}
+    return {env: {k: v for k, v in bank.items() if not k.startswith("_")} for env, bank in raw.items()}
 
 
 @pytest.fixture(scope="module")
@@ -242,7 +243,7 @@ def test_merged_round_trips_as_user_file(banks, tmp_path):
 
 
 def test_load_bank_unknown_env():
-    with pytest.raises(LangprefError, match="unknown env 'kitchen'"):
+    with pytest.raises(LangprefError, match="unknown task 'kitchen'"):
         load_bank("kitchen")
 
 
@@ -295,7 +296,7 @@ MALFORMED = [
     # (file content, env, substrings the one-line message must hold)
     ('{"metaworld": {"speed": ', "metaworld", ["is not valid JSON"]),
     ("[1, 2]", "metaworld", ["top level must be an object"]),
-    ({"metaworld": {"speed": {"increase": ["x"]}}, "kitchen": {}}, "metaworld", ["unknown env key", "'kitchen'"]),
+    ({"metaworld": {"speed": {"increase": ["x"]}}, "kitchen": {}}, "metaworld", ["unknown task key", "'kitchen'"]),
     (
         {"metaworld": {"sped": {"increase": ["Go faster."]}}},
         "metaworld",
@@ -359,5 +360,5 @@ def test_user_file_not_utf8(tmp_path):
 
 def test_user_file_unknown_env_argument(tmp_path):
     path = _write(tmp_path, {"metaworld": {"speed": {"increase": ["Go faster."]}}})
-    with pytest.raises(LangprefError, match="unknown env 'kitchen'"):
+    with pytest.raises(LangprefError, match="unknown task 'kitchen'"):
         load_user_utterances(path, "kitchen")

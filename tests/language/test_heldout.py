@@ -7,7 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from langpref.envs import ENV_NAMES, get_spec
+from langpref.tasks import get_task
+
+ENV_NAMES = ("metaworld", "robosuite")
 from langpref.language.bank import load_bank, load_user_utterances, normalise
 
 HELDOUT = Path(__file__).resolve().parents[2] / "heldout" / "utterances.json"
@@ -29,7 +31,7 @@ def test_heldout_comment_present() -> None:
 @pytest.mark.parametrize("env", ENV_NAMES)
 def test_heldout_covers_every_feature_and_direction(env: str) -> None:
     mapping = load_user_utterances(HELDOUT, env)
-    features = tuple(get_spec(env).features)
+    features = tuple(get_task(env).features)
     assert set(mapping) == set(features)
     for feature in features:
         for direction in DIRECTIONS:

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from langpref.envs import ENV_NAMES
 from langpref.language.bank import load_user_utterances
 from langpref.language.relevance import FeedbackGate, NotFeedbackError
 
@@ -15,7 +14,7 @@ HELDOUT = Path(__file__).resolve().parents[2] / "heldout" / "utterances.json"
 NONSENSE = ("asdf", "qwertyuiop", "!!!???", "123 456", "I like pizza.", "What is the weather today?")
 
 
-@pytest.fixture(scope="module", params=ENV_NAMES)
+@pytest.fixture(scope="module", params=("metaworld", "robosuite"))
 def gate(request) -> FeedbackGate:
     return FeedbackGate(request.param)
 

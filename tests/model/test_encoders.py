@@ -19,3 +19,28 @@ def test_a_constant_input_normalises_to_zero_not_infinity():
     mean, std = normalisation_stats(steps)
     assert std[1] == 1.0 and std[2] == 1.0 and std[0] > 0
     assert np.all(np.isfinite((steps - mean) / std))
+
+
+def test_padding_does_not_change_phi():
+    """A trajectory padded to a longer horizon embeds as its own steps' mean (the paper's footnote 1)."""
+    import torch
+
+    from langpref.model.encoders import TrajectoryEncoder
+
+    torch.manual_seed(0)
+    enc = TrajectoryEncoder(in_dim=3, hidden=[8], latent_dim=4)
+    short = torch.randn(1, 5, 3)
+    padded = torch.cat([short, short[:, -1:].repeat(1, 7, 1)], dim=1)
+    other = torch.randn(1, 12, 3)
+    phi = enc(torch.cat([padded, other]), torch.tensor([5, 12]))
+    torch.testing.assert_close(phi[0], enc(short)[0])
+    torch.testing.assert_close(phi[1], enc(other)[0])
+    assert not torch.allclose(enc(padded)[0], enc(short)[0])  # without lengths the padding would count
+
+
+def test_normalisation_ignores_padding():
+    steps = np.zeros((2, 4, 1), np.float32)
+    steps[0, :, 0] = [1.0, 3.0, 3.0, 3.0]  # two real steps, padded with the last
+    steps[1, :, 0] = [5.0, 7.0, 9.0, 11.0]
+    mean, _ = normalisation_stats(steps, np.array([2, 4]))
+    assert mean[0] == np.float32((1 + 3 + 5 + 7 + 9 + 11) / 6)

@@ -7,6 +7,7 @@ import itertools
 import pytest
 
 from langpref.errors import LangprefError
+from langpref.feedback import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
 from langpref.study.config import StudyConfig
 from langpref.study.flow import (
     Answer,
@@ -34,18 +35,12 @@ class ScriptedRobot:
     def improve(self, p, shown, text):
         return shown + 1, {"feature": "speed", "direction": "increase", "confidence": 0.9}
 
-    def learn_language(self, p, number, shown, text):
-        self.learned.append(("language", number, shown, text))
-        return {"feature": "speed", "direction": "increase", "confidence": 0.9}
+    def learn(self, p, method, number, answer):
+        self.learned.append((method, number, answer))
+        return {"feature": "speed", "direction": "increase", "confidence": 0.9} if method == "language" else None
 
-    def learn_comparison(self, p, number, a, b, choice):
-        self.learned.append(("comparison", number, a, b, choice))
-
-    def language_query(self, p, number):
-        return 100 + number
-
-    def comparison_query(self, p, number):
-        return (100 + number, 200 + number)
+    def query(self, p, method, number):
+        return (100 + number,) if method == "language" else (100 + number, 200 + number)
 
     def best(self, p, method):
         return 7
@@ -78,9 +73,9 @@ def default_answers(satisfied_at=None):
         if step.kind == "survey":
             return survey_answer(step.survey)
         if step.kind == "language":
-            return Answer("language", "Move faster.", 10.0)
+            return Answer("language", LanguageAnswer(LanguageQuery(step.shown[0]), "Move faster."), 10.0)
         if step.kind == "comparison":
-            return Answer("comparison", 1, 10.0)
+            return Answer("comparison", ComparisonAnswer(ComparisonQuery(*step.shown), 1), 10.0)
         if step.kind == "satisfaction":
             return Answer("satisfaction", satisfied_at is not None and step.number >= satisfied_at)
         return Answer("rating", 4)
@@ -110,6 +105,8 @@ def test_whole_path_follows_the_paper():
     assert comp == [("comparison", 1), ("comparison", 2), ("rating", 2), ("comparison", 3), ("comparison", 4),
                     ("rating", 4)]
     assert [x[1] for x in robot.learned if x[0] == "language"] == [1, 2, 3, 4]
+    assert [x[2] for x in robot.learned if x[0] == "comparison"] == [
+        ComparisonAnswer(ComparisonQuery(100 + q, 200 + q), 1) for q in (1, 2, 3, 4)]
     # the step after every language answer says how the robot understood it
     after_language = [b for a, b in itertools.pairwise(steps) if a.kind == "language"]
     assert after_language and all(b.extra["understood"]["feature"] == "speed" for b in after_language)
@@ -153,8 +150,8 @@ def test_parse_answer_refuses_bad_language_answers(body, status):
 def test_parse_answer_accepts_and_trims():
     step = Step(3, "improve", "language", (0,))
     a = parse_answer({"feedback": "  Move faster.  ", "client_ms": 1200, "seq": 3}, step)
-    assert (a.kind, a.value, a.client_ms) == ("language", "Move faster.", 1200.0)
-    assert parse_answer({"feedback": "x" * 500, "client_ms": 0}, step).value == "x" * 500
+    assert (a.kind, a.value, a.client_ms) == ("language", LanguageAnswer(LanguageQuery(0), "Move faster."), 1200.0)
+    assert parse_answer({"feedback": "x" * 500, "client_ms": 0}, step).value.text == "x" * 500
     rating = Step(4, "pref_language", "rating", (0,), number=5)
     for bad in (0, 6, 2.5, "3", True, None):
         with pytest.raises(AnswerError):
@@ -164,6 +161,7 @@ def test_parse_answer_accepts_and_trims():
     for bad in (2, -1, True, "1", 0.0):
         with pytest.raises(AnswerError):
             parse_answer({"choice": bad, "client_ms": 1}, comp)
+    assert parse_answer({"choice": 1, "client_ms": 1}, comp).value == ComparisonAnswer(ComparisonQuery(0, 1), 1)
     with pytest.raises(WrongStep):
         parse_answer({"rating": 3}, Step(9, "done", "done"))
 

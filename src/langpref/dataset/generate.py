@@ -32,18 +32,19 @@ from langpref.dataset.storage import (
     trajectory_path,
     write_meta,
 )
-from langpref.envs import env_module, get_spec
 from langpref.errors import LangprefError
+from langpref.tasks import get_simulator, get_task
+from langpref.tasks.base import Task
 
 
 @dataclass(frozen=True)
 class GenerateConfig:
     env: str
-    """Simulated environment: metaworld or robosuite."""
+    """Task with a simulator: metaworld, robosuite, or a plugin's task."""
     out: Path
     """Dataset directory to create."""
     num_trajectories: int | None = None
-    """Number of rollouts; default the paper's (324 metaworld, 448 robosuite)."""
+    """Number of rollouts; default the task's (the paper's 324 metaworld, 448 robosuite)."""
     horizon: int | None = None
     """Steps per rollout; default the paper's T = 500."""
     workers: int | None = None
@@ -58,12 +59,12 @@ class GenerateConfig:
     """With --backend ray: a running cluster to join (e.g. auto or HOST:6379); default a local instance."""
 
     def resolved(self) -> "GenerateConfig":
-        spec = get_spec(self.env)
+        sim = get_simulator(self.env)
         cfg = GenerateConfig(
             env=self.env,
             out=Path(self.out),
-            num_trajectories=spec.default_num_trajectories if self.num_trajectories is None else self.num_trajectories,
-            horizon=spec.default_horizon if self.horizon is None else self.horizon,
+            num_trajectories=sim.default_num_trajectories if self.num_trajectories is None else self.num_trajectories,
+            horizon=sim.default_horizon if self.horizon is None else self.horizon,
             workers=(os.cpu_count() or 1) if self.workers is None else self.workers,
             seed=self.seed,
             force=self.force,
@@ -85,8 +86,7 @@ class GenerateConfig:
 
 def split_sizes(env: str, n: int) -> dict[str, int]:
     """The paper's split sizes for the default n, the same proportions otherwise (at least one per split)."""
-    spec = get_spec(env)
-    train, val, test = spec.default_splits
+    train, val, test = get_task(env).default_splits
     total = train + val + test
     n_val = max(1, round(n * val / total))
     n_test = max(1, round(n * test / total))
@@ -107,7 +107,7 @@ def controller_units(env: str, n: int, seed: int) -> np.ndarray:
     """One Latin hypercube row per trajectory: stratified cover of the controller's parameter space."""
     from scipy.stats import qmc
 
-    dim = env_module(env).CONTROLLER_DIM
+    dim = get_simulator(env).controller_dim
     return qmc.LatinHypercube(d=dim, seed=np.random.default_rng([seed, 2])).random(n)
 
 
@@ -115,14 +115,13 @@ def trajectory_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([seed, 3, index]).generate_state(1)[0])
 
 
-def rollout(env: Any, module: Any, unit: np.ndarray, traj_seed: int, horizon: int, index: int) -> Trajectory:
+def rollout(env: Any, task: Task, unit: np.ndarray, traj_seed: int, horizon: int, index: int) -> Trajectory:
     """Roll out one controller for `horizon` steps, recording what the dataset stores."""
-    controller = module.make_controller(unit, np.random.default_rng(traj_seed))
+    controller = task.simulator.make_controller(unit, np.random.default_rng(traj_seed))
     obs = env.reset(traj_seed)
-    spec = module.SPEC
-    observations = np.zeros((horizon, spec.obs_dim), np.float32)
-    actions = np.zeros((horizon, spec.action_dim), np.float32)
-    features = np.zeros((horizon, len(spec.features)), np.float32)
+    observations = np.zeros((horizon, task.obs_dim), np.float32)
+    actions = np.zeros((horizon, task.action_dim), np.float32)
+    features = np.zeros((horizon, len(task.features)), np.float32)
     qpos0, qvel0 = env.get_state()
     qpos = np.zeros((horizon, len(qpos0)))
     qvel = np.zeros((horizon, len(qvel0)))
@@ -153,14 +152,14 @@ def make_worker_env(env_name: str, horizon: int) -> tuple[Any, Any]:
 
     warnings.filterwarnings("ignore")
     os.environ.setdefault("MUJOCO_GL", "egl")
-    module = env_module(env_name)
-    return module, module.make(horizon)
+    task = get_task(env_name)
+    return task, get_simulator(env_name).make_env(horizon)
 
 
-def _rollout_job(state: tuple[Any, Any], job: tuple[int, np.ndarray, int, int]) -> Trajectory:
-    module, env = state
+def _rollout_job(state: tuple[Task, Any], job: tuple[int, np.ndarray, int, int]) -> Trajectory:
+    task, env = state
     index, unit, traj_seed, horizon = job
-    return rollout(env, module, unit, traj_seed, horizon, index)
+    return rollout(env, task, unit, traj_seed, horizon, index)
 
 
 def _prepare_out(cfg: GenerateConfig) -> None:
@@ -182,9 +181,9 @@ def _finished(cfg: GenerateConfig, index: int) -> tuple[np.ndarray, bool] | None
     """Features and success of a trajectory an interrupted run already wrote, if it reads back whole."""
     if not trajectory_path(cfg.out, index).exists():
         return None
-    spec = get_spec(cfg.env)
-    meta = DatasetMeta(cfg.env, cfg.horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim,
-                       list(spec.features), {}, cfg.num_trajectories)
+    task = get_task(cfg.env)
+    meta = DatasetMeta(cfg.env, cfg.horizon, [asdict(f) for f in task.obs_layout], task.action_dim,
+                       list(task.features), {}, cfg.num_trajectories)
     try:
         traj = load_trajectory(cfg.out, index, meta)
     except LangprefError:
@@ -195,11 +194,11 @@ def _finished(cfg: GenerateConfig, index: int) -> tuple[np.ndarray, bool] | None
 def generate(cfg: GenerateConfig) -> dict[str, Any]:
     """Generate and store a dataset; returns a summary. Interrupted runs resume where they stopped."""
     cfg = cfg.resolved()
-    spec = get_spec(cfg.env)
+    task = get_task(cfg.env)
     _prepare_out(cfg)
     n = cfg.num_trajectories
     units = controller_units(cfg.env, n, cfg.seed)
-    features = np.zeros((n, len(spec.features)))
+    features = np.zeros((n, len(task.features)))
     success = np.zeros(n, bool)
     jobs = []
     for i in range(n):
@@ -222,9 +221,9 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
     meta = DatasetMeta(
         env=cfg.env,
         horizon=cfg.horizon,
-        obs_layout=[asdict(f) for f in spec.obs_layout],
-        action_dim=spec.action_dim,
-        feature_names=list(spec.features),
+        obs_layout=[asdict(f) for f in task.obs_layout],
+        action_dim=task.action_dim,
+        feature_names=list(task.features),
         splits=assign_splits(cfg.env, n, cfg.seed),
         num_trajectories=n,
         config={**cfg.identity(), "generator": "latin-hypercube waypoint controllers", "wall_s": round(wall, 1),

@@ -1,13 +1,18 @@
 """On-disk trajectory datasets: one compressed `.npz` per trajectory plus `meta.json` and a feature table.
 
-Layout of a dataset directory:
+Layout of a dataset directory (schema 2):
 
-    meta.json              schema version, env, horizon, observation layout, feature names, splits, generator config
+    meta.json              schema version, task (`env`), horizon (the longest episode), per-trajectory lengths when
+                           they differ, observation layout, feature names, splits, how it was made
     features.npy           (N, F) trajectory features theta(tau) (per-step features averaged over time)
-    trajectories/000123.npz  observations (T, obs_dim), actions (T, A), step_features (T, F), qpos (T, nq),
-                             qvel (T, nv), success (), seed (), controller_params (JSON string)
+    trajectories/000123.npz  observations (T, obs_dim), actions (T, A), step_features (T, F), success (), and when
+                             the trajectory was simulated: qpos (T, nq), qvel (T, nv), seed (), controller_params
+                             (JSON string); when it was recorded: source (the recording's episode name)
+    videos/000123.mp4      the recorded camera video of a trajectory (recorded datasets; simulated ones re-render)
+    task.json, utterances.json   the task and its bank, for a recorded task (see `langpref.tasks.taskfile`)
 
-Every load checks what it reads and fails with a one-line `LangprefError` saying what is wrong.
+Schema-1 datasets (every trajectory simulated, all of one length) load unchanged. Every load checks what it reads
+and fails with a one-line `LangprefError` saying what is wrong.
 """
 
 from __future__ import annotations
@@ -22,25 +27,31 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.tasks import register_task
+from langpref.tasks.taskfile import load_stored_task
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+READABLE_SCHEMAS = (1, 2)
 SPLITS = ("train", "val", "test")
-_ARRAYS = ("observations", "actions", "step_features", "qpos", "qvel")
+_ARRAYS = ("observations", "actions", "step_features")
+_STATE = ("qpos", "qvel")
 
 
 @dataclass
 class Trajectory:
-    """One rollout. `step_features[t]` is theta(s_t, a_t); `qpos/qvel[t]` is the simulator state at step t."""
+    """One trajectory. `step_features[t]` is theta(s_t, a_t); `qpos/qvel[t]` is the simulator state at step t (None
+    for a recorded trajectory, whose `source` names the recording's episode)."""
 
     index: int
     observations: np.ndarray
     actions: np.ndarray
     step_features: np.ndarray
-    qpos: np.ndarray
-    qvel: np.ndarray
+    qpos: np.ndarray | None
+    qvel: np.ndarray | None
     success: bool
-    seed: int
+    seed: int | None
     controller_params: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
 
     @property
     def features(self) -> np.ndarray:
@@ -63,10 +74,17 @@ class DatasetMeta:
     num_trajectories: int
     config: dict[str, Any] = field(default_factory=dict)
     schema_version: int = SCHEMA_VERSION
+    lengths: list[int] | None = None
+    """Steps of each trajectory when they differ (recordings); None when every one has `horizon` steps."""
+    videos: bool = False
+    """Whether every trajectory has a recorded video under `videos/` (else videos are rendered from the state)."""
 
     @property
     def obs_dim(self) -> int:
         return int(self.obs_layout[-1]["stop"])
+
+    def length(self, index: int) -> int:
+        return self.horizon if self.lengths is None else int(self.lengths[index])
 
 
 def trajectory_path(root: Path, index: int) -> Path:
@@ -78,13 +96,16 @@ def save_trajectory(root: Path, traj: Trajectory) -> Path:
     path = trajectory_path(root, traj.index)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(
-        tmp,
-        **{name: getattr(traj, name) for name in _ARRAYS},
-        success=np.asarray(traj.success),
-        seed=np.asarray(traj.seed),
-        controller_params=np.asarray(json.dumps(traj.controller_params)),
-    )
+    arrays = {name: getattr(traj, name) for name in _ARRAYS}
+    if traj.qpos is not None and traj.qvel is not None:
+        arrays.update(qpos=traj.qpos, qvel=traj.qvel)
+    arrays["success"] = np.asarray(traj.success)
+    if traj.seed is not None:
+        arrays["seed"] = np.asarray(traj.seed)
+    arrays["controller_params"] = np.asarray(json.dumps(traj.controller_params))
+    if traj.source is not None:
+        arrays["source"] = np.asarray(traj.source)
+    np.savez_compressed(tmp, **arrays)
     tmp.replace(path)
     return path
 
@@ -107,15 +128,18 @@ def _read_meta(root: Path) -> DatasetMeta:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise LangprefError(f"{path} is corrupt (not valid JSON: {exc}); regenerate the dataset") from None
     version = raw.get("schema_version") if isinstance(raw, dict) else None
-    if version != SCHEMA_VERSION:
+    if version not in READABLE_SCHEMAS:
         raise LangprefError(
-            f"{path} has dataset schema version {version!r}, this langpref reads version {SCHEMA_VERSION}; "
-            "regenerate the dataset with this version"
+            f"{path} has dataset schema version {version!r}, this langpref reads versions "
+            f"{', '.join(map(str, READABLE_SCHEMAS))}; regenerate the dataset with this version"
         )
     try:
-        return DatasetMeta(**raw)
+        meta = DatasetMeta(**raw)
     except TypeError as exc:
         raise LangprefError(f"{path} is not a valid dataset description ({exc}); regenerate the dataset") from None
+    if meta.lengths is not None and (len(meta.lengths) != meta.num_trajectories or max(meta.lengths) != meta.horizon):
+        raise LangprefError(f"{path}: 'lengths' must give one length per trajectory, the longest equal to 'horizon'")
+    return meta
 
 
 class Dataset:
@@ -150,16 +174,37 @@ class Dataset:
         indices = range(len(self)) if split is None else self.split(split)
         return [self.load(i) for i in indices]
 
-    def arrays(self, split: str) -> tuple[np.ndarray, np.ndarray]:
-        """(observations (N, T, obs_dim), actions (N, T, A)) of a split, stacked, float32."""
+    def arrays(self, split: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(observations (N, T, obs_dim), actions (N, T, A)) of a split (every trajectory when None), stacked,
+        float32. Shorter trajectories are padded to the horizon by repeating their last step: `lengths` says how
+        many steps are real, and the encoder averages over those only."""
         trajs = self.trajectories(split)
-        obs = np.stack([t.observations for t in trajs]).astype(np.float32)
-        act = np.stack([t.actions for t in trajs]).astype(np.float32)
-        return obs, act
+        return _stack([t.observations for t in trajs]), _stack([t.actions for t in trajs])
+
+    def lengths(self, split: str | None = None) -> np.ndarray | None:
+        """Steps of each trajectory of a split, or None when they all have `horizon` steps."""
+        if self.meta.lengths is None:
+            return None
+        indices = range(len(self)) if split is None else self.split(split)
+        return np.array([self.meta.lengths[i] for i in indices], dtype=np.int64)
+
+    def video_path(self, index: int) -> Path | None:
+        """The recorded video of a trajectory, or None when videos are rendered from the simulator state."""
+        return video_path(self.root, index) if self.meta.videos else None
 
     @cached_property
     def success(self) -> np.ndarray:
         return np.array([self.load(i).success for i in range(len(self))], dtype=bool)
+
+
+def _stack(arrays: list[np.ndarray]) -> np.ndarray:
+    horizon = max(len(a) for a in arrays)
+    return np.stack([a if len(a) == horizon else np.concatenate([a, np.repeat(a[-1:], horizon - len(a), axis=0)])
+                     for a in arrays]).astype(np.float32)
+
+
+def video_path(root: Path, index: int) -> Path:
+    return Path(root) / "videos" / f"{index:06d}.mp4"
 
 
 def load_trajectory(root: Path, index: int, meta: DatasetMeta) -> Trajectory:
@@ -171,34 +216,41 @@ def load_trajectory(root: Path, index: int, meta: DatasetMeta) -> Trajectory:
             data = {k: npz[k] for k in npz.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
         raise LangprefError(f"{path} is truncated or corrupt ({type(exc).__name__}); regenerate the dataset") from None
-    missing = [k for k in (*_ARRAYS, "success", "seed", "controller_params") if k not in data]
+    required = (*_ARRAYS, "success", *(("seed", "controller_params", *_STATE) if meta.schema_version == 1 else ()))
+    missing = [k for k in required if k not in data]
     if missing:
         raise LangprefError(f"{path} lacks {', '.join(missing)}; regenerate the dataset")
     obs, act, feats = data["observations"], data["actions"], data["step_features"]
-    if obs.shape != (meta.horizon, meta.obs_dim) or act.shape != (meta.horizon, meta.action_dim):
+    steps = meta.length(index)
+    if obs.shape != (steps, meta.obs_dim) or act.shape != (steps, meta.action_dim):
         raise LangprefError(
-            f"{path} has observations {obs.shape} and actions {act.shape}, meta.json says horizon {meta.horizon}, "
+            f"{path} has observations {obs.shape} and actions {act.shape}, meta.json says {steps} steps, "
             f"obs {meta.obs_dim}, action {meta.action_dim}; the dataset is mixed up, regenerate it"
         )
-    if feats.shape != (meta.horizon, len(meta.feature_names)):
+    if feats.shape != (steps, len(meta.feature_names)):
         raise LangprefError(f"{path} has step_features {feats.shape}, inconsistent with meta.json; regenerate it")
     return Trajectory(
         index=index,
         observations=obs,
         actions=act,
         step_features=feats,
-        qpos=data["qpos"],
-        qvel=data["qvel"],
+        qpos=data.get("qpos"),
+        qvel=data.get("qvel"),
         success=bool(data["success"]),
-        seed=int(data["seed"]),
-        controller_params=json.loads(str(data["controller_params"])),
+        seed=int(data["seed"]) if "seed" in data else None,
+        controller_params=json.loads(str(data["controller_params"])) if "controller_params" in data else {},
+        source=str(data["source"]) if "source" in data else None,
     )
 
 
 def load_dataset(root: str | Path, env: str | None = None) -> Dataset:
-    """Open a dataset; with `env`, also check it is a dataset of that env."""
+    """Open a dataset; with `env`, also check it is a dataset of that task. A dataset that carries its task (a
+    recorded one) registers it, so the task is known by name to every later step."""
     root = Path(root)
     meta = _read_meta(root)
+    stored = load_stored_task(root)
+    if stored is not None:
+        register_task(stored)
     if env is not None and meta.env != env:
         raise LangprefError(f"dataset {root} is a {meta.env} dataset, but {env} was asked for")
     fpath = root / "features.npy"

@@ -71,7 +71,7 @@ def run_alignment_experiment(env: str, data_dir: str | Path, out_dir: str | Path
         "data": str(data_dir),
         "cofinetune": rows["cofinetune"],
         "frozen": rows["frozen"],
-        "paper": PAPER[env],
+        "paper": PAPER.get(env),
         "train": result.results,
         "train_wall_s": train_s,
         "command": f"langpref experiment alignment --env {env} --data {data_dir} --out {out_dir}",
@@ -88,7 +88,7 @@ def alignment_table(summaries: list[dict[str, Any]]) -> str:
     sep = "|---|" + "---|---|" * len(summaries)
     lines = [head, sep]
     for key, label in (("cofinetune", "Co-finetune"), ("frozen", "Frozen language model")):
-        cells = " | ".join(f"{s[key]['accuracy']:.3f} | {s['paper'][key]:.3f}" for s in summaries)
+        cells = " | ".join(f"{s[key]['accuracy']:.3f} | " + (f"{s['paper'][key]:.3f}" if s['paper'] else "-") for s in summaries)
         lines.append(f"| {label} | {cells} |")
     per = []
     for s in summaries:

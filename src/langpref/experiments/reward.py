@@ -13,15 +13,23 @@ from __future__ import annotations
 
 import datetime
 import json
-import sys
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from langpref.experiments.improve import (RunCache, SweepConfig, cli_flags, command_line, default_paths, figure_link,
-                                         phrasing_variant, run_sweep, title_suffix)
+from langpref.experiments.common import (
+    RunCache,
+    SweepConfig,
+    cli_flags,
+    command_line,
+    default_paths,
+    figure_link,
+    phrasing_variant,
+    run_sweep,
+    title_suffix,
+)
 
 PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
               "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "

@@ -1,10 +1,11 @@
-"""The utterance bank: comparative language feedback per env, feature and direction, with its train/val/test splits.
+"""The utterance bank: comparative language feedback per task, feature and direction, with its train/val/test splits.
 
-The shipped bank (`language/data/utterances.json`) holds, per env, `split -> feature -> direction -> [phrasings]`.
-It starts from every original utterance of the paper's Appendix E (all in `train`) plus hand-written paraphrases.
+Each task brings its bank (`Task.utterances`): `split -> feature -> direction -> [phrasings]`. The built-in banks
+start from every original utterance of the paper's Appendix E (all in `train`) plus hand-written paraphrases.
 Paraphrase families stay within one split, and no val/test phrasing equals a train phrasing after `normalise`.
+A recorded task's bank may come unsplit (`feature -> direction -> [phrasings]`); `split_bank` splits it by phrasing.
 
-A user file (`--utterances FILE`) uses the plain schema of DESIGN.md, without splits:
+A user file (`--utterances FILE`) uses the plain schema of DESIGN.md, without splits, keyed by task name:
 `{"metaworld": {"speed": {"increase": ["Move faster."], "decrease": ["Move slower."]}}}`. It may give only some
 features and directions; keys starting with `_` (at any level) are comments and are ignored.
 
@@ -17,23 +18,18 @@ import json
 import string
 import unicodedata
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from langpref.errors import LangprefError
+from langpref.tasks import get_task, task_names
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 DIRECTIONS: tuple[str, ...] = ("increase", "decrease")
+SPLIT_SHARES = (0.6, 0.2, 0.2)  # the paper's real-robot bank: 297/99/100 phrasings
 
-# Canonical feature names, in canonical order. This mirrors `langpref.envs.get_spec(env).features` (a test checks
-# that they agree); it is repeated here so the language data can be loaded without importing the simulators' code.
-FEATURES: dict[str, tuple[str, ...]] = {
-    "metaworld": ("height", "speed", "distance_to_button"),
-    "robosuite": ("height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success"),
-}
-
-_BANK_RESOURCE = ("data", "utterances.json")
 _APOSTROPHES = {"'", "\u2019", "\u2018", "`"}
 
 
@@ -51,9 +47,9 @@ def normalise(text: str) -> str:
     return " ".join("".join(out).split())
 
 
-def _check_env(env: str) -> None:
-    if env not in FEATURES:
-        raise LangprefError(f"unknown env {env!r}: choose one of {', '.join(FEATURES)}")
+def _features(task: str) -> tuple[str, ...]:
+    """The task's feature names in canonical order (a one-line error for an unknown task)."""
+    return get_task(task).features
 
 
 @dataclass(frozen=True)
@@ -65,7 +61,7 @@ class Bank:
 
     @property
     def features(self) -> tuple[str, ...]:
-        return FEATURES[self.env]
+        return _features(self.env)
 
     def _check_split(self, split: str) -> None:
         if split not in self.phrasings:
@@ -114,7 +110,7 @@ def _type_name(value: Any) -> str:
 
 
 def _parse_phrasings(
-    section: Any, env: str, where: str, key: str, *, require_all: bool
+    section: Any, env: str, where: str, key: str, *, require_all: bool, valid: tuple[str, ...] | None = None
 ) -> dict[str, dict[str, tuple[str, ...]]]:
     """Validate a `feature -> direction -> [phrasings]` object; `key` is its dotted location for messages."""
     if not isinstance(section, dict):
@@ -122,7 +118,7 @@ def _parse_phrasings(
             f"{where}: {key} must be an object of features, got {_type_name(section)}; "
             f'e.g. {{"speed": {{"increase": ["Move faster."]}}}}'
         )
-    valid = FEATURES[env]
+    valid = valid or _features(env)
     out: dict[str, dict[str, tuple[str, ...]]] = {}
     entries = _visible(section)
     for feature in entries:
@@ -191,7 +187,7 @@ def _check_top(data: Any, where: str, allowed: tuple[str, ...]) -> dict[str, Any
     entries = _visible(data)
     for key in entries:
         if key not in allowed:
-            raise LangprefError(f"{where}: unknown env key {key!r}; valid envs: {', '.join(allowed)}")
+            raise LangprefError(f"{where}: unknown task key {key!r}; known tasks: {', '.join(allowed)}")
     return entries
 
 
@@ -199,7 +195,7 @@ def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tupl
     """Read a user's utterance file (DESIGN.md schema, no splits) and return `feature -> direction -> phrasings`
     for `env`: only the features and directions the file gives, in canonical order. Every env section present in the
     file is validated, not only `env`'s."""
-    _check_env(env)
+    _features(env)
     path = Path(path)
     where = f"utterances file {path}"
     if not path.exists():
@@ -212,7 +208,7 @@ def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tupl
         raise LangprefError(f"{where} is not UTF-8 text: {exc}") from None
     except OSError as exc:
         raise LangprefError(f"{where} cannot be read: {exc.strerror or exc}") from None
-    entries = _check_top(_read_json(text, where), where, tuple(FEATURES))
+    entries = _check_top(_read_json(text, where), where, task_names())
     parsed = {
         name: _parse_phrasings(section, name, where, name, require_all=False) for name, section in entries.items()
     }
@@ -224,39 +220,26 @@ def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tupl
     return parsed[env]
 
 
-def _bank_text() -> tuple[str, str]:
-    ref = resources.files("langpref.language").joinpath(*_BANK_RESOURCE)
-    where = f"shipped utterance bank {'/'.join(('langpref', 'language') + _BANK_RESOURCE)}"
-    try:
-        return ref.read_text(encoding="utf-8"), where
-    except (OSError, UnicodeDecodeError) as exc:
-        raise LangprefError(f"{where} cannot be read ({exc}); reinstall langpref") from None
-
-
-def _parse_bank(data: Any, env: str, where: str) -> Bank:
-    entries = _check_top(data, where, tuple(FEATURES))
-    if env not in entries:
-        raise LangprefError(f"{where} has no {env!r} section")
-    section = entries[env]
-    if not isinstance(section, dict):
-        raise LangprefError(f"{where}: {env} must be an object of splits, got {_type_name(section)}")
-    splits = _visible(section)
+def _parse_bank(data: Any, env: str, where: str, features: tuple[str, ...] | None = None) -> Bank:
+    if not isinstance(data, dict):
+        raise LangprefError(f"{where}: the top level must be an object of splits, got {_type_name(data)}")
+    splits = _visible(data)
     for split in splits:
         if split not in SPLITS:
-            raise LangprefError(f"{where}: unknown split {split!r} at {env}.{split}; valid splits: {', '.join(SPLITS)}")
+            raise LangprefError(f"{where}: unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
     phrasings: dict[str, dict[str, dict[str, tuple[str, ...]]]] = {}
     for split in SPLITS:
         if split not in splits:
-            raise LangprefError(f"{where}: {env} lacks split {split!r}")
-        phrasings[split] = _parse_phrasings(splits[split], env, where, f"{env}.{split}", require_all=True)
-    # No phrasing twice in an env (after normalise), so no val/test phrasing equals a train one.
+            raise LangprefError(f"{where}: the bank lacks split {split!r}")
+        phrasings[split] = _parse_phrasings(splits[split], env, where, split, require_all=True, valid=features)
+    # No phrasing twice in a task (after normalise), so no val/test phrasing equals a train one.
     seen: dict[str, str] = {}
     for split in SPLITS:
         for feature, by_direction in phrasings[split].items():
             for direction, texts in by_direction.items():
                 for text in texts:
                     key = normalise(text)
-                    here = f"{env}.{split}.{feature}.{direction}"
+                    here = f"{split}.{feature}.{direction}"
                     if key in seen:
                         raise LangprefError(f"{where}: {text!r} at {here} repeats a phrasing at {seen[key]}")
                     seen[key] = here
@@ -264,10 +247,71 @@ def _parse_bank(data: Any, env: str, where: str) -> Bank:
 
 
 def load_bank(env: str) -> Bank:
-    """The phrasings shipped with langpref for `env`, all splits, validated."""
-    _check_env(env)
-    text, where = _bank_text()
+    """The bank of task `env`, all splits, validated."""
+    source = get_task(env).utterances
+    where = f"utterance bank of task {env} ({source})"
+    try:
+        text = source.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LangprefError(f"{where} cannot be read ({exc})") from None
     return _parse_bank(_read_json(text, where), env, where)
 
 
-__all__ = ["DIRECTIONS", "FEATURES", "SPLITS", "Bank", "load_bank", "load_user_utterances", "normalise"]
+def check_bank(data: Any, task: str, features: tuple[str, ...], where: str) -> None:
+    """Check a split bank for a task not registered yet (`langpref import` checks before it writes anything)."""
+    _parse_bank(data, task, where, features)
+
+
+def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str, Any]:
+    """A task file's bank as `{train, val, test: {feature: {direction: [...]}}}`, ready to store with a dataset.
+
+    A bank given with `train`/`val`/`test` keys is used as given. An unsplit one (`{feature: {direction: [...]}}`)
+    is split by phrasing, seeded, in the paper's proportions (60/20/20), so every feature and direction has at least
+    one phrasing in every split; it then needs at least three distinct phrasings per feature and direction.
+    Phrasings are checked as every bank is (features, directions, no repeats) when the dataset's task is loaded.
+    """
+    where = f"utterances file {path}"
+    try:
+        data = _read_json(path.read_text(encoding="utf-8"), where)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LangprefError(f"{where} cannot be read ({exc})") from None
+    if not isinstance(data, dict):
+        raise LangprefError(f"{where}: the top level must be an object, got {_type_name(data)}")
+    data = _visible(data)
+    if set(data) & set(SPLITS):
+        return data
+    out: dict[str, Any] = {split: {} for split in SPLITS}
+    rng = np.random.default_rng([seed, 7])
+    for feature in features:
+        if feature not in data or not isinstance(data[feature], dict):
+            raise LangprefError(f"{where}: no phrasings for feature {feature!r} (the task's features: "
+                                f"{', '.join(features)})")
+        for split in SPLITS:
+            out[split][feature] = {}
+        for direction in DIRECTIONS:
+            texts = data[feature].get(direction)
+            if not isinstance(texts, list) or not all(isinstance(x, str) for x in texts):
+                raise LangprefError(f"{where}: {feature}.{direction} must be a list of phrasings")
+            distinct: dict[str, str] = {}
+            for text in texts:
+                distinct.setdefault(normalise(text), text.strip())
+            distinct.pop("", None)
+            unique = list(distinct.values())
+            if len(unique) < 3:
+                raise LangprefError(f"{where}: {feature}.{direction} has {len(unique)} distinct phrasing(s); an "
+                                    "unsplit bank needs at least 3 per feature and direction (one per split)")
+            order = [unique[i] for i in rng.permutation(len(unique))]
+            n_val = max(1, round(len(order) * SPLIT_SHARES[1]))
+            n_test = max(1, round(len(order) * SPLIT_SHARES[2]))
+            n_train = len(order) - n_val - n_test
+            parts = {"train": order[:n_train], "val": order[n_train:n_train + n_val], "test": order[n_train + n_val:]}
+            for split in SPLITS:
+                out[split][feature][direction] = parts[split]
+    unknown = sorted(set(data) - set(features))
+    if unknown:
+        raise LangprefError(f"{where}: unknown feature(s) {', '.join(unknown)}; the task's features: "
+                            f"{', '.join(features)}")
+    return out
+
+
+__all__ = ["DIRECTIONS", "SPLITS", "Bank", "load_bank", "load_user_utterances", "normalise", "check_bank", "split_bank"]

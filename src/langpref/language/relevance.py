@@ -55,11 +55,10 @@ class FeedbackGate:
         import torch
 
         from langpref.language.bank import load_bank
-        from langpref.model.encoders import LanguageEncoder, load_transformer
+        from langpref.language.transformer import SentenceEncoder, load_transformer
 
         tokenizer, transformer = load_transformer(GATE_LANG_MODEL)
-        # only its mean-pooled sentence embedding is read (`pooled_texts`); the linear head is never used
-        self._encoder = LanguageEncoder(tokenizer, transformer, latent_dim=1).eval()
+        self._encoder = SentenceEncoder(tokenizer, transformer).eval()
         self._vocab = set(tokenizer.get_vocab())
         self._torch = torch
         self._lock = threading.Lock()

@@ -27,10 +27,12 @@ import torch
 
 from langpref import __version__
 from langpref.errors import LangprefError
+from langpref.language.transformer import load_transformer
 from langpref.model.config import ModelConfig
-from langpref.model.encoders import (LanguageEncoder, TrajectoryEncoder, load_transformer, save_transformer,
-                                     step_input_dim)
+from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, save_transformer, step_input_dim
 from langpref.model.latent import DataInfo, LatentModel
+from langpref.tasks import register_task
+from langpref.tasks.taskfile import load_stored_task
 
 FORMAT = "langpref-latent-model"
 FORMAT_VERSION = 1
@@ -162,6 +164,9 @@ def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=Non
 
     path = Path(path)
     cfg = read_config(path)
+    stored = load_stored_task(path)  # a model of a recorded task carries it: its task is known wherever it goes
+    if stored is not None:
+        register_task(stored)
     if WEIGHTS not in cfg["files"]:
         raise LangprefError(f"{path / CONFIG} lists no {WEIGHTS}; retrain the model")
     _check_files(path, cfg["files"])

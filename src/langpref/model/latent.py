@@ -82,15 +82,19 @@ class LatentModel(nn.Module):
                                 f"action {self.info.action_dim}); regenerate the data or retrain the model")
 
     @torch.no_grad()
-    def encode_trajectories(self, obs: np.ndarray, actions: np.ndarray, batch_size: int = 64) -> torch.Tensor:
-        """phi (N, D) of raw observations (N, T, obs_dim) and actions (N, T, A)."""
+    def encode_trajectories(self, obs: np.ndarray, actions: np.ndarray, batch_size: int = 64,
+                            lengths: np.ndarray | None = None) -> torch.Tensor:
+        """phi (N, D) of raw observations (N, T, obs_dim) and actions (N, T, A); with `lengths`, trajectory i has
+        lengths[i] real steps and padding after them (`Dataset.arrays`)."""
         if obs.shape[-1] != self.info.obs_dim or actions.shape[-1] != self.info.action_dim:
             raise LangprefError(f"trajectories have obs {obs.shape[-1]} / action {actions.shape[-1]} dims, the model "
                                 f"expects {self.info.obs_dim} / {self.info.action_dim}")
         was_training = self.training
         self.eval()
         steps = step_inputs(obs, actions, self.traj.observation_deltas)
-        out = [self.traj(torch.from_numpy(steps[i:i + batch_size]).to(self.device))
+        lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
+        out = [self.traj(torch.from_numpy(steps[i:i + batch_size]).to(self.device),
+                         None if lens is None else lens[i:i + batch_size])
                for i in range(0, len(steps), batch_size)]
         self.train(was_training)
         return torch.cat(out) if out else torch.zeros(0, self.prototypes.shape[1], device=self.device)
@@ -98,13 +102,8 @@ class LatentModel(nn.Module):
     def encode_dataset(self, dataset, split: str | None = None) -> torch.Tensor:
         """phi of the trajectories of one split (all of them when `split` is None), in dataset order."""
         self.check_dataset(dataset)
-        if split is None:
-            trajs = dataset.trajectories()
-            obs = np.stack([t.observations for t in trajs]).astype(np.float32)
-            act = np.stack([t.actions for t in trajs]).astype(np.float32)
-        else:
-            obs, act = dataset.arrays(split)
-        return self.encode_trajectories(obs, act)
+        obs, act = dataset.arrays(split)
+        return self.encode_trajectories(obs, act, lengths=dataset.lengths(split))
 
     @torch.no_grad()
     def encode_texts(self, texts: Sequence[str]) -> torch.Tensor:

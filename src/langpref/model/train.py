@@ -47,6 +47,7 @@ from langpref.model.encoders import freeze, normalisation_stats, step_inputs
 from langpref.model.evaluate import alignment_counts
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import latent_loss
+from langpref.tasks.taskfile import stored_task_files
 
 
 @dataclass
@@ -92,6 +93,7 @@ class _Split:
                                 "least 2 in train and val")
         obs, act = dataset.arrays(name)
         self.steps = torch.from_numpy(step_inputs(obs, act, observation_deltas)).to(device)
+        self.lengths = dataset.lengths(name)  # None: every trajectory has `horizon` steps
         self.features = dataset.features[idx]
         self.pairs: Pairs = build_pairs(self.features, thresholds)
         if len(self.pairs) == 0:
@@ -133,7 +135,7 @@ class Trainer:
         deltas = cfg.model.observation_deltas
         self.train = _Split(self.dataset, "train", thresholds, self.device, deltas)
         self.val = _Split(self.dataset, "val", thresholds, self.device, deltas)
-        mean, std = normalisation_stats(self.train.steps.cpu().numpy())
+        mean, std = normalisation_stats(self.train.steps.cpu().numpy(), self.train.lengths)
         info = DataInfo(env=meta.env, feature_names=names, obs_layout=[dict(x) for x in meta.obs_layout],
                         obs_dim=meta.obs_dim, action_dim=meta.action_dim, horizon=meta.horizon,
                         schema_version=meta.schema_version, tie_thresholds=thresholds.tolist(),
@@ -150,32 +152,42 @@ class Trainer:
 
     # ---- pieces shared by both stages ------------------------------------------------------------------------------
 
-    def _time_index(self, n: int, horizon: int) -> torch.Tensor | None:
+    def _time_index(self, n: int, horizon: int, lengths: np.ndarray | None = None) -> torch.Tensor | None:
         """Stratified time steps for a training step: one random step in each of `time_samples` equal segments of
-        the horizon, drawn afresh per trajectory (None: every step). The mean of the per-step embeddings over them is
-        an unbiased estimate of the mean over all steps, at a fraction of the cost; evaluation always uses all."""
+        the horizon (of each trajectory's own length when they differ), drawn afresh per trajectory (None: every
+        step). The mean of the per-step embeddings over them is an unbiased estimate of the mean over all steps, at
+        a fraction of the cost; evaluation always uses all."""
         k = self.cfg.time_samples
-        if k <= 0 or k >= horizon:
+        if k <= 0 or (k >= horizon and lengths is None):
             return None
-        edges = np.linspace(0, horizon, k + 1)
-        lo, width = edges[:-1], np.diff(edges)
-        t = np.floor(lo + self.rng.random((n, k)) * width).astype(np.int64)
-        return torch.as_tensor(np.minimum(t, horizon - 1), device=self.device)
+        if lengths is None:
+            edges = np.linspace(0, horizon, k + 1)
+            lo, width = edges[:-1], np.diff(edges)
+            t = np.floor(lo + self.rng.random((n, k)) * width).astype(np.int64)
+            return torch.as_tensor(np.minimum(t, horizon - 1), device=self.device)
+        frac = (np.arange(k) + self.rng.random((n, k))) / k  # stratified in [0, 1), scaled to each length
+        t = np.floor(frac * lengths[:, None]).astype(np.int64)
+        return torch.as_tensor(np.minimum(t, lengths[:, None] - 1), device=self.device)
 
     def _phi(self, split: _Split, a: np.ndarray, b: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """phi_A, phi_B of a batch, computing phi once per distinct trajectory."""
         both = np.concatenate([a, b])
         uniq, inv = np.unique(both, return_inverse=True)
         rows = torch.as_tensor(uniq, device=self.device)
-        t = self._time_index(len(uniq), split.steps.shape[1])
-        steps = split.steps[rows] if t is None else split.steps[rows.unsqueeze(1), t]
-        phi = self.model.traj(steps)
+        lengths = None if split.lengths is None else split.lengths[uniq]
+        t = self._time_index(len(uniq), split.steps.shape[1], lengths)
+        if t is None:
+            lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
+            phi = self.model.traj(split.steps[rows], lens)
+        else:
+            phi = self.model.traj(split.steps[rows.unsqueeze(1), t])
         inv_t = torch.as_tensor(inv, device=self.device)
         return phi[inv_t[:len(a)]], phi[inv_t[len(a):]]
 
     @torch.no_grad()
     def _val_accuracy(self, pooled_val: torch.Tensor) -> float:
-        phi = self.model.traj(self.val.steps).double().cpu()
+        lens = None if self.val.lengths is None else torch.as_tensor(self.val.lengths, device=self.device)
+        phi = self.model.traj(self.val.steps, lens).double().cpu()
         psi = self.model.lang.head(pooled_val).double().cpu()
         correct, total = alignment_counts(phi, psi, self.val.pairs, self.val_phr.group_ids,
                                           len(self.val_phr.feature_names))
@@ -351,7 +363,7 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
                              title=f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}")
         return save_model(model, out, model_cfg=cfg.model, lang_finetuned=lang_finetuned,
                           train_config=cfg.to_dict(), history=history, results=results, force=force,
-                          extra_files={"training_curve.png": curve})
+                          extra_files={"training_curve.png": curve, **stored_task_files(trainer.dataset.root)})
 
 
 @contextmanager

@@ -33,7 +33,8 @@ from langpref.study import db as sdb
 from langpref.study.config import METHODS, StudyConfig
 from langpref.study.engine import StudyEngine, StudyRobot
 from langpref.study.flow import AnswerError, Participant, Step, advance, first_step, parse_answer, progress, questions
-from langpref.study.surveys import METHOD_LABELS, SURVEY_TITLES, TASKS
+from langpref.study.hook import ShowHook
+from langpref.study.surveys import METHOD_LABELS, SURVEY_TITLES, task_text
 from langpref.study.videos import VideoCache
 
 log = logging.getLogger("langpref.study")
@@ -68,15 +69,17 @@ def _decode(body: bytes, allow_empty: bool = False) -> Any:
 
 
 class StudyApp:
-    """Everything a request needs: the database path, the engine, the video cache and the admin token."""
+    """Everything a request needs: the database path, the engine, the video cache, the admin token and the
+    `--on-show` hook (told of every step handed out; it never blocks a request)."""
 
     def __init__(self, db_path: str | Path, engine: StudyEngine, videos: VideoCache, admin_token: str,
-                 cfg: StudyConfig | None = None):
+                 cfg: StudyConfig | None = None, hook: ShowHook | None = None):
         self.db_path = str(db_path)
         self.engine = engine
         self.cfg = cfg or engine.cfg
         self.videos = videos
         self.admin_token = admin_token
+        self.hook = hook
         self.robot = StudyRobot(engine, self._history)
         self._locks: dict[str, threading.Lock] = {}
         self._locks_guard = threading.Lock()
@@ -92,12 +95,9 @@ class StudyApp:
             conn = self._local.conn = sdb.connect(self.db_path)
         return conn
 
-    def _history(self, pid: str, method: str) -> list[tuple]:
-        if method == "language":
-            sql = "SELECT shown, text FROM feedback WHERE participant_id=? AND phase='pref_language' ORDER BY number"
-        else:
-            sql = "SELECT a, b, choice FROM comparisons WHERE participant_id=? ORDER BY number"
-        return [tuple(r) for r in self.connect().execute(sql, (pid,))]
+    def _history(self, pid: str, method: str) -> list[Any]:
+        """The participant's stored Study-2 answers of `method`, in order, as its feedback kind's answers."""
+        return sdb.stored_answers(self.connect(), pid, method)
 
     def _lock(self, pid: str) -> threading.Lock:
         with self._locks_guard:
@@ -173,6 +173,8 @@ class StudyApp:
         if row["first_shown_at"] is None:
             conn.execute("UPDATE steps SET first_shown_at=? WHERE participant_id=? AND seq=? AND "
                          "first_shown_at IS NULL", (time.time(), pid, step.seq))
+        if self.hook is not None:
+            self.hook.show(pid, step.seq, step.kind, step.shown)
         return self.step_json(step)
 
     def answer(self, pid: str, token: str | None, body: bytes) -> dict[str, Any]:
@@ -185,7 +187,7 @@ class StudyApp:
                 ans = parse_answer(data, step)
             except AnswerError as exc:
                 raise HttpError(exc.status, str(exc)) from None
-            if ans.kind == "language" and not self.engine.gate.score(ans.value).ok:
+            if ans.kind == "language" and not self.engine.gate.score(ans.value.text).ok:
                 raise HttpError(400, NOT_FEEDBACK)
             received = time.time()
             try:
@@ -201,6 +203,8 @@ class StudyApp:
             except BaseException:
                 self.robot.forget(pid)
                 raise
+            if self.hook is not None:
+                self.hook.show(pid, tr.next.seq, tr.next.kind, tr.next.shown)
             return self.step_json(tr.next)
 
     def _store(self, conn, p: Participant, step: Step, row: dict, ans, data: dict, tr, received: float) -> None:
@@ -254,7 +258,8 @@ class StudyApp:
                         "created_at": p["created_at"], "finished_at": p["finished_at"], "phase": step.phase,
                         "kind": step.kind, "progress": progress(self.cfg, step), "answers": n_answers,
                         "recent_feedback": feedback})
-        return {"participants": out, "videos": self.videos.progress(), "study": self.cfg.to_dict()}
+        return {"participants": out, "videos": self.videos.progress(), "study": self.cfg.to_dict(),
+                "hooks": self.hook.status() if self.hook else None}
 
     def admin_export(self) -> dict[str, Any]:
         from langpref.study.export import analyse, read_tables
@@ -266,7 +271,7 @@ class StudyApp:
     # ---- pages ----
 
     def page(self, name: str) -> str:
-        task = TASKS.get(self.engine.env, TASKS["metaworld"])
+        task = task_text(self.engine.env)
         c = self.cfg
         values = {
             "ROBOT": task["robot"], "TASK": task["task"],
@@ -342,7 +347,7 @@ def create_app(state: StudyApp) -> FastAPI:
 
     @app.get("/api/info")
     def info():
-        task = TASKS.get(state.engine.env, TASKS["metaworld"])
+        task = task_text(state.engine.env)
         return {"env": state.engine.env, "task": task, "study": state.cfg.to_dict(),
                 "methods": {m: METHOD_LABELS[m] for m in METHODS}}
 
@@ -390,6 +395,7 @@ def create_app(state: StudyApp) -> FastAPI:
         state.check_admin(request.headers.get("authorization"))
         conn = state.connect()
         counts = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in sdb.TABLES}
-        return {"videos": state.videos.progress(), "rows": counts, "engine": state.engine.describe()}
+        return {"videos": state.videos.progress(), "rows": counts, "engine": state.engine.describe(),
+                "hooks": state.hook.status() if state.hook else None}
 
     return app

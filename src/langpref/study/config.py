@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from langpref.errors import LangprefError
+from langpref.study.hook import parse_command
 
 METHODS = ("language", "comparison")
 VIDEO_FORMATS = ("webm", "mp4")
@@ -54,10 +56,12 @@ class StudyConfig:
 
 @dataclass
 class VideoConfig:
-    """How study videos are rendered (one frame per `stride` stored steps, played at `fps`)."""
+    """How study videos are served: their format, and for a simulated dataset how they are rendered (one frame per
+    `stride` stored steps, played at `fps`); a recorded dataset's videos keep their own size and frame rate."""
 
     format: str = "webm"
-    """`webm` (VP9, plays in Debian's Chromium and every current browser) or `mp4` (H.264)."""
+    """`webm` (VP9, plays in Debian's Chromium and every current browser) or `mp4` (H.264); a recorded video in
+    another format is transcoded once."""
     width: int = 320
     height: int = 240
     fps: int = 30
@@ -79,7 +83,7 @@ class ServeConfig:
     model: str = ""
     """Checkpoint directory (`langpref train`)."""
     data: str = ""
-    """Dataset directory (`langpref generate`)."""
+    """Dataset directory (`langpref generate`, or `langpref import` for a recording with its videos)."""
     db: str = "study.sqlite"
     """SQLite database; created on first start, continued on later ones."""
     videos: str | None = None
@@ -92,6 +96,11 @@ class ServeConfig:
     """Render every study video in the background at start (with progress), so that no participant waits."""
     torch_threads: int = 1
     """Torch threads per request; requests of different participants run in parallel threads."""
+    on_show: str | None = None
+    """Command line run (without a shell) before each trajectory is shown, e.g. to replay it on the real robot;
+    what to show comes in LANGPREF_* environment variables (see `langpref.study.hook`)."""
+    on_show_timeout: float = 60.0
+    """Seconds an `on_show` run may take before it is killed and reported as timed out."""
     study: StudyConfig = field(default_factory=StudyConfig)
     video: VideoConfig = field(default_factory=VideoConfig)
 
@@ -104,5 +113,15 @@ class ServeConfig:
             raise LangprefError(f"--port must be 0..65535, got {self.port}")
         if self.admin_token is not None and len(self.admin_token) < 16:
             raise LangprefError("--admin-token must be at least 16 characters (or leave it out for a random one)")
+        if self.on_show is not None:
+            try:
+                program = parse_command(self.on_show)[0]
+            except ValueError as exc:
+                raise LangprefError(f"--on-show {self.on_show!r} is not a command line ({exc})") from None
+            if shutil.which(program) is None:
+                raise LangprefError(f"--on-show: program {program!r} not found or not executable; give its path or "
+                                    "put it on PATH")
+        if not self.on_show_timeout > 0:
+            raise LangprefError(f"--on-show-timeout must be > 0 seconds, got {self.on_show_timeout}")
         self.study.validate()
         self.video.validate()

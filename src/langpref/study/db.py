@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
+from langpref.feedback.kind import get_kind
 
 SCHEMA_VERSION = 1
 
@@ -230,3 +231,16 @@ def open_existing(path: str | Path) -> sqlite3.Connection:
 
 def rows(conn: sqlite3.Connection, sql: str, args: tuple = ()) -> list[dict[str, Any]]:
     return [dict(r) for r in conn.execute(sql, args)]
+
+
+def method_rows(rows: list[dict[str, Any]], method: str) -> list[dict[str, Any]]:
+    """The Study-2 answers of `method` among rows of its feedback kind's table: Study 1's language feedback shares the
+    `feedback` table, where every row says its phase."""
+    return [r for r in rows if r.get("phase", f"pref_{method}") == f"pref_{method}"]
+
+
+def stored_answers(conn: sqlite3.Connection, participant_id: str, method: str) -> list[Any]:
+    """A participant's stored Study-2 answers of `method`, in query order, as the kind's typed answers."""
+    kind = get_kind(method)
+    found = rows(conn, f"SELECT * FROM {kind.table} WHERE participant_id=? ORDER BY number", (participant_id,))
+    return [kind.from_record(r) for r in method_rows(found, method)]

@@ -5,8 +5,9 @@
   feedback on the robot's motion is refused first (`langpref.language.relevance.FeedbackGate`);
 - the improvement step of Study 1 (paper Eq. 4, its cosine reading: `langpref.improve.improvement_step`) over the
   study set;
-- one reward learner per participant and method (`langpref.reward.RewardLearner`, explicit + implicit losses for
-  language via `language_pairs`, Bradley-Terry for comparisons via `comparison_pairs`), refit after every answer;
+- one reward learner per participant and method (`langpref.reward.RewardLearner`), fed by the method's feedback kind
+  (`langpref.feedback.kind`: its `pairs`, explicit + implicit losses for language, Bradley-Terry for comparisons),
+  refit after every answer;
 - which trajectories each query shows (random, as in the paper, fixed by the study and participant seeds).
 
 The database is the only state that counts: a learner lost with a restart is rebuilt by replaying the participant's
@@ -25,15 +26,16 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.types import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
+from langpref.feedback.kind import get_kind
+from langpref.feedback.language import LanguageAnswer
 from langpref.improve import improvement_step
 from langpref.language.relevance import FeedbackGate
-from langpref.reward import RewardConfig, RewardLearner, comparison_pairs, language_pairs
+from langpref.reward import RewardConfig, RewardLearner
 from langpref.study.config import METHODS, StudyConfig
 from langpref.study.flow import Participant
 
-# method -> its stored answers in order: language [(shown, text)], comparison [(a, b, choice)]
-History = Callable[[str, str], list[tuple]]
+History = Callable[[str, str], list[Any]]
+"""(participant id, method) -> the participant's stored answers of that method, in order, as the kind's answers."""
 
 
 class _TextCache:
@@ -159,15 +161,14 @@ class StudyRobot:
         """Study 1 starts from a random trajectory that fails the task (any, if none fails)."""
         return int(self._rng(p, 0).choice(self.engine.failed))
 
-    def language_query(self, p: Participant, number: int) -> int:
-        """Query `number` (1-based): one pass over the study set in a random order, then another."""
-        study = self.engine.study
-        cycle, pos = divmod(number - 1, len(study))
-        return int(self._rng(p, 1, cycle).permutation(study)[pos])
-
-    def comparison_query(self, p: Participant, number: int) -> tuple[int, int]:
-        a, b = self._rng(p, 2, number).choice(self.engine.study, size=2, replace=False)
-        return int(a), int(b)
+    def query(self, p: Participant, method: str, number: int) -> tuple[int, ...]:
+        """What query `number` (1-based) of `method` shows. One trajectory (language): one pass over the study set in
+        a random order, then another; several (comparison): distinct ones drawn afresh for every query."""
+        study, shows = self.engine.study, get_kind(method).shows
+        if shows == 1:
+            cycle, pos = divmod(number - 1, len(study))
+            return (int(self._rng(p, 1, cycle).permutation(study)[pos]),)
+        return tuple(int(i) for i in self._rng(p, 2, number).choice(study, size=shows, replace=False))
 
     # ---- Study 1 ----
 
@@ -180,15 +181,13 @@ class StudyRobot:
         return RewardLearner(self.engine.space.dim, self.engine.reward_cfg,
                              seed=int(self._rng(p, 3, METHODS.index(method)).integers(2**31)))
 
-    def _add(self, learner: RewardLearner, p: Participant, method: str, number: int, item: tuple) -> None:
-        space = self.engine.space
-        if method == "language":
-            shown, text = item
-            answer = LanguageAnswer(LanguageQuery(int(shown)), self.engine.normalise(text))
-            learner.add(language_pairs(space, answer, self.engine.reward_cfg, self._rng(p, 4, number)))
-        else:
-            a, b, choice = item
-            learner.add(comparison_pairs(space, ComparisonAnswer(ComparisonQuery(int(a), int(b)), int(choice))))
+    def _add(self, learner: RewardLearner, p: Participant, method: str, number: int, answer: Any) -> None:
+        """Answer `number` of `method` as its kind's pairs; language read with its whitespace collapsed, as the text
+        cache keys it."""
+        if isinstance(answer, LanguageAnswer):
+            answer = replace(answer, text=self.engine.normalise(answer.text))
+        pairs = get_kind(method).pairs(self.engine.space, answer, self.engine.reward_cfg, self._rng(p, 4, number))
+        learner.add(pairs)
 
     def _learner(self, p: Participant, method: str, answered: int) -> RewardLearner:
         """The learner of (participant, method) that has seen the first `answered` stored answers."""
@@ -201,8 +200,8 @@ class StudyRobot:
         past = self.history(p.id, method)[:answered]
         if len(past) != answered:
             raise LangprefError(f"participant {p.id} has {len(past)} stored {method} answers, expected {answered}")
-        for i, item in enumerate(past, start=1):
-            self._add(learner, p, method, i, item)
+        for i, answer in enumerate(past, start=1):
+            self._add(learner, p, method, i, answer)
         learner.fit()
         return learner
 
@@ -213,18 +212,13 @@ class StudyRobot:
             while len(self._learners) > self.max_cached:
                 self._learners.popitem(last=False)
 
-    def learn_language(self, p: Participant, number: int, shown: int, text: str) -> dict[str, Any]:
-        learner = self._learner(p, "language", number - 1)
-        self._add(learner, p, "language", number, (shown, text))
+    def learn(self, p: Participant, method: str, number: int, answer: Any) -> dict[str, Any] | None:
+        """Refit the learner of `method` with answer `number`; how the model read it, for language (else None)."""
+        learner = self._learner(p, method, number - 1)
+        self._add(learner, p, method, number, answer)
         learner.fit()
-        self._keep(p, "language", learner, number)
-        return self.engine.understand(text)
-
-    def learn_comparison(self, p: Participant, number: int, a: int, b: int, choice: int) -> None:
-        learner = self._learner(p, "comparison", number - 1)
-        self._add(learner, p, "comparison", number, (a, b, choice))
-        learner.fit()
-        self._keep(p, "comparison", learner, number)
+        self._keep(p, method, learner, number)
+        return self.engine.understand(answer.text) if isinstance(answer, LanguageAnswer) else None
 
     def best(self, p: Participant, method: str) -> int:
         """argmax of the reward learned so far over the study set."""

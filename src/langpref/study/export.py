@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from langpref.feedback.kind import get_kind
 from langpref.study import db as sdb
 from langpref.study.config import METHODS
 from langpref.study.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM, PREF_LIKERT
@@ -139,13 +140,10 @@ def analyse(tables: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
 
     # ---- Study 2: time per query ----
     times: dict[str, dict[str, list[float]]] = {m: {} for m in METHODS}
-    for r in tables["feedback"]:
-        if r["phase"] == "pref_language":
-            times["language"].setdefault(r["participant_id"], []).append(
+    for m in METHODS:
+        for r in sdb.method_rows(tables[get_kind(m).table], m):
+            times[m].setdefault(r["participant_id"], []).append(
                 r["client_ms"] if r["client_ms"] is not None else r["server_ms"])
-    for r in tables["comparisons"]:
-        times["comparison"].setdefault(r["participant_id"], []).append(
-            r["client_ms"] if r["client_ms"] is not None else r["server_ms"])
     t_out: dict[str, Any] = {}
     for m in METHODS:
         every = [t / 1000.0 for ts in times[m].values() for t in ts]

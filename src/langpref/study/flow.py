@@ -8,6 +8,10 @@ Nothing here touches the database or the model: `advance` gets the current `Step
 (the learning side, `langpref.study.engine`), and returns the next `Step` with the rows to store. The app writes both
 in one transaction. Every step fixes what it shows when it is made, so showing it again (a reload, a restart)
 shows the same thing.
+
+The robot's feedback (language and comparison steps) goes one way for either kind: the kind
+(`langpref.feedback.kind`) parses the answer into its typed answer, says what of it is stored, and the robot learns
+from it; each Study-2 method is the kind of its name.
 """
 
 from __future__ import annotations
@@ -18,14 +22,15 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from langpref.errors import LangprefError
-from langpref.study.config import StudyConfig
+from langpref.feedback.kind import get_kind
+from langpref.study.config import METHODS, StudyConfig
 from langpref.study.surveys import SURVEYS, validate_answers
 
 PHASES = ("pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey", "done")
 KINDS = ("survey", "language", "comparison", "satisfaction", "rating", "done")
-ANSWER_KEYS = {"answers": "survey", "feedback": "language", "choice": "comparison", "satisfied": "satisfaction",
+ANSWER_KEYS = {"answers": "survey", **{get_kind(m).answer_key: m for m in METHODS}, "satisfied": "satisfaction",
                "rating": "rating"}
-MAX_FEEDBACK = 500
+"""The field of an answer body that says its kind of step (the feedback kinds' own fields in the middle)."""
 MAX_CLIENT_MS = 24 * 3600 * 1000
 
 
@@ -77,6 +82,8 @@ class Step:
 
 @dataclass(frozen=True)
 class Answer:
+    """A checked answer to a step; `value` is the feedback kind's typed answer on language and comparison steps."""
+
     kind: str
     value: Any
     client_ms: float | None = None
@@ -89,13 +96,11 @@ class Robot(Protocol):
 
     def improve(self, p: Participant, shown: int, text: str) -> tuple[int, dict[str, Any]]: ...
 
-    def learn_language(self, p: Participant, number: int, shown: int, text: str) -> dict[str, Any]: ...
+    def query(self, p: Participant, method: str, number: int) -> tuple[int, ...]:
+        """The trajectories query `number` (1-based) of a Study-2 method shows."""
 
-    def learn_comparison(self, p: Participant, number: int, a: int, b: int, choice: int) -> None: ...
-
-    def language_query(self, p: Participant, number: int) -> int: ...
-
-    def comparison_query(self, p: Participant, number: int) -> tuple[int, int]: ...
+    def learn(self, p: Participant, method: str, number: int, answer: Any) -> dict[str, Any] | None:
+        """Learn from answer `number` of `method`; how the robot read it (language), or None."""
 
     def best(self, p: Participant, method: str) -> int: ...
 
@@ -141,34 +146,25 @@ def parse_answer(body: Any, step: Step) -> Answer:
     if "seq" in body and body["seq"] != step.seq:
         raise WrongStep(f"step {body['seq']!r} was already answered; the current step is {step.seq}")
     client_ms = None
-    if kind in ("language", "comparison"):
+    if kind in METHODS:
         client_ms = float(_number(body, "client_ms", 0, MAX_CLIENT_MS, "the milliseconds from showing the videos to "
                                   "the answer (a number >= 0)", integer=False))
-    if kind == "survey":
-        try:
-            value: Any = validate_answers(step.survey or "", body["answers"])
-        except AnswerError:
-            raise
-        except LangprefError as exc:
-            raise AnswerError(str(exc)) from None
-    elif kind == "language":
-        text = body["feedback"]
-        if not isinstance(text, str):
-            raise AnswerError("'feedback' must be text")
-        text = text.strip()
-        if not text:
-            raise AnswerError("Please type your feedback before continuing (for example: \"Move faster.\").")
-        if len(text) > MAX_FEEDBACK:
-            raise AnswerError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
-        value = text
-    elif kind == "comparison":
-        value = _number(body, "choice", 0, 1, "0 (the left/first video) or 1 (the right/second video)", integer=True)
-    elif kind == "satisfaction":
-        value = body["satisfied"]
-        if not isinstance(value, bool):
-            raise AnswerError("'satisfied' must be true or false")
-    else:
-        value = _number(body, "rating", 1, 5, "an integer from 1 to 5", integer=True)
+    try:
+        if kind in METHODS:
+            feedback = get_kind(kind)
+            value: Any = feedback.parse(body[feedback.answer_key], feedback.query(*step.shown))
+        elif kind == "survey":
+            value = validate_answers(step.survey or "", body["answers"])
+        elif kind == "satisfaction":
+            value = body["satisfied"]
+            if not isinstance(value, bool):
+                raise AnswerError("'satisfied' must be true or false")
+        else:
+            value = _number(body, "rating", 1, 5, "an integer from 1 to 5", integer=True)
+    except AnswerError:
+        raise
+    except LangprefError as exc:
+        raise AnswerError(str(exc)) from None
     return Answer(kind, value, client_ms)
 
 
@@ -181,8 +177,7 @@ class Transition:
 
 def _query(p: Participant, robot: Robot, seq: int, method: str, q: int) -> Step:
     """Query number `q` (1-based) of a Study-2 method; the kind of step is the method's name."""
-    shown = (robot.language_query(p, q),) if method == "language" else robot.comparison_query(p, q)
-    return Step(seq, f"pref_{method}", method, tuple(shown), number=q)
+    return Step(seq, f"pref_{method}", method, tuple(robot.query(p, method, q)), number=q)
 
 
 def _pref_start(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, method: str) -> Step:
@@ -214,10 +209,11 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
     if step.phase == "improve":
         shown = step.shown[0]
         if step.kind == "language":
-            improved, understood = robot.improve(p, shown, answer.value)
-            row = {"phase": "improve", "number": step.number + 1, "shown": shown, "text": answer.value,
+            text = answer.value.text
+            improved, understood = robot.improve(p, shown, text)
+            row = {"phase": "improve", "number": step.number + 1, "shown": shown, "text": text,
                    "improved": improved, **_understood_columns(understood), **timing}
-            extra = {"understood": {**understood, "text": answer.value}, "previous": shown,
+            extra = {"understood": {**understood, "text": text}, "previous": shown,
                      "unchanged": improved == shown}
             return Transition(Step(seq, "improve", "satisfaction", (improved,), number=step.number + 1, extra=extra),
                               [("feedback", row)])
@@ -236,17 +232,14 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
         return Transition(_query(p, robot, seq, method, step.number + 1), [("ratings", row)])
 
     q = step.number
+    kind, feedback = get_kind(method), answer.value
+    understood = robot.learn(p, method, q, feedback)
+    row = {**kind.to_record(feedback), "number": q, **timing}
     extra: dict[str, Any] = {}
-    if step.kind == "language":
-        understood = robot.learn_language(p, q, step.shown[0], answer.value)
-        records = [("feedback", {"phase": step.phase, "number": q, "shown": step.shown[0], "text": answer.value,
-                                 "improved": None, **_understood_columns(understood), **timing})]
-        extra = {"understood": {**understood, "text": answer.value}}
-    else:
-        a, b = step.shown
-        robot.learn_comparison(p, q, a, b, answer.value)
-        records = [("comparisons", {"number": q, "a": a, "b": b, "choice": answer.value,
-                                    "preferred": b if answer.value else a, **timing})]
+    if understood is not None:  # language: its reading is stored (the feedback table, Study 1's too, says the phase)
+        row.update(phase=step.phase, improved=None, **_understood_columns(understood))
+        extra = {"understood": {**understood, "text": feedback.text}}
+    records = [(kind.table, row)]
     if q in cfg.rating_points():
         nxt = Step(seq, step.phase, "rating", (robot.best(p, method),), number=q, extra=extra)
     else:

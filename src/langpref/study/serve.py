@@ -1,4 +1,4 @@
-"""`langpref study serve`: load the model and data, open (or create) the database, render videos ahead, serve.
+"""`langpref study serve`: load the model and data, open (or create) the database, make videos ahead, serve.
 
 The database remembers the protocol (`StudyConfig`), the model and the dataset it was created with; a later start
 on the same database continues the same study and refuses a different model, dataset or protocol (pass a new
@@ -23,6 +23,7 @@ from langpref.study import db as sdb
 from langpref.study.app import StudyApp, create_app
 from langpref.study.config import ServeConfig, StudyConfig
 from langpref.study.engine import StudyEngine
+from langpref.study.hook import ShowHook
 from langpref.study.videos import VideoCache
 
 
@@ -60,7 +61,7 @@ def resolve_study_config(db_path: str | Path, overrides: dict[str, Any]) -> Stud
 
 
 def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True) -> StudyApp:
-    """Engine, database (created or checked) and video cache of a study."""
+    """Engine, database (created or checked), video cache and `--on-show` hook of a study."""
     cfg.validate()
     engine = engine or StudyEngine.load(cfg.model, cfg.data, cfg.study)
     model_dir, data_dir = Path(cfg.model).resolve(), Path(cfg.data).resolve()
@@ -76,8 +77,9 @@ def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: b
             raise LangprefError(f"{cfg.db} belongs to a study run with another {what} ({stored.get(key[:-7])}); pass "
                                 f"that {what} again, or a new --db for a new study")
     videos = VideoCache(cfg.data, cfg.videos or f"{cfg.db}.videos", cfg.video, engine.study, progress=progress)
+    hook = ShowHook(cfg.on_show, engine.dataset, cfg.on_show_timeout) if cfg.on_show else None
     token = cfg.admin_token or secrets.token_urlsafe(24)
-    return StudyApp(cfg.db, engine, videos, token, cfg.study)
+    return StudyApp(cfg.db, engine, videos, token, cfg.study, hook=hook)
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -114,6 +116,8 @@ def serve(cfg: ServeConfig) -> None:
     url = f"http://{shown}:{port}"
     print(f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
           f"database {cfg.db}", file=sys.stderr)
+    if state.hook is not None:
+        print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
     print(f"participants: {url}/", flush=True)
     print(f"admin:        {url}/admin   token: {state.admin_token}", flush=True)
     state.videos.start(prerender=cfg.prerender)
@@ -121,6 +125,8 @@ def serve(cfg: ServeConfig) -> None:
         _uvicorn_server(create_app(state)).run(sockets=[sock])
     finally:
         state.videos.close()
+        if state.hook is not None:
+            state.hook.close()
         sock.close()
 
 

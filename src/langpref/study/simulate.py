@@ -1,12 +1,13 @@
 """Simulated participants that run whole study sessions through the HTTP API (load test, benchmark, demo data).
 
 Each simulated participant is a thread with its own HTTP connection. It answers surveys with random valid answers
-and, when it is given the dataset, answers the robot like the library's synthetic humans (`langpref.feedback.humans`):
-a random reward w over the normalised features, language feedback by Eq. 10 with the bank's test phrasings,
-comparisons by Eq. 11, "satisfied" once the shown trajectory is within 10% of the best of the study set, and ratings
-1 + 4 x the normalised reward. It reads which trajectory a video shows from the video's name (`trajNNNNNN-...`), a
-shortcut only a simulation takes. Without the dataset it answers at random. The time per query it reports is the
-time it really took from receiving the step to sending the answer (its optional think time included).
+and, when it is given the dataset, answers the robot like the library's synthetic humans (`langpref.feedback.language`
+and `.comparison`): a random reward w over the normalised features, language feedback by Eq. 10 with the bank's test
+phrasings, comparisons by Eq. 11, "satisfied" once the shown trajectory is within 10% of the best of the study set,
+and ratings 1 + 4 x the normalised reward. It reads which trajectory a video shows from the video's name
+(`trajNNNNNN-...`), a shortcut only a simulation takes. Without the dataset it answers at random. The time per query
+it reports is the time it really took from receiving the step to sending the answer (its optional think time
+included).
 """
 
 from __future__ import annotations
@@ -87,7 +88,9 @@ class SimParticipant:
         self.errors: list[str] = []
         self.participant_id = ""
         if world is not None:
-            from langpref.feedback.humans import ComparisonHuman, LanguageHuman, sample_weights
+            from langpref.feedback.comparison import ComparisonHuman
+            from langpref.feedback.humans import sample_weights
+            from langpref.feedback.language import LanguageHuman
 
             w = sample_weights(world.theta.shape[1], self.rng)
             self.reward = world.theta @ w
@@ -101,7 +104,8 @@ class SimParticipant:
         return [int(m.group(1)) for m in map(_INDEX.search, step["videos"]) if m]
 
     def _body(self, step: dict[str, Any], received: float) -> dict[str, Any]:
-        from langpref.feedback.types import ComparisonQuery, LanguageQuery
+        from langpref.feedback.comparison import ComparisonQuery
+        from langpref.feedback.language import LanguageQuery
 
         kind, shown, rng, world = step["kind"], self._shown(step), self.rng, self.world
         if kind == "survey":

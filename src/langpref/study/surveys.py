@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from langpref.errors import LangprefError
+from langpref.tasks import get_task
 
 NONE_OF_THEM = "None of them"
 ASPECTS = ("Adaptability", "Time efficiency", "Convenience")
@@ -136,18 +137,7 @@ def _check_value(q: dict[str, Any], value: Any) -> Any:
     return [o for o in q["options"] if o in value]
 
 
-TASKS = {
-    "metaworld": {
-        "robot": "a simulated Sawyer robot arm",
-        "task": "The robot stands at a table with a button on it, and its task is to press the button. Trajectories "
-                "differ in how high the arm moves, how fast it moves, and how close it comes to the button.",
-        "examples": ["Move faster.", "Stay lower.", "Get closer to the button."],
-    },
-    "robosuite": {
-        "robot": "a simulated Kinova Jaco robot arm",
-        "task": "The robot stands at a table with a cube and a bottle on it, and its task is to lift the cube. "
-                "Trajectories differ in how high and how fast the arm moves, how close it comes to the cube and to "
-                "the bottle, and how well it lifts the cube.",
-        "examples": ["Move slower.", "Keep away from the bottle.", "Be better at lifting the cube."],
-    },
-}
+def task_text(task_name: str) -> dict[str, Any]:
+    """What the guidelines tell participants about the task: the robot, what it does, example phrasings."""
+    task = get_task(task_name)
+    return {"robot": task.robot, "task": task.description, "examples": list(task.examples)}

@@ -1,9 +1,12 @@
-"""Study videos: rendered once from the stored simulator states, cached on disk, served by name.
+"""Study videos: made once per trajectory, cached on disk, served by name.
 
-Names are `traj000012-<tag>.webm`, the tag a hash of the dataset and the render settings, so a cache folder never
-serves a video made another way. Rendering runs in one worker process (MuJoCo on EGL, apart from the server's
-threads) that keeps its env between trajectories. At start every study trajectory is queued (`prerender`), and a
-video asked for before its turn goes to the front of the queue; the request waits for it.
+A recorded dataset (`langpref import`) has its own camera video per trajectory: it is served as recorded, copied
+when it is already in the served format and transcoded once when not; it is never re-rendered. A simulated dataset's
+videos are rendered from the stored simulator states. Names are `traj000012-<tag>.webm`, the tag a hash of the
+dataset and (for rendered videos) the render settings, so a cache folder never serves a video made another way.
+Videos are made in one worker process (MuJoCo on EGL, or PyAV's encoder, apart from the server's threads) that keeps
+its env between trajectories. At start every study trajectory is queued (`prerender`), and a video asked for before
+its turn goes to the front of the queue; the request waits for it.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
 from langpref.study.config import VideoConfig
 
@@ -28,50 +32,53 @@ _NAME = re.compile(r"^traj(\d{6})-([0-9a-f]{10})\.(webm|mp4)$")
 # ---- the worker process ----------------------------------------------------------------------------------------
 
 _WORKER_STATE: dict[str, Any] = {}
+"""data_dir -> (dataset, its task's env or None until a simulated trajectory is rendered)."""
 
 
 def _close_worker_envs() -> None:
     for _, env in _WORKER_STATE.values():
         try:
-            env.close()
+            if env is not None:
+                env.close()
         except Exception:  # noqa: BLE001, S110 (closing at exit: nothing to do about it)
             pass
     _WORKER_STATE.clear()
 
 
 def _worker_init() -> None:
-    """The render worker yields the CPU to the server's requests."""
+    """The video worker yields the CPU to the server's requests and closes its envs at exit."""
     import os
 
+    atexit.register(_close_worker_envs)
     try:
         os.nice(10)
     except (AttributeError, OSError):
         pass
 
 
-def render_one(data_dir: str, index: int, out: str, width: int, height: int, fps: int, stride: int) -> str:
-    """Render trajectory `index` into `out` (runs in the worker process; the env is kept for the next one)."""
-    from langpref.dataset.storage import load_dataset
-    from langpref.envs import make_env
-    from langpref.envs.render import render_frames, write_video
+def make_video(data_dir: str, index: int, out: str, width: int, height: int, fps: int, stride: int) -> str:
+    """Write the video of trajectory `index` into `out` (runs in the worker process): a recorded dataset's own video
+    (the render settings do not apply), else a replay of the stored states (the env is kept for the next one)."""
+    from langpref.dataset.render import recorded_video, replay_video
 
     if data_dir not in _WORKER_STATE:
-        ds = load_dataset(data_dir)
-        if not _WORKER_STATE:
-            atexit.register(_close_worker_envs)
-        _WORKER_STATE[data_dir] = (ds, make_env(ds.env, ds.meta.horizon))
+        _WORKER_STATE[data_dir] = (load_dataset(data_dir), None)
     ds, env = _WORKER_STATE[data_dir]
-    traj = ds.load(index)
-    env.reset(traj.seed)
-    frames = render_frames(env, traj.qpos, traj.qvel, width, height, stride)
-    return str(write_video(frames, Path(out), fps))
+    if ds.meta.videos:
+        return str(recorded_video(ds, index, Path(out)))
+    if env is None:
+        from langpref.tasks import make_env
+
+        env = make_env(ds.env, ds.meta.horizon)
+        _WORKER_STATE[data_dir] = (ds, env)
+    return str(replay_video(ds, index, Path(out), env, width, height, fps, stride))
 
 
 # ---- the cache -------------------------------------------------------------------------------------------------
 
 
 class VideoCache:
-    """Videos of the study set in `cache_dir`; `ensure(index)` renders one now if needed."""
+    """Videos of the study set in `cache_dir`; `ensure(index)` makes one now if needed."""
 
     def __init__(self, data_dir: str | Path, cache_dir: str | Path, cfg: VideoConfig, indices, progress: bool = True):
         cfg.validate()
@@ -82,8 +89,11 @@ class VideoCache:
         self.indices = sorted({int(i) for i in indices})
         self._allowed = set(self.indices)
         meta = Path(self.data_dir) / "meta.json"
-        ident = {"data": self.data_dir, "meta_sha": hashlib.sha256(meta.read_bytes()).hexdigest() if meta.is_file()
-                 else "", "width": cfg.width, "height": cfg.height, "fps": cfg.fps, "stride": cfg.stride}
+        ident: dict[str, Any] = {"data": self.data_dir, "meta_sha": hashlib.sha256(meta.read_bytes()).hexdigest()}
+        if load_dataset(self.data_dir).meta.videos:
+            ident["recorded"] = True
+        else:
+            ident.update(width=cfg.width, height=cfg.height, fps=cfg.fps, stride=cfg.stride)
         self.tag = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:10]
         self.show_progress = progress
         self._queue: deque[int] = deque()
@@ -178,7 +188,7 @@ class VideoCache:
                         self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
                                                      initializer=_worker_init)
                     c = self.cfg
-                    self._pool.submit(render_one, self.data_dir, index, str(self.path(index)), c.width, c.height,
+                    self._pool.submit(make_video, self.data_dir, index, str(self.path(index)), c.width, c.height,
                                       c.fps, c.stride).result()
                     self._errors.pop(index, None)
                 except Exception as exc:  # noqa: BLE001 (reported per video, the server keeps running)
@@ -202,7 +212,7 @@ class VideoCache:
                 bar.close()
 
     def ensure(self, index: int, timeout: float = 180.0) -> Path:
-        """The video of `index`, rendering it first (ahead of the queue) if it is not cached yet."""
+        """The video of `index`, made first (ahead of the queue) if it is not cached yet."""
         path = self.path(index)
         if path.is_file():
             return path
@@ -215,7 +225,7 @@ class VideoCache:
         if path.is_file():
             return path
         if index in self._errors:
-            raise LangprefError(f"video of trajectory {index} could not be rendered: {self._errors[index]}")
+            raise LangprefError(f"video of trajectory {index} could not be made: {self._errors[index]}")
         raise LangprefError(f"video of trajectory {index} is not ready yet (timed out: {not ok}); try again")
 
     def wait(self, timeout: float = 600.0) -> bool:

@@ -1,5 +1,5 @@
 "use strict";
-// The admin dashboard: participants and their progress, video rendering, a JSON download of everything.
+// The admin dashboard: participants and their progress, videos, the --on-show robot hook's runs, a JSON download.
 // The token stays in this tab (sessionStorage); every value is shown with textContent, so feedback is never HTML.
 
 const TOKEN_KEY = "langpref-admin-token";
@@ -41,8 +41,9 @@ async function refresh() {
       `split ${data.study.split}.`;
     const v = data.videos;
     document.getElementById("video-status").textContent =
-      `Videos rendered: ${v.done} of ${v.total}${v.running ? " (rendering\u2026)" : ""}` +
+      `Videos ready: ${v.done} of ${v.total}${v.running ? " (making\u2026)" : ""}` +
       (Object.keys(v.errors).length ? `; ${Object.keys(v.errors).length} failed` : "");
+    showHooks(data.hooks);
     const body = document.querySelector("#participants tbody");
     body.replaceChildren();
     for (const p of ps) {
@@ -70,6 +71,32 @@ async function refresh() {
       if (timer) { clearInterval(timer); timer = null; }
     }
     showError(e.message);
+  }
+}
+
+// The --on-show hook (null when the server runs none): counts per outcome and its last runs, newest first.
+function showHooks(h) {
+  document.getElementById("hooks").hidden = !h;
+  if (!h) return;
+  const c = h.counts;
+  const failures = c.failed + c.timeout + c.error + c.skipped;
+  document.getElementById("hook-summary").textContent =
+    `${h.command} (timeout ${h.timeout_s} s): ${c.ok} ok, ${failures} not ok` +
+    (failures ? ` (${c.failed} exit non-zero, ${c.timeout} timed out, ${c.error} could not start, ` +
+                `${c.skipped} skipped: queue full)` : "") +
+    `; ${h.queued} waiting` + (h.running ? `, running for trajectory ${h.running.trajectory}` : "") + ".";
+  const body = document.querySelector("#hook-runs tbody");
+  body.replaceChildren();
+  for (const r of h.recent) {
+    const tr = document.createElement("tr");
+    const status = cell(r.status);
+    status.className = "hook-" + r.status;
+    const output = cell(r.output);
+    output.className = "hook-output";
+    tr.append(cell(when(r.started_at)), cell(r.participant.slice(0, 8) + "\u2026"), cell(`${r.kind} (#${r.seq})`),
+              cell(r.kind === "comparison" ? `${r.trajectory} (${"AB"[r.position]})` : r.trajectory), cell(r.episode), status,
+              cell(r.returncode), cell(r.seconds.toFixed(1)), output);
+    body.append(tr);
   }
 }
 

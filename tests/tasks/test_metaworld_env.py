@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
-from langpref.envs import get_spec, make_env
-from langpref.envs.metaworld_env import CONTROLLER_DIM, expert_unit, make_controller, params_from_unit, step_features
+from langpref.tasks import get_task, make_env
+from langpref.tasks.metaworld.controller import CONTROLLER_DIM, expert_unit, make_controller, params_from_unit
+from langpref.tasks.metaworld.env import step_features
 
 
 def test_step_features_on_hand_built_states():
@@ -18,7 +19,7 @@ def test_step_features_on_hand_built_states():
 
 
 def test_spec_is_the_contract():
-    spec = get_spec("metaworld")
+    spec = get_task("metaworld")
     assert spec.features == ("height", "speed", "distance_to_button")
     assert spec.obs_dim == 39 and spec.action_dim == 4 and spec.default_splits == (260, 32, 32)
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from langpref.dataset.generate import GenerateConfig, generate
-from langpref.envs.render import render_trajectory
+from langpref.dataset.render import render_trajectory
 from langpref.errors import LangprefError
 
 
@@ -26,8 +26,8 @@ def test_render_writes_a_playable_video(dataset, tmp_path, suffix):
 def test_frames_are_upright(dataset):
     """The table is below the horizon: the bottom band is warmer (wood) than the top band (sky/wall)."""
     from langpref.dataset.storage import load_dataset
-    from langpref.envs import make_env
-    from langpref.envs.render import render_frames
+    from langpref.tasks import make_env
+    from langpref.tasks.render import render_frames
 
     traj = load_dataset(dataset).load(0)
     env = make_env("metaworld", 12)

@@ -7,38 +7,37 @@ import sys
 import numpy as np
 import pytest
 
-from langpref.envs import get_spec, make_env
-from langpref.envs.robosuite_env import (
-    CONTROLLER_DIM,
+from langpref.tasks import get_task, make_env
+from langpref.tasks.robosuite.controller import CONTROLLER_DIM, lift_unit, make_controller, params_from_unit
+from langpref.tasks.robosuite.env import (
+    FEATURES,
     GRASP_WEIGHT,
     MIN_CUBE_BOTTLE_GAP,
+    OBS_DIM,
+    OBS_LAYOUT,
     REACH_WEIGHT,
-    SPEC,
     SUCCESS_HEIGHT,
     TABLE_HEIGHT,
     compute_features,
     lift_success_value,
-    lift_unit,
-    make_controller,
-    params_from_unit,
 )
 
-FIELDS = {f.name: slice(f.start, f.stop) for f in SPEC.obs_layout}
-F = {name: i for i, name in enumerate(SPEC.features)}
+FIELDS = {f.name: slice(f.start, f.stop) for f in OBS_LAYOUT}
+F = {name: i for i, name in enumerate(FEATURES)}
 
 
 # ---- without a simulator ------------------------------------------------------------------------------------------
 
 
 def test_spec_is_the_contract():
-    spec = get_spec("robosuite")
-    assert spec is SPEC
+    spec = get_task("robosuite")
+    assert spec.features == FEATURES
     assert spec.name == "robosuite"
     assert spec.features == ("height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success")
-    assert spec.action_dim == 4 and spec.default_horizon == 500
-    assert spec.default_num_trajectories == 448 and spec.default_splits == (359, 44, 45)
-    assert sum(spec.default_splits) == spec.default_num_trajectories
-    assert spec.success_name == "cube lifted"
+    assert spec.action_dim == 4 and spec.simulator.default_horizon == 500
+    assert spec.simulator.default_num_trajectories == 448 and spec.default_splits == (359, 44, 45)
+    assert sum(spec.default_splits) == spec.simulator.default_num_trajectories
+    assert spec.simulator.success_name == "cube lifted"
     stops = [0] + [f.stop for f in spec.obs_layout]
     assert [f.start for f in spec.obs_layout] == stops[:-1]  # contiguous, no gaps
     assert spec.obs_dim == 28
@@ -90,7 +89,7 @@ def test_import_is_cheap_and_robosuite_stays_quiet():
     """Importing the module loads no robosuite; making an env prints none of robosuite's warnings."""
     code = (
         "import sys\n"
-        "import langpref.envs.robosuite_env as R\n"
+        "import langpref.tasks.robosuite.env as R\n"
         "assert 'robosuite' not in sys.modules, 'robosuite imported at module import'\n"
         "e = R.make(10); e.reset(0); e.step([0, 0, 0, 0]); e.close()\n"
         "print('ok')\n"
@@ -143,7 +142,7 @@ def test_bottle_is_in_the_scene_and_observed(env):
     np.testing.assert_allclose(obs[FIELDS["bottle_pos"]], data.xpos[bid], atol=1e-6)
     np.testing.assert_allclose(obs[FIELDS["cube_pos"]], data.xpos[cid], atol=1e-6)
     np.testing.assert_allclose(obs[FIELDS["eef_to_bottle"]], data.xpos[bid] - obs[FIELDS["eef_pos"]], atol=1e-5)
-    assert obs.dtype == np.float32 and obs.shape == (SPEC.obs_dim,)
+    assert obs.dtype == np.float32 and obs.shape == (OBS_DIM,)
     cam = env.camera()
     assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, cam["name"]) >= 0
 

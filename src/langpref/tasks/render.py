@@ -1,4 +1,4 @@
-"""Render stored trajectories into videos by replaying their simulator states offscreen.
+"""Render simulator states into videos by replaying them offscreen (for tasks with a MuJoCo simulator).
 
 Uses MuJoCo's own renderer on EGL (works on a CPU through Mesa), with the expensive extras off (no shadows,
 reflections or multisampling): about 5x faster than the simulators' default settings and fine for study videos.
@@ -8,14 +8,13 @@ robosuite's object placement) is the one the trajectory saw.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from langpref.errors import LangprefError
 
-_CODECS = {".mp4": ("libx264", "yuv420p"), ".webm": ("libvpx-vp9", "yuv420p")}
+VIDEO_CODECS = {".mp4": ("libx264", "yuv420p"), ".webm": ("libvpx-vp9", "yuv420p")}
 
 
 def _camera(mujoco, model, spec: dict):
@@ -59,9 +58,9 @@ def write_video(frames: np.ndarray, out: Path, fps: int) -> Path:
     import imageio.v2 as imageio
 
     out = Path(out)
-    if out.suffix not in _CODECS:
+    if out.suffix not in VIDEO_CODECS:
         raise LangprefError(f"unsupported video format {out.suffix!r} for {out}: use .mp4 or .webm")
-    codec, pix = _CODECS[out.suffix]
+    codec, pix = VIDEO_CODECS[out.suffix]
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.partial{out.suffix}")
     writer = imageio.get_writer(tmp, fps=fps, codec=codec, pixelformat=pix, macro_block_size=8,
@@ -73,27 +72,3 @@ def write_video(frames: np.ndarray, out: Path, fps: int) -> Path:
         writer.close()
     tmp.replace(out)
     return out
-
-
-def render_trajectory(data_dir: str | Path, index: int, out: str | Path, width: int = 320, height: int = 240,
-                      fps: int = 40, stride: int = 1) -> Path:
-    """Render trajectory `index` of a dataset into a .mp4 (H.264) or .webm (VP9) video."""
-    from langpref.dataset.storage import load_dataset
-    from langpref.envs import make_env
-
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    out = Path(out)
-    if out.suffix not in _CODECS:
-        raise LangprefError(f"unsupported video format {out.suffix!r} for {out}: use .mp4 or .webm")
-    ds = load_dataset(data_dir)
-    if not 0 <= index < len(ds):
-        raise LangprefError(f"--index {index} is out of range: {data_dir} has trajectories 0..{len(ds) - 1}")
-    traj = ds.load(index)
-    env = make_env(ds.env, ds.meta.horizon)
-    try:
-        env.reset(traj.seed)
-        frames = render_frames(env, traj.qpos, traj.qvel, width, height, stride)
-    finally:
-        env.close()
-    return write_video(frames, out, fps)

@@ -1,0 +1,194 @@
+"""`langpref import`: a robot recording (a plain folder of episodes, or a LeRobotDataset) into a langpref dataset.
+
+The recording brings observations, actions, and optionally features, success and a camera video per episode; the
+task file (`langpref.tasks.taskfile`) brings the task's name, features, text and bank. Features come from the task
+file's `features_from` function when it names one, else from the episodes' own `features`. Episodes may differ in
+length. Videos are copied when a browser plays them as they are, else cut and transcoded once, here.
+
+Everything is written into a temporary folder beside `out` and renamed into place at the end, so a bad episode
+(one line naming its file and key) never leaves half a dataset.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from langpref.dataset.recording import RecordedEpisode, plain_episode_files, read_plain_episode
+from langpref.dataset.storage import SPLITS, DatasetMeta, Trajectory, save_trajectory, video_path, write_meta
+from langpref.errors import LangprefError
+from langpref.tasks.taskfile import TaskFile, save_task
+
+DEFAULT_SPLITS = (0.8, 0.1, 0.1)  # the paper's simulated datasets: 260/32/32
+
+
+@dataclass(frozen=True)
+class ImportConfig:
+    src: Path
+    """A plain recording folder (NAME.npz episodes, NAME.mp4/.webm videos) or a LeRobotDataset (v3)."""
+    task: Path
+    """The task file (TOML) naming the task, its features, its bank and where its features come from."""
+    out: Path
+    """Dataset directory to create."""
+    seed: int = 0
+    """Seed of the trajectory split (and of the bank's split, for an unsplit bank)."""
+    splits: tuple[float, float, float] = DEFAULT_SPLITS
+    """Shares of train/val/test trajectories."""
+    state_key: str = "observation.state"
+    """LeRobotDataset: the feature read as observations."""
+    action_key: str = "action"
+    """LeRobotDataset: the feature read as actions."""
+    camera: str | None = None
+    """LeRobotDataset: the video feature kept as each episode's video (default the first; '' for none)."""
+    force: bool = False
+    """Overwrite an existing dataset in `out`."""
+
+
+def is_lerobot(src: Path) -> bool:
+    return (Path(src) / "meta" / "info.json").is_file()
+
+
+def split_counts(n: int, shares: tuple[float, float, float]) -> dict[str, int]:
+    """Trajectories per split: `shares` of n, with at least two in val and test once there are six or more
+    (training validates on pairs, and the synthetic humans compare trajectories within a split), else one."""
+    if n < 3:
+        raise LangprefError(f"the recording has {n} episode(s); a dataset needs at least 3 (one per split)")
+    least = 2 if n >= 6 else 1
+    total = sum(shares)
+    n_val = max(least, round(n * shares[1] / total))
+    n_test = max(least, round(n * shares[2] / total))
+    if n - n_val - n_test < 1:
+        raise LangprefError(f"--splits {shares} leaves no episode of {n} for train")
+    return {"train": n - n_val - n_test, "val": n_val, "test": n_test}
+
+
+def _step_features(ep: RecordedEpisode, task: TaskFile, fn: Any, where: str) -> np.ndarray:
+    """Per-step features (T, F) of one episode, from the task's function or from the episode itself."""
+    n_feat, steps = len(task.features), len(ep.actions)
+    if fn is not None:
+        try:
+            out = fn(ep.observations.copy(), ep.actions.copy())
+        except Exception as exc:
+            raise LangprefError(f"{where}: the feature function {task.features_from} failed: "
+                                f"{type(exc).__name__}: {exc}") from None
+        out = np.asarray(out, dtype=np.float64)
+        if out.shape != (steps, n_feat):
+            raise LangprefError(f"{where}: the feature function {task.features_from} returned shape {out.shape}, "
+                                f"expected ({steps}, {n_feat}): one row per step, one column per feature")
+    elif ep.features is not None:
+        out = np.asarray(ep.features, dtype=np.float64)
+        if out.shape == (n_feat,):
+            out = np.broadcast_to(out, (steps, n_feat))  # per-episode features: their time mean is themselves
+        elif out.shape != (steps, n_feat):
+            raise LangprefError(f"{where}: 'features' has shape {out.shape}, expected ({steps}, {n_feat}) per step "
+                                f"or ({n_feat},) per episode, in the task file's order ({', '.join(task.features)})")
+    else:
+        raise LangprefError(f"{where}: no features: give 'features' in every episode or features_from in the task "
+                            f"file {task.path}")
+    if not np.isfinite(out).all():
+        raise LangprefError(f"{where}: the features hold NaN or infinite values")
+    return out.astype(np.float32)
+
+
+def _episodes(cfg: ImportConfig) -> tuple[str, list[Any]]:
+    """(layout name, a list of zero-argument loaders, one per episode, each returning (where, RecordedEpisode))."""
+    if is_lerobot(cfg.src):
+        from langpref.dataset.lerobot import read_lerobot
+
+        eps = read_lerobot(cfg.src, state_key=cfg.state_key, action_key=cfg.action_key, camera=cfg.camera)
+        return "lerobot", [lambda ep=ep: (f"{cfg.src} {ep.name}", ep) for ep in eps]
+    files = plain_episode_files(cfg.src)
+    return "plain", [lambda f=f: (str(f), read_plain_episode(f)) for f in files]
+
+
+def _prepare(cfg: ImportConfig) -> Path:
+    src, out = Path(cfg.src), Path(cfg.out)
+    if not src.is_dir():
+        raise LangprefError(f"recording {src} not found" if not src.exists() else f"recording {src} is not a folder")
+    if out.exists() and not cfg.force:
+        raise LangprefError(f"{out} already exists; pass --force to overwrite it or choose another --out")
+    if out.resolve() == src.resolve() or src.resolve() in out.resolve().parents:
+        raise LangprefError(f"--out {out} lies inside the recording {src}; choose a folder outside it")
+    tmp = out.parent / f".{out.name}.importing-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    return tmp
+
+
+def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], progress: bool = True
+                     ) -> dict[str, Any]:
+    """Import the recording `cfg.src` as a dataset of `task`, storing `bank` (split, checked) as its bank."""
+    start = time.time()
+    tmp = _prepare(cfg)
+    try:
+        layout, loaders = _episodes(cfg)
+        n = len(loaders)
+        counts = split_counts(n, cfg.splits)
+        fn = task.step_features()
+        obs_dim = action_dim = None
+        lengths, features, success, videos = [], np.zeros((n, len(task.features))), [], []
+        for i, load in enumerate(tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress,
+                                      dynamic_ncols=True)):
+            where, ep = load()
+            if len(ep.actions) < 2:
+                raise LangprefError(f"{where}: the episode has {len(ep.actions)} step(s); it needs at least 2")
+            if obs_dim is None:
+                obs_dim, action_dim = ep.observations.shape[1], ep.actions.shape[1]
+            elif (ep.observations.shape[1], ep.actions.shape[1]) != (obs_dim, action_dim):
+                raise LangprefError(f"{where}: observations/actions have {ep.observations.shape[1]}/"
+                                    f"{ep.actions.shape[1]} dims, earlier episodes {obs_dim}/{action_dim}")
+            traj = Trajectory(index=i, observations=ep.observations, actions=ep.actions,
+                              step_features=_step_features(ep, task, fn, where), qpos=None, qvel=None,
+                              success=bool(ep.success), seed=None, source=ep.name)
+            save_trajectory(tmp, traj)
+            lengths.append(traj.horizon)
+            features[i] = traj.features
+            success.append(ep.success)
+            videos.append(ep.video)
+        with_video = [v is not None for v in videos]
+        if any(with_video) and not all(with_video):
+            missing = with_video.index(False)
+            raise LangprefError(f"episode {loaders[missing]()[0]} has no video while others have one; give every "
+                                "episode its video (NAME.mp4 or NAME.webm) or none")
+        if all(with_video):
+            from langpref.dataset.video import write_clip
+
+            for i, clip in enumerate(tqdm(videos, desc="videos", unit="video", disable=not progress,
+                                          dynamic_ncols=True)):
+                write_clip(clip, video_path(tmp, i))
+        order = np.random.default_rng([cfg.seed, 1]).permutation(n)
+        splits, at = {}, 0
+        for name in SPLITS:
+            splits[name] = sorted(int(i) for i in order[at:at + counts[name]])
+            at += counts[name]
+        task_obj = task.task(obs_dim, action_dim, tmp / "utterances.json")
+        save_task(task_obj, tmp, bank)
+        horizon = max(lengths)
+        meta = DatasetMeta(
+            env=task.name, horizon=horizon, obs_layout=[asdict(f) for f in task_obj.obs_layout],
+            action_dim=action_dim, feature_names=list(task.features), splits=splits, num_trajectories=n,
+            config={"source": str(cfg.src), "layout": layout, "task_file": str(task.path), "seed": cfg.seed,
+                    "splits": list(cfg.splits), "features_from": task.features_from or "recording",
+                    "success_known": all(s is not None for s in success)},
+            lengths=None if min(lengths) == horizon else lengths, videos=all(with_video))
+        write_meta(tmp, meta, features)
+        out = Path(cfg.out)
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    wall = time.time() - start
+    return {"out": str(cfg.out), "task": task.name, "layout": layout, "num_trajectories": n,
+            "splits": {k: len(v) for k, v in splits.items()}, "horizon": horizon, "min_length": min(lengths),
+            "videos": meta.videos, "features_from": meta.config["features_from"], "wall_s": wall,
+            "episodes_per_s": n / wall if wall > 0 else None}

@@ -1,0 +1,180 @@
+"""Language feedback (paper Eq. 5-10): one trajectory shown, a comparative sentence back ("Move faster.").
+
+Human (Eq. 10). Shown tau^0, with tau* the best trajectory of its candidate set under w, it samples a feature f from
+softmax(w (.) (theta*_f - theta0_f) / temperature), says the direction that raises its reward (`increase` when
+w_f >= 0), and picks a phrasing of that feature and direction uniformly from one split of the bank (default `test`,
+phrasings the model never trained on). The paper's Eq. 10 has no temperature (temperature 1).
+
+Likelihood. Feedback l about tau becomes Bradley-Terry pairs on the frozen embeddings: the imagined improvement
+phi + psi_l beats phi (L_Explicit, Eq. 7), and beats phi + psi_l~ for k other utterances l~ of the robot's own pool
+(L_Implicit, Eq. 9). The pool is a split of the bank (default `train`, the phrasings the model was trained on); by
+default the negatives are drawn among pool utterances of *other meanings* than the one the model reads l as (nearest
+meaning prototype by cosine: the model's reading, never the synthetic human's label), so a paraphrase of l is never
+a negative. Of L_Explicit + L_Implicit, an answer weighs 2 (its explicit pair, and k implicit pairs of weight 1/k);
+of either alone, 1.
+
+A synthetic human also records *why* it answered (the feature and direction it meant). Those fields are ground truth
+for analysis only: no learning method reads them (a real participant's answers leave them `None`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from langpref.errors import LangprefError
+from langpref.feedback.bradley_terry import PairBatch
+from langpref.feedback.humans import HumanConfig, Seed, rng_of, softmax, true_reward
+from langpref.feedback.kind import FeedbackKind, register_kind
+from langpref.feedback.space import LatentSpace, PhraseTable
+from langpref.language.bank import DIRECTIONS
+
+if TYPE_CHECKING:
+    from langpref.reward import RewardConfig
+
+MAX_FEEDBACK = 500
+"""Longest feedback a study participant may send, in characters."""
+
+
+@dataclass(frozen=True)
+class LanguageQuery:
+    """Show one trajectory and ask how it should change."""
+
+    shown: int
+    """Dataset index of the trajectory shown."""
+
+
+@dataclass(frozen=True)
+class LanguageAnswer:
+    """Comparative language feedback about the shown trajectory, e.g. "Move faster."."""
+
+    query: LanguageQuery
+    text: str
+    feature: str | None = None
+    """What a synthetic human meant (ground truth; never read by a method). `None` for a real participant."""
+    direction: str | None = None
+    """`increase` or `decrease`, what a synthetic human meant; `None` for a real participant."""
+
+    def __post_init__(self) -> None:
+        if not self.text.strip():
+            raise LangprefError("language feedback is empty; give a sentence such as 'Move faster.'")
+
+
+class LanguageHuman:
+    """Answers language queries about trajectories with Eq. 10, relative to the best of its candidate set."""
+
+    def __init__(self, w: np.ndarray, theta: np.ndarray, phrases: PhraseTable, candidates: Sequence[int],
+                 feature_names: Sequence[str], temperature: float = 1.0, seed: Seed = 0):
+        self.w = np.asarray(w, dtype=np.float64)
+        self.theta = np.asarray(theta, dtype=np.float64)
+        if self.theta.shape[1] != len(self.w):
+            raise LangprefError(f"{len(self.w)} weights for {self.theta.shape[1]} features")
+        if not temperature > 0:
+            raise LangprefError(f"the language human's temperature must be > 0, got {temperature}")
+        self.phrases = phrases
+        self.feature_names = tuple(feature_names)
+        self.temperature = float(temperature)
+        cands = np.asarray(candidates, dtype=np.int64)
+        self.best = int(cands[np.argmax(true_reward(self.w, self.theta[cands]))])
+        """tau*, the best trajectory of the candidate set under w."""
+        self.rng = rng_of(seed)
+
+    def feature_probabilities(self, shown: int) -> np.ndarray:
+        """softmax(w (.) (theta* - theta0) / temperature) over the features (Eq. 10)."""
+        return softmax(self.w * (self.theta[self.best] - self.theta[shown]) / self.temperature)
+
+    def direction(self, feature: int) -> int:
+        """The direction (0 increase, 1 decrease) of `feature` that raises the reward."""
+        return 0 if self.w[feature] >= 0 else 1
+
+    def answer(self, query: LanguageQuery) -> LanguageAnswer:
+        feature = int(self.rng.choice(len(self.w), p=self.feature_probabilities(query.shown)))
+        direction = self.direction(feature)
+        rows = self.phrases.rows(feature, direction)
+        if len(rows) == 0:
+            raise LangprefError(f"the phrasings this human speaks from have none of {self.feature_names[feature]}/"
+                                f"{DIRECTIONS[direction]}")
+        row = int(rows[self.rng.integers(len(rows))])
+        return LanguageAnswer(query, self.phrases.texts[row], self.feature_names[feature], DIRECTIONS[direction])
+
+
+def make_human(w: np.ndarray, space: LatentSpace, candidates: Sequence[int], cfg: HumanConfig,
+               rng: np.random.Generator) -> LanguageHuman:
+    """The Eq. 10 human speaking the phrasings `cfg` names, tau* the best of `candidates`."""
+    return LanguageHuman(w, space.theta, space.table(cfg.phrase_source), candidates, space.feature_names,
+                         cfg.temperature, rng)
+
+
+# ---- likelihood -----------------------------------------------------------------------------------------------
+
+
+def _prototypes(psi: np.ndarray, group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    groups = np.unique(group)
+    protos = np.stack([psi[group == g].mean(axis=0) for g in groups])
+    return groups, protos / np.maximum(np.linalg.norm(protos, axis=1, keepdims=True), 1e-12)
+
+
+def read_meaning(space: LatentSpace, psi: np.ndarray, split: str = "train") -> int:
+    """The meaning (2 * feature + direction) whose mean psi in `split` is closest in cosine to `psi`."""
+    table = space.table(split)
+    groups, protos = _prototypes(table.psi, table.group)
+    return int(groups[np.argmax(protos @ (psi / max(float(np.linalg.norm(psi)), 1e-12)))])
+
+
+def language_pairs(space: LatentSpace, answer: LanguageAnswer, cfg: RewardConfig,
+                   rng: np.random.Generator) -> PairBatch:
+    """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read)."""
+    phi = space.phi[answer.query.shown]
+    psi = space.psi_of(answer.text)
+    hat = phi + psi
+    winners, losers, weights = [], [], []
+    if cfg.loss in ("both", "explicit"):
+        winners.append(hat)
+        losers.append(phi)
+        weights.append(1.0)
+    if cfg.loss in ("both", "implicit"):
+        pool = space.table(cfg.negative_split)
+        if cfg.negatives == "other_meaning":
+            allowed = np.flatnonzero(pool.group != read_meaning(space, psi, cfg.negative_split))
+        else:
+            allowed = np.array([i for i, t in enumerate(pool.texts) if t != answer.text], dtype=np.int64)
+        if len(allowed) == 0:
+            raise LangprefError(f"bank split {cfg.negative_split!r} has no utterance to use as an implicit negative")
+        chosen = rng.choice(allowed, size=min(cfg.num_negatives, len(allowed)), replace=False)
+        for j in chosen:
+            winners.append(hat)
+            losers.append(phi + pool.psi[j])
+            weights.append(1.0 / len(chosen))
+    return PairBatch(np.array(winners), np.array(losers), np.array(weights))
+
+
+# ---- over HTTP and in the study database ----------------------------------------------------------------------
+
+
+def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
+    """The body's `feedback`: text, trimmed, not empty, at most MAX_FEEDBACK characters."""
+    if not isinstance(value, str):
+        raise LangprefError("'feedback' must be text")
+    text = value.strip()
+    if not text:
+        raise LangprefError("Please type your feedback before continuing (for example: \"Move faster.\").")
+    if len(text) > MAX_FEEDBACK:
+        raise LangprefError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
+    return LanguageAnswer(query, text)
+
+
+def to_record(answer: LanguageAnswer) -> dict[str, Any]:
+    return {"shown": answer.query.shown, "text": answer.text}
+
+
+def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
+    return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
+
+
+LANGUAGE = register_kind(FeedbackKind(
+    name="language", query=LanguageQuery, answer=LanguageAnswer, shows=1, make_human=make_human, pairs=language_pairs,
+    answer_key="feedback", parse=parse, value=lambda answer: answer.text, table="feedback", to_record=to_record,
+    from_record=from_record))

@@ -1,0 +1,225 @@
+"""The live-robot hook of `langpref study serve --on-show CMD`: run CMD when a trajectory is about to be shown.
+
+In the paper's studies participants watched the real robot replay each trajectory as well as its video. `--on-show`
+is where a lab plugs in its replay (e.g. a ROS script): CMD runs once per trajectory of every step the server hands
+out with videos (a comparison step runs it for A, then B), the first time that step is handed out by this server
+process (a reload of the page does not replay, a restart of the server does).
+
+CMD is one command line, split as a POSIX shell would split it (`shlex.split`) into a program and its arguments,
+and run WITHOUT a shell; nothing a participant sends ever becomes command text. Shell syntax (pipes, `&&`) needs an
+explicit shell: `--on-show "sh -c 'replay.sh && beep'"`. What to show comes in the environment (the server's own,
+plus):
+
+    LANGPREF_TRAJECTORY   the trajectory's index in the dataset
+    LANGPREF_EPISODE      its recording's episode name (`Trajectory.source`); empty for a simulated dataset
+    LANGPREF_PARTICIPANT  the participant's id (made by the server)
+    LANGPREF_DATA         the dataset directory (absolute)
+    LANGPREF_KIND         the step's kind: language, comparison, satisfaction or rating
+    LANGPREF_POSITION     the trajectory's place among the step's videos (0; 0 or 1 in a comparison)
+
+Hooks run one at a time, in the order steps were handed out (one robot replays one trajectory at a time), in one
+background thread; a request only appends to a bounded queue, so a slow or failing hook never delays a step, an
+answer or another participant. A run that exits non-zero (`failed`), cannot start (`error`), or outlives its
+timeout (`timeout`: its process group is killed) is logged; a trajectory that finds the queue full is dropped
+(`skipped`). The admin dashboard shows the counts and the last runs.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shlex
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from langpref.dataset.storage import Dataset
+
+log = logging.getLogger("langpref.study")
+STATUSES = ("ok", "failed", "timeout", "error", "skipped")
+OUTPUT_TAIL = 500
+"""Characters kept of a run's output (stdout and stderr together), from its end."""
+
+
+def parse_command(command: str) -> list[str]:
+    """The argv of a hook command line (shell-style quoting, no shell); ValueError if it is empty or unbalanced."""
+    argv = shlex.split(command)
+    if not argv:
+        raise ValueError("the command is empty")
+    return argv
+
+
+@dataclass(frozen=True)
+class ShowEvent:
+    """One trajectory about to be shown to one participant."""
+
+    participant: str
+    seq: int
+    kind: str
+    position: int
+    trajectory: int
+
+
+@dataclass(frozen=True)
+class HookRun:
+    """The outcome of the hook for one event: a status of `STATUSES`, with the exit code and output when it ran."""
+
+    event: ShowEvent
+    episode: str | None
+    status: str
+    returncode: int | None
+    started_at: float
+    seconds: float
+    output: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self.event), **{k: v for k, v in asdict(self).items() if k != "event"}}
+
+
+class ShowHook:
+    """Runs the `--on-show` command for every trajectory shown, in a background thread with a bounded queue."""
+
+    def __init__(self, command: str, dataset: Dataset, timeout_s: float = 60.0, queue_size: int = 64,
+                 keep: int = 20):
+        self.command = command
+        self.argv = parse_command(command)
+        self.dataset = dataset
+        self.timeout_s = timeout_s
+        self.queue_size = queue_size
+        self._queue: deque[ShowEvent] = deque()
+        self._recent: deque[HookRun] = deque(maxlen=keep)
+        self._counts: Counter[str] = Counter()
+        self._handed_out: set[tuple[str, int]] = set()
+        self._episodes: dict[int, str | None] = {}
+        self._running: ShowEvent | None = None
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._stopped = False
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._run, name="on-show-hook", daemon=True)
+        self._thread.start()
+
+    # ---- request side (never blocks, never raises for a hook's sake) ----
+
+    def show(self, participant: str, seq: int, kind: str, trajectories: Sequence[int]) -> None:
+        """Queue the hook for each trajectory of a step handed out to a participant (once per step)."""
+        with self._cond:
+            if not trajectories or (participant, seq) in self._handed_out or self._stopped:
+                return
+            self._handed_out.add((participant, seq))
+            for position, index in enumerate(trajectories):
+                event = ShowEvent(participant, seq, kind, position, int(index))
+                if len(self._queue) >= self.queue_size:
+                    self._record(HookRun(event, None, "skipped", None, time.time(), 0.0,
+                                         f"{self.queue_size} runs were already waiting"))
+                else:
+                    self._queue.append(event)
+            self._cond.notify_all()
+
+    def status(self) -> dict[str, Any]:
+        """For the admin dashboard: the command, counts per status, what waits and runs, the last runs (newest
+        first)."""
+        with self._cond:
+            return {"command": self.command, "timeout_s": self.timeout_s, "queued": len(self._queue),
+                    "running": asdict(self._running) if self._running else None,
+                    "counts": {s: self._counts[s] for s in STATUSES},
+                    "recent": [r.to_json() for r in reversed(self._recent)]}
+
+    def wait(self, timeout: float = 60.0) -> bool:
+        """Wait until nothing waits or runs (tests, shutdown)."""
+        with self._cond:
+            return self._cond.wait_for(lambda: not self._queue and self._running is None, timeout)
+
+    def close(self) -> None:
+        """Stop: drop what waits, kill a running hook's process group, end the thread."""
+        with self._cond:
+            self._stopped = True
+            self._queue.clear()
+            if self._proc is not None:
+                _kill_group(self._proc)
+            self._cond.notify_all()
+        self._thread.join(timeout=10)
+
+    # ---- the background thread ----
+
+    def _record(self, run: HookRun) -> None:
+        """Keep a finished run for the dashboard and log it unless it went well (call with `_cond` held)."""
+        self._recent.append(run)
+        self._counts[run.status] += 1
+        if run.status != "ok":
+            e = run.event
+            log.warning("--on-show hook %s for trajectory %d (participant %s, %s step): exit code %s, %.1f s; %s",
+                        run.status, e.trajectory, e.participant[:8], e.kind, run.returncode, run.seconds,
+                        run.output[-200:].strip() or "no output")
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._queue or self._stopped)
+                if self._stopped:
+                    return
+                event = self._running = self._queue.popleft()
+            try:
+                run = self._execute(event)
+            except Exception as exc:  # noqa: BLE001 (a broken run is reported; the thread serves the next one)
+                run = HookRun(event, None, "error", None, time.time(), 0.0, f"{type(exc).__name__}: {exc}")
+            with self._cond:
+                self._running = None
+                self._record(run)
+                self._cond.notify_all()
+
+    def _episode(self, index: int) -> str | None:
+        if index not in self._episodes:
+            self._episodes[index] = self.dataset.load(index).source
+        return self._episodes[index]
+
+    def _execute(self, event: ShowEvent) -> HookRun:
+        """Run the command for one event, its output into a temporary file (a pipe could block on a grandchild)."""
+        episode = self._episode(event.trajectory)
+        env = {**os.environ, "LANGPREF_TRAJECTORY": str(event.trajectory), "LANGPREF_EPISODE": episode or "",
+               "LANGPREF_PARTICIPANT": event.participant, "LANGPREF_DATA": str(self.dataset.root.resolve()),
+               "LANGPREF_KIND": event.kind, "LANGPREF_POSITION": str(event.position)}
+        started, t0 = time.time(), time.monotonic()
+        with tempfile.TemporaryFile() as out:
+            try:
+                proc = subprocess.Popen(self.argv, env=env, stdin=subprocess.DEVNULL, stdout=out,
+                                        stderr=subprocess.STDOUT, start_new_session=True)
+            except OSError as exc:
+                return HookRun(event, episode, "error", None, started, time.monotonic() - t0,
+                               f"cannot start {self.argv[0]}: {exc.strerror or exc}")
+            with self._cond:
+                self._proc = proc
+                if self._stopped:
+                    _kill_group(proc)
+            try:
+                proc.wait(timeout=self.timeout_s)
+                status = "ok" if proc.returncode == 0 else "failed"
+            except subprocess.TimeoutExpired:
+                _kill_group(proc)
+                proc.wait()
+                status = "timeout"
+            finally:
+                with self._cond:
+                    self._proc = None
+            size = out.seek(0, os.SEEK_END)
+            out.seek(max(0, size - 4 * OUTPUT_TAIL))  # at most 4 bytes per character
+            output = out.read().decode("utf-8", "replace")[-OUTPUT_TAIL:]
+        if status == "timeout":
+            output = f"killed after {self.timeout_s:g} s\n{output}"
+        return HookRun(event, episode, status, proc.returncode, started, time.monotonic() - t0, output)
+
+
+def _kill_group(proc: subprocess.Popen[bytes]) -> None:
+    """Kill the hook and everything it started (its own session, see `start_new_session`), unless it has ended."""
+    if proc.returncode is not None:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass

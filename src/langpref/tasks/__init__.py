@@ -1,0 +1,98 @@
+"""Tasks, by name: the one place that knows which robot tasks exist.
+
+Three kinds of task reach the registry:
+- built-in: `metaworld` and `robosuite`, each a subpackage here owning its env wrapper, controller, bank and text;
+- plugins: a Python package that declares an entry point in the group `langpref.tasks` (as Gymnasium's
+  `gymnasium.envs`), pointing at a `Task` or at a function returning one; `langpref generate --env NAME` then works
+  with no edit inside langpref;
+- recorded: a task file (TOML, see `taskfile.py`) imported with `langpref import`; the dataset (and every model
+  trained on it) carries the task, and opening them registers it (`register_task`).
+
+Simulators are imported only when an env is made, so looking a task up is cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+import warnings
+from dataclasses import replace
+from importlib.metadata import entry_points
+
+from langpref.errors import LangprefError
+from langpref.tasks.base import Controller, ObsField, SimEnv, Simulator, Task
+
+ENTRY_POINT_GROUP = "langpref.tasks"
+_BUILTIN = {"metaworld": "langpref.tasks.metaworld", "robosuite": "langpref.tasks.robosuite"}
+_registry: dict[str, Task] = {}
+_plugins_loaded = False
+
+
+def _load_plugins() -> None:
+    """Register every task declared under the `langpref.tasks` entry-point group (once per process)."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            obj = ep.load()
+            task = obj() if callable(obj) and not isinstance(obj, Task) else obj
+            if not isinstance(task, Task):
+                raise TypeError(f"it gives a {type(task).__name__}, not a langpref.tasks.Task")
+            if task.name in _BUILTIN:
+                raise ValueError(f"it is named {task.name!r}, a built-in task's name")
+        except Exception as exc:  # a broken plugin must not break the other tasks: say which one and go on
+            warnings.warn(f"langpref: skipped the task plugin {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}",
+                          stacklevel=2)
+            continue
+        _registry.setdefault(task.name, replace(task, source="plugin"))
+
+
+def register_task(task: Task) -> Task:
+    """Add a task (a recorded one, or one built in code) to the registry. Registering an equal task again is a
+    no-op; a different task under a taken name is refused unless both are recorded tasks (the later one wins, as
+    when the same task file was imported again)."""
+    if task.name in _BUILTIN:
+        raise LangprefError(f"a task may not be named {task.name!r}: that is a built-in task")
+    old = _registry.get(task.name)
+    if old is not None and old != task and old.source == "plugin":
+        raise LangprefError(f"task {task.name!r} is already registered by a plugin; rename it in its task file")
+    _registry[task.name] = task
+    return task
+
+
+def task_names() -> tuple[str, ...]:
+    """Every task known in this process: built-ins first, then plugins and recorded tasks."""
+    _load_plugins()
+    return (*_BUILTIN, *(name for name in _registry if name not in _BUILTIN))
+
+
+def get_task(name: str) -> Task:
+    if name in _BUILTIN:
+        return importlib.import_module(_BUILTIN[name]).TASK
+    if name not in _registry:
+        _load_plugins()
+    if name not in _registry:
+        raise LangprefError(
+            f"unknown task {name!r}: known tasks are {', '.join(task_names())}; a recorded task becomes known by "
+            "opening its dataset or model (`langpref import` makes one), a plugin by installing its package"
+        )
+    return _registry[name]
+
+
+def get_simulator(name: str) -> Simulator:
+    """The simulator of a task, or a one-line error for a recorded task (which has only its recordings)."""
+    task = get_task(name)
+    if task.simulator is None:
+        raise LangprefError(f"task {name!r} has no simulator (it is a recorded task): its trajectories come from "
+                            "`langpref import`, and its videos from the recording")
+    return task.simulator
+
+
+def make_env(name: str, horizon: int | None = None) -> SimEnv:
+    sim = get_simulator(name)
+    return sim.make_env(horizon or sim.default_horizon)
+
+
+__all__ = ["ENTRY_POINT_GROUP", "Controller", "ObsField", "SimEnv", "Simulator", "Task", "get_simulator",
+           "get_task", "make_env", "register_task", "task_names"]
