@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The "own robot" example end to end: record (a script that does not use langpref), import, train, check the model
 # reads the bank's unseen test phrasings, then improvement and reward learning with synthetic humans who speak the
-# task's bank. Each step is skipped when its output exists. Numbers land in results/own_robot/ (see docs/results.md).
+# task's bank, and one participant through both studies over HTTP on the recorded videos. Each step is skipped
+# when its output exists. Numbers land in results/own_robot/ (see docs/results.md).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${BIN:-.venv/bin}
@@ -16,4 +17,5 @@ test -f "$MODEL/config.json" || "$BIN/langpref" train --data "$DATA" --out "$MOD
     > "$OUT/improve.json"
 "$BIN/langpref" experiment reward --env drawer-open --data "$DATA" --model "$MODEL" --out "$OUT/reward" --json \
     > "$OUT/reward.json"
-echo "results in $OUT/ (improve/improve.png, reward/reward.png)"
+"$BIN/python" examples/own_robot/study_check.py --model "$MODEL" --data "$DATA" > "$OUT/study_check.json"
+echo "results in $OUT/ (improve/improve.png, reward/reward.png, study_check.json)"
