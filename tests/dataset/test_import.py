@@ -216,6 +216,13 @@ def test_videos_are_imported(tmp_path):
     assert summary["videos"]
     ds = load_dataset(tmp_path / "ds")
     assert ds.video_path(2).read_bytes() == (rec / "ep02.mp4").read_bytes()  # browser-playable: copied as is
+    # `langpref render` of a recorded trajectory is its recording, never a simulator replay
+    from langpref.dataset.render import render_trajectory
+    from langpref.dataset.video import check_video
+
+    assert render_trajectory(tmp_path / "ds", 2, tmp_path / "a.mp4").read_bytes() == ds.video_path(2).read_bytes()
+    frames, _ = check_video(render_trajectory(tmp_path / "ds", 3, tmp_path / "b.webm"))
+    assert frames == 4
 
 
 @pytest.mark.parametrize("toml,message", [
