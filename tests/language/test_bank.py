@@ -296,7 +296,8 @@ MALFORMED = [
     # (file content, env, substrings the one-line message must hold)
     ('{"metaworld": {"speed": ', "metaworld", ["is not valid JSON"]),
     ("[1, 2]", "metaworld", ["top level must be an object"]),
-    ({"metaworld": {"speed": {"increase": ["x"]}}, "kitchen": {}}, "metaworld", ["unknown task key", "'kitchen'"]),
+    ({"metaworld": {"speed": {"increase": ["x"]}}, "robosuite": {"speed": 3}}, "metaworld", ["robosuite.speed"]),
+    ({"metaworld-typo": {"speed": {"increase": ["x"]}}}, "metaworld", ["no 'metaworld' section", "metaworld-typo"]),
     (
         {"metaworld": {"sped": {"increase": ["Go faster."]}}},
         "metaworld",

@@ -179,22 +179,19 @@ def _read_json(text: str, where: str) -> Any:
         raise LangprefError(f"{where} is not valid JSON: {exc}") from None
 
 
-def _check_top(data: Any, where: str, allowed: tuple[str, ...]) -> dict[str, Any]:
+def _check_top(data: Any, where: str) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise LangprefError(
             f'{where}: the top level must be an object like {{"metaworld": {{...}}}}, got {_type_name(data)}'
         )
-    entries = _visible(data)
-    for key in entries:
-        if key not in allowed:
-            raise LangprefError(f"{where}: unknown task key {key!r}; known tasks: {', '.join(allowed)}")
-    return entries
+    return _visible(data)
 
 
 def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tuple[str, ...]]]:
     """Read a user's utterance file (DESIGN.md schema, no splits) and return `feature -> direction -> phrasings`
-    for `env`: only the features and directions the file gives, in canonical order. Every env section present in the
-    file is validated, not only `env`'s."""
+    for `env`: only the features and directions the file gives, in canonical order. Every section of a task known in
+    this process is validated, not only `env`'s; sections of other tasks (a shared file may cover tasks whose dataset
+    is not open here) are skipped, and named in the error if `env`'s own section is missing."""
     _features(env)
     path = Path(path)
     where = f"utterances file {path}"
@@ -208,13 +205,15 @@ def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tupl
         raise LangprefError(f"{where} is not UTF-8 text: {exc}") from None
     except OSError as exc:
         raise LangprefError(f"{where} cannot be read: {exc.strerror or exc}") from None
-    entries = _check_top(_read_json(text, where), where, task_names())
+    entries = _check_top(_read_json(text, where), where)
+    known = set(task_names())
     parsed = {
-        name: _parse_phrasings(section, name, where, name, require_all=False) for name, section in entries.items()
+        name: _parse_phrasings(section, name, where, name, require_all=False)
+        for name, section in entries.items() if name in known
     }
     if env not in parsed:
-        present = ", ".join(parsed) or "none"
-        raise LangprefError(f"{where} has no {env!r} section (envs present: {present})")
+        present = ", ".join(entries) or "none"
+        raise LangprefError(f"{where} has no {env!r} section (tasks present: {present})")
     if not parsed[env]:
         raise LangprefError(f"{where}: section {env!r} gives no phrasings")
     return parsed[env]
