@@ -19,9 +19,11 @@ $(STAMP): pyproject.toml requirements/constraints.txt examples/plugin/pyproject.
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[test,ray]"
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e examples/plugin  # example task plugin (metaworld-reach)
-	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here).
-	command -v chromium >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
-	  || echo "warning: could not install Debian's chromium; the browser test will be skipped"
+	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here); its
+	@# reverse-proxy test runs Debian's nginx with a self-signed certificate (openssl).
+	{ command -v chromium && { command -v nginx || test -x /usr/sbin/nginx; } && command -v openssl; } >/dev/null \
+	  || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium nginx openssl; } \
+	  || echo "warning: could not install Debian's chromium, nginx and openssl; their tests fail under CI=1"
 	touch $(STAMP)
 
 demo: install

@@ -51,6 +51,13 @@ def synthetic_dataset(tmp_path: Path) -> Path:
     return write_synthetic_dataset(tmp_path / "synthetic")
 
 
+@pytest.fixture
+def make_synthetic_dataset():
+    """`write_synthetic_dataset` itself, for tests that need another size (`from conftest import` may find the
+    conftest of another test folder first)."""
+    return write_synthetic_dataset
+
+
 TRAIN_TEXTS = {
     "height": {"increase": ["Move higher.", "Go up more.", "Raise your arm."],
                "decrease": ["Move lower.", "Go down more.", "Lower your arm."]},

@@ -6,7 +6,7 @@ from langpref.cli import main
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "langpref", *args], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "langpref", *args], capture_output=True, text=True, check=False)
 
 
 def test_help_lists_the_commands():
@@ -30,3 +30,160 @@ def test_errors_are_one_line(tmp_path):
     assert proc.stdout == ""
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "does not exist" in lines[0]
+
+
+# ---- flags derived from the config dataclasses -------------------------------------------------------------------
+
+LEGACY_FLAGS = {  # every flag of the hand-written parser this one replaced: scripts and docs rely on them
+    "demo": "--out --workers",
+    "embed": "--model",
+    "evaluate": "--data --device --model --phrasing-split --split --utterances",
+    "experiment alignment": "--data --env --force --out",
+    "experiment improve": "--backend --data --env --force --iterations --model --out --perfect-latent "
+                          "--phrasing-split --phrasings --ray-address --seeds --workers",
+    "generate": "--backend --env --force --horizon --num-trajectories --out --ray-address --seed --workers",
+    "import": "--action-key --camera --force --out --seed --splits --state-key --task",
+    "improve": "--candidates --data --exclude-shown --figure --iterations --loss --model --negatives --num-negatives "
+               "--objective --perfect-latent --phrasing-split --phrasings --reward-model --seed --seeds --strategy "
+               "--temperature --weight-decay",
+    "learn-reward": "--data --eval-split --feedback --figure --humans --loss --model --negatives --num-negatives "
+                    "--perfect-latent --phrasing-split --phrasings --queries --query-split --rationality "
+                    "--reward-model --seed --seeds --temperature --weight-decay",
+    "render": "--fps --height --index --out --width",
+    "study export": "--db --out",
+    "study serve": "--admin-token --data --db --host --improve-max-iterations --model --no-prerender --num-negatives "
+                   "--on-show --on-show-timeout --port --pref-queries --rating-every --seed --split --torch-threads "
+                   "--video-format --video-fps --video-height --video-stride --video-width --videos",
+    "tasks": "--data",
+    "train": "--batch-size --data --device --epochs --extend-bank --finetune-batch-size --finetune-epochs --force "
+             "--freeze-language --head-lr --lang-model --latent-dim --lm-lr --lr --max-length --no-mixed-precision "
+             "--no-observation-deltas --norm-a --norm-b --out --patience --phrasings-per-step --seed --tie-fraction "
+             "--time-samples --utterances",
+    "utterances": "--env",
+    "visualize": "--data --model --out --split",
+}
+for _name in ("reward", "ablation", "prior"):
+    LEGACY_FLAGS[f"experiment {_name}"] = LEGACY_FLAGS["experiment improve"].replace(
+        "--iterations", "--humans --queries --reward-model")
+
+
+def parsers():
+    """{"train": its parser, "experiment improve": ..., ...} with every command's options built."""
+    import argparse
+
+    from langpref.cli import build_parser
+
+    out = {}
+
+    def walk(p, path):
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    out[" ".join([*path, name])] = sub
+                    walk(sub, [*path, name])
+    walk(build_parser(), [])
+    return out
+
+
+def test_every_legacy_flag_is_still_there_and_every_option_has_help():
+    all_parsers = parsers()
+    for command, flags in LEGACY_FLAGS.items():
+        have = {o for a in all_parsers[command]._actions for o in a.option_strings}
+        assert set(flags.split()) <= have, (command, set(flags.split()) - have)
+    for command, p in all_parsers.items():
+        for a in p._actions:
+            if a.option_strings and a.dest != "help":
+                assert a.help, f"{command} {a.option_strings[0]} has no help"
+
+
+def test_flags_carry_the_dataclass_defaults_and_docstrings():
+    from langpref.model.config import ModelConfig, TrainConfig
+    from langpref.reward import LearnRewardConfig
+    from langpref.study.config import StudyConfig
+
+    p = parsers()
+    train = {a.option_strings[0]: a for a in p["train"]._actions if a.option_strings}
+    d = TrainConfig()
+    assert train["--epochs"].default == d.stage1_epochs and train["--lm-lr"].default == d.stage2_lm_lr
+    assert train["--latent-dim"].default == ModelConfig().latent_dim
+    assert train["--no-observation-deltas"].dest == "model.observation_deltas"
+    assert "co-finetun" not in train["--time-samples"].help and "0 = all" in train["--time-samples"].help
+    assert train["--device"].choices == ("auto", "cpu", "cuda")
+    lr = {a.option_strings[0]: a for a in p["learn-reward"]._actions if a.option_strings}
+    assert lr["--queries"].default == LearnRewardConfig().queries and lr["--feedback"].required
+    assert set(lr["--feedback"].choices) == {"language", "comparison"}
+    assert lr["--reward-model"].choices == ("linear", "mlp") and lr["--weight-decay"].default is None
+    serve = {a.option_strings[0]: a for a in p["study serve"]._actions if a.option_strings}
+    assert serve["--split"].default is None and f"default {StudyConfig().split}" in serve["--split"].help
+    assert serve["--video-format"].choices == ("webm", "mp4")
+
+
+def test_config_round_trip_through_the_parser():
+    import argparse
+    from dataclasses import dataclass, field
+
+    from langpref.cli_config import add_config, field_docs, from_args
+
+    @dataclass
+    class Inner:
+        width: int = 3
+        """How wide."""
+
+    @dataclass
+    class Outer:
+        name: str
+        """Required: no default."""
+        sizes: tuple[int, ...] = (1, 2)
+        """Sizes, 100% of them."""
+        fast: bool = True
+        """Go fast."""
+        label: str | None = None
+        inner: Inner = field(default_factory=Inner)
+
+    assert field_docs(Outer)["sizes"] == "Sizes, 100% of them."
+    p = argparse.ArgumentParser()
+    add_config(p, Outer, {"label": "--tag", "inner.width": {"choices": (3, 4)}})
+    help_text = p.format_help()
+    assert "--no-fast" in help_text and "--tag" in help_text and "How wide." in help_text and "100%" in help_text
+    cfg = from_args(Outer, p.parse_args(["--name", "x", "--sizes", "4,5,6", "--no-fast", "--width", "4"]))
+    assert cfg == Outer("x", (4, 5, 6), False, None, Inner(4))
+    assert from_args(Outer, p.parse_args(["--name", "y"])) == Outer("y")
+
+
+def test_help_imports_nothing_heavy():
+    code = ("import sys; from langpref.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('torch', 'numpy', 'transformers', 'mujoco') if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0 and proc.stdout.strip().endswith("[]"), proc.stdout + proc.stderr
+
+
+def test_the_study_server_does_not_import_the_cli():
+    code = "import sys, langpref.study.serve; print('langpref.cli' in sys.modules)"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0 and proc.stdout.strip() == "False", proc.stderr
+
+
+# ---- the resolved config beside every output ---------------------------------------------------------------------
+
+
+def test_improve_and_experiments_write_their_resolved_config(tmp_path, capsys):
+    from test_improve import write_features_dataset
+
+    data = write_features_dataset(tmp_path / "d")
+    figure = tmp_path / "figs" / "curve.png"
+    assert main(["improve", "--data", str(data), "--perfect-latent", "--seeds", "2", "--iterations", "2",
+                 "--temperature", "0.5", "--figure", str(figure), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    saved = json.loads((tmp_path / "figs" / "curve.config.json").read_text())
+    assert saved["command"].startswith("langpref improve --data") and saved["langpref_version"]
+    assert saved["config"]["config"] == printed["config"]  # the same resolved config --json prints
+    assert saved["config"]["config"]["human"]["temperature"] == 0.5 and saved["config"]["perfect"] is True
+
+    out = tmp_path / "res"
+    assert main(["experiment", "reward", "--env", "metaworld", "--data", str(data), "--perfect-latent", "--out",
+                 str(out), "--seeds", "1", "--humans", "1", "--queries", "2", "--json"]) == 0
+    capsys.readouterr()
+    saved = json.loads((out / "reward.config.json").read_text())
+    assert saved["config"]["config"]["queries"] == 2 and saved["config"]["sweep"] == {
+        "backend": "local", "workers": 1, "ray_address": None}
+    assert saved["config"]["data"] == str(data) and saved["config"]["out"] == str(out)

@@ -46,12 +46,14 @@ class ImproveConfig:
     seeds: int = 100
     """Runs (the paper's 100); each draws its own human weights w and start."""
     seed: int = 0
+    """Master seed: the same seed gives the same numbers."""
     candidate_split: str = "test"
     """The candidate set C the argmax searches (and whose best/worst define the normalised reward)."""
     strategy: str = "paper"
     """`paper` (Eq. 4, last feedback only) or `history` (reward learned from all feedback so far)."""
     objective: str = "cosine"
-    """`paper` only: Eq. 4 as the text describes it (`cosine`) or as printed (`printed`); see the module docstring."""
+    """`paper` only: Eq. 4 as the text describes it, `cosine`: cos(phi' - phi^t, psi_l), or as printed, `printed`:
+    psi_l . (phi' - phi^t) / (|phi'| |phi^t|); see the module docstring."""
     exclude_shown: bool = False
     """`history` only: never show a trajectory twice (off: once at the best, staying there is right)."""
     human: HumanConfig = field(default_factory=HumanConfig)

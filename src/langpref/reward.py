@@ -17,6 +17,10 @@ The default r_xi is linear, r = xi . phi, as in the authors' code; then the loss
 minimum unique, so the result does not depend on optimiser details; `model="mlp"` gives a small network instead.
 With a linear r, r(phi + psi_l) - r(phi) = xi . psi_l: what language teaches does not depend on the shown trajectory.
 
+Queries are drawn uniformly from the query split (the paper's), or chosen by an active strategy from the learner's
+Laplace posterior (`query_selection`; `langpref.feedback.selection`, `langpref.feedback.posterior`) from a separate
+random stream, so that the human's answers and the negatives draw from the same streams whatever the strategy.
+
 Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged over all its unordered pairs, and
 `reward_of_best`, the normalised true reward (0 worst, 1 best of the split) of the trajectory r_xi ranks first
 (averaged over ties, so a constant r_xi scores the split's mean).
@@ -231,15 +235,40 @@ class LearnRewardConfig:
     seeds: int = 3
     """Runs per human (query draws, answer noise, negatives)."""
     seed: int = 0
+    """Master seed: the same seed gives the same numbers."""
     query_split: str = "train"
     """Trajectories shown in queries; the language human's tau* is the best of this split."""
     eval_split: str = "test"
     """Split of the metrics."""
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
+    query_selection: str | None = None
+    """How each query is chosen (`langpref.feedback.selection`): None or `random` (uniform, the paper's); `infogain`
+    (language and comparisons: information about the reward, Laplace posterior); `lal-infogain` (language: the
+    authors' follow-up); `volume-removal` (comparisons). Active strategies need the linear reward model."""
+    candidates: int | None = None
+    """Active strategies score a random subset of this many trajectories of the query split, drawn afresh for
+    every query; None: the whole split."""
+    posterior_samples: int | None = None
+    """Draws of the reward's Laplace posterior per active selection; None: 64."""
+
+    @property
+    def selection(self) -> str:
+        """The query selection strategy, `random` when unset."""
+        return self.query_selection or "random"
 
     def validate(self) -> None:
+        from langpref.feedback.selection import check_strategy
+
         get_kind(self.feedback)
+        check_strategy(self.selection, self.feedback)
+        if self.selection != "random" and self.reward.model != "linear":
+            raise LangprefError(f"query selection {self.selection!r} needs the linear reward model; the "
+                                f"{self.reward.model} reward only works with random queries")
+        if self.candidates is not None and self.candidates < 2:
+            raise LangprefError(f"candidates must be >= 2, got {self.candidates}")
+        if self.posterior_samples is not None and self.posterior_samples < 2:
+            raise LangprefError(f"posterior_samples must be >= 2, got {self.posterior_samples}")
         if self.queries < 1 or self.humans < 1 or self.seeds < 1:
             raise LangprefError("queries, humans and seeds must each be >= 1")
         self.human.validate()
@@ -251,9 +280,14 @@ def human_weights(num_features: int, seed: int, human: int) -> np.ndarray:
     return sample_weights(num_features, np.random.default_rng([seed, 7919, human]))
 
 
-def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfig, run_seed: tuple[int, ...]
-                        ) -> Curves:
-    """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each."""
+def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfig, run_seed: tuple[int, ...],
+                        record: list | None = None) -> Curves:
+    """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each. Queries
+    are drawn uniformly (`random`, from their own stream) or chosen by `cfg.query_selection` (from another stream,
+    so the human's answers and the negatives use the same streams whatever the strategy). With `record`, appends
+    each query's `langpref.feedback.selection.Selection` (score None for random) and answer as a pair."""
+    from langpref.feedback.selection import Selection, make_selector
+
     cfg.validate()
     kind = get_kind(cfg.feedback)
     pool = space.split(cfg.query_split)
@@ -261,11 +295,21 @@ def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfi
     R_eval = true_reward(w, space.theta[eval_rows])
     rng_query, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
     learner = RewardLearner(space.dim, cfg.reward, seed=int(np.random.default_rng([*run_seed, 4]).integers(2**31)))
+    selector = make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
+    rng_select = np.random.default_rng([*run_seed, 5])
     curves = Curves()
     curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
     human = kind.make_human(w, space, pool, cfg.human, rng_human)
     for _ in range(cfg.queries):
-        answer = human.answer(random_query(kind, pool, rng_query))
+        if selector is None:
+            chosen = Selection(random_query(kind, pool, rng_query), None, "random", len(pool))
+        else:
+            chosen = selector.select(learner, rng_select)
+        answer = human.answer(chosen.query)
+        if selector is not None:
+            selector.observe(space, answer)
+        if record is not None:
+            record.append((chosen, answer))
         learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
         learner.fit()
         curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
@@ -297,12 +341,13 @@ def learn_reward(space: LatentSpace, cfg: LearnRewardConfig, progress: bool = Tr
 
     cfg.validate()
     runs = []
-    with tqdm(total=cfg.humans * cfg.seeds, desc=f"learn-reward {cfg.feedback}", disable=not progress,
+    with tqdm(total=cfg.humans * cfg.seeds, desc=f"learn-reward {cfg.feedback} {cfg.selection}", disable=not progress,
               file=sys.stderr) as bar:
         for h in range(cfg.humans):
             w = human_weights(len(space.feature_names), cfg.seed, h)
             for s in range(cfg.seeds):
                 runs.append(run_reward_learning(space, w, cfg, (cfg.seed, h, s)))
                 bar.update()
-    return {**summarise(runs), "feedback": cfg.feedback, "loss": cfg.reward.loss, "config": asdict(cfg),
+    return {**summarise(runs), "feedback": cfg.feedback, "loss": cfg.reward.loss, "query_selection": cfg.selection,
+            "config": asdict(cfg),
             "space": space.description}

@@ -93,7 +93,11 @@ def join(client) -> tuple[str, dict[str, str]]:
 
 
 def answer_for(step: dict, feedback: str = "Move faster.") -> dict:
-    """A valid answer to any step (surveys: every question answered)."""
+    """A valid answer to any step (surveys: every question answered), with the step's `seq`."""
+    return {**_answer_for(step, feedback), "seq": step["seq"]}
+
+
+def _answer_for(step: dict, feedback: str) -> dict:
     kind = step["kind"]
     if kind == "survey":
         answers = {}

@@ -80,7 +80,7 @@ def test_whole_session_follows_the_contract(client, h, study_state):
     assert conn.execute("SELECT count(*) FROM answers WHERE answered_at IS NULL OR server_ms IS NULL").fetchone()[0] == 0
     assert conn.execute("SELECT finished_at FROM participants WHERE id=?", (pid,)).fetchone()[0] is not None
     # a finished study takes no more answers
-    r = client.post(f"/api/participants/{pid}/answer", json={"rating": 3}, headers=headers)
+    r = client.post(f"/api/participants/{pid}/answer", json={"rating": 3, "seq": steps[-1]["seq"]}, headers=headers)
     assert r.status_code == 409 and "finished" in r.json()["error"]
 
 
@@ -101,7 +101,8 @@ def test_reload_shows_the_same_step(client, h):
     first = client.get(url, headers=headers).json()
     assert first["kind"] == "language" and first["phase"] == "improve"
     assert client.get(url, headers=headers).json() == first
-    r = client.post(f"/api/participants/{pid}/answer", json={"feedback": "Go lower please", "client_ms": 5},
+    r = client.post(f"/api/participants/{pid}/answer", json={"feedback": "Go lower please", "client_ms": 5,
+                                                             "seq": first["seq"]},
                     headers=headers)
     step = r.json()
     assert step["kind"] == "satisfaction" and client.get(url, headers=headers).json() == step
@@ -112,10 +113,11 @@ def test_study_1_stops_when_satisfied(client, h):
     url = f"/api/participants/{pid}/answer"
     step = client.post(url, json=h.answer_for(client.get(f"/api/participants/{pid}/step", headers=headers).json()),
                        headers=headers).json()
-    step = client.post(url, json={"feedback": "Move faster.", "client_ms": 3}, headers=headers).json()
+    step = client.post(url, json={"feedback": "Move faster.", "client_ms": 3, "seq": step["seq"]},
+                       headers=headers).json()
     assert step["kind"] == "satisfaction" and step["progress"] == {"done": 1, "total": 3}
     assert step["videos"][0].startswith("/videos/traj")
-    step = client.post(url, json={"satisfied": True}, headers=headers).json()
+    step = client.post(url, json={"satisfied": True, "seq": step["seq"]}, headers=headers).json()
     assert step["phase"] == "improve_survey"
 
 

@@ -43,7 +43,7 @@ def test_sigkill_and_restart_lose_nothing(h, tmp_path):
         # kill with an answer in flight: afterwards it is either stored with its next step, or not at all
         def post():
             try:
-                httpx.post(f"{url}{base}/answer", json={"feedback": "Move slower.", "client_ms": 4},
+                httpx.post(f"{url}{base}/answer", json={"feedback": "Move slower.", "client_ms": 4, "seq": step["seq"]},
                            headers=headers, timeout=5)
             except httpx.HTTPError:
                 pass

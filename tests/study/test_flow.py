@@ -134,10 +134,15 @@ def test_rating_points_and_progress():
 
 
 @pytest.mark.parametrize("body, status", [
-    ([], 400), ({}, 400), ({"feedback": "x", "choice": 1}, 400), ({"choice": 1, "client_ms": 3}, 409),
-    ({"feedback": "   \n\t ", "client_ms": 3}, 400), ({"feedback": "x" * 501, "client_ms": 3}, 400),
-    ({"feedback": 5, "client_ms": 3}, 400), ({"feedback": "ok"}, 400), ({"feedback": "ok", "client_ms": -1}, 400),
-    ({"feedback": "ok", "client_ms": True}, 400), ({"feedback": "ok", "client_ms": 3, "seq": 4}, 409),
+    ([], 400), ({}, 400), ({"feedback": "x", "choice": 1, "seq": 3}, 400), ({"choice": 1, "client_ms": 3}, 409),
+    ({"feedback": "   \n\t ", "client_ms": 3, "seq": 3}, 400), ({"feedback": "x" * 501, "client_ms": 3, "seq": 3}, 400),
+    ({"feedback": 5, "client_ms": 3, "seq": 3}, 400), ({"feedback": "ok", "seq": 3}, 400),
+    ({"feedback": "ok", "client_ms": -1, "seq": 3}, 400), ({"feedback": "ok", "client_ms": True, "seq": 3}, 400),
+    ({"feedback": "ok", "client_ms": 3, "seq": 4}, 409),
+    # a seq that is not an integer (without one, DESIGN.md's clients, the answer is for the current step)
+    ({"feedback": "Move faster.", "client_ms": 3, "seq": "3"}, 400),
+    ({"feedback": "Move\x00 faster.", "client_ms": 3, "seq": 3}, 400),
+    ({"feedback": "Move faster.", "client_ms": 10 ** 400, "seq": 3}, 400),
 ])
 def test_parse_answer_refuses_bad_language_answers(body, status):
     step = Step(3, "improve", "language", (0,))
@@ -151,17 +156,17 @@ def test_parse_answer_accepts_and_trims():
     step = Step(3, "improve", "language", (0,))
     a = parse_answer({"feedback": "  Move faster.  ", "client_ms": 1200, "seq": 3}, step)
     assert (a.kind, a.value, a.client_ms) == ("language", LanguageAnswer(LanguageQuery(0), "Move faster."), 1200.0)
-    assert parse_answer({"feedback": "x" * 500, "client_ms": 0}, step).value.text == "x" * 500
+    assert parse_answer({"feedback": "x" * 500, "client_ms": 0, "seq": 3}, step).value.text == "x" * 500
     rating = Step(4, "pref_language", "rating", (0,), number=5)
     for bad in (0, 6, 2.5, "3", True, None):
         with pytest.raises(AnswerError):
-            parse_answer({"rating": bad}, rating)
-    assert parse_answer({"rating": 5}, rating).value == 5
+            parse_answer({"rating": bad, "seq": 4}, rating)
+    assert parse_answer({"rating": 5, "seq": 4}, rating).value == 5
     comp = Step(4, "pref_comparison", "comparison", (0, 1), number=1)
     for bad in (2, -1, True, "1", 0.0):
         with pytest.raises(AnswerError):
-            parse_answer({"choice": bad, "client_ms": 1}, comp)
-    assert parse_answer({"choice": 1, "client_ms": 1}, comp).value == ComparisonAnswer(ComparisonQuery(0, 1), 1)
+            parse_answer({"choice": bad, "client_ms": 1, "seq": 4}, comp)
+    assert parse_answer({"choice": 1, "client_ms": 1, "seq": 4}, comp).value == ComparisonAnswer(ComparisonQuery(0, 1), 1)
     with pytest.raises(WrongStep):
         parse_answer({"rating": 3}, Step(9, "done", "done"))
 
@@ -182,3 +187,17 @@ def test_survey_validation():
     assert "comments" not in validate_answers("pref", pref)  # optional text left empty
     with pytest.raises(LangprefError, match="None of them"):
         validate_answers("pref", {**pref, "aspects_language": ["None of them", "Convenience"]})
+
+
+def test_text_is_cleaned_and_only_contract_fields_are_kept():
+    """Bidirectional overrides are removed from every text (they reverse a line on the dashboard); unknown fields are
+    not stored."""
+    step = Step(3, "improve", "language", (0,))
+    a = parse_answer({"feedback": "\u202eMove faster.\u202c", "client_ms": 5, "seq": 3, "junk": "x" * 60000}, step)
+    assert a.value.text == "Move faster."
+    assert a.body == {"seq": 3, "feedback": "Move faster.", "client_ms": 5.0}
+    survey = Step(0, "pre_survey", "survey", survey="pre")
+    answers = {q["id"]: value_for(q, likert=3, multi=1) for q in SURVEYS["pre"]}
+    answers["robot_interaction"] = "\u2066Never\u2069"
+    a = parse_answer({"answers": answers, "seq": 0, "extra": {"a": 1}}, survey)
+    assert a.body["answers"]["robot_interaction"] == "Never" and set(a.body) == {"seq", "answers"}

@@ -28,6 +28,30 @@ def to_kind(client, h, pid, headers, kind: str) -> dict:
     return step
 
 
+def get_video(client, url: str, timeout: float = 120.0):
+    """GET a video, coming back after each 503 (it is being made) as the page does."""
+    import time
+
+    deadline = time.time() + timeout
+    while True:
+        r = client.get(url)
+        if r.status_code != 503 or time.time() > deadline:
+            return r
+        time.sleep(min(0.2, int(r.headers["retry-after"])))
+
+
+def with_seq(body: bytes, seq: int) -> bytes:
+    """The body with the current step's seq added when it is a JSON object without one (so that each bad body is
+    refused for what it tests, not for a missing seq)."""
+    try:
+        data = json.loads(body)
+    except ValueError:
+        return body
+    if isinstance(data, dict) and "seq" not in data:
+        return json.dumps({**data, "seq": seq}).encode()
+    return body
+
+
 BAD_BODIES = {
     "survey": [b"{not json", b"[1, 2]", b'"text"', b"{}", b'{"answers": []}', b'{"answers": {"age": "3"}}',
                b'{"answers": {"nope": 1}}', b'{"feedback": "hi", "client_ms": 1}', b"\xff\xfe",
@@ -36,7 +60,8 @@ BAD_BODIES = {
                  json.dumps({"feedback": "a" * 501, "client_ms": 1}).encode(), b'{"feedback": "ok"}',
                  b'{"feedback": ["ok"], "client_ms": 1}', b'{"feedback": "ok", "client_ms": "soon"}',
                  b'{"choice": 0, "client_ms": 1}', b'{"rating": 3}', b'{"satisfied": true}',
-                 b'{"feedback": "ok", "client_ms": 1, "seq": 99}'],
+                 b'{"feedback": "ok", "client_ms": 1, "seq": 99}', b'{"feedback": "move\\u0000 faster", "client_ms": 1}',
+                 b'{"feedback": "Move faster.", "client_ms": 1, "seq": null}'],
     "comparison": [b'{"choice": 2, "client_ms": 1}', b'{"choice": -1, "client_ms": 1}', b'{"choice": "0", "client_ms": 1}',
                    b'{"choice": true, "client_ms": 1}', b'{"choice": 1}', b'{"feedback": "x", "client_ms": 1}'],
     "rating": [b'{"rating": 0}', b'{"rating": 6}', b'{"rating": 4.5}', b'{"rating": "5"}', b'{"rating": null}',
@@ -51,6 +76,7 @@ def test_bad_answers_are_refused_and_change_nothing(client, h, study_state, kind
     step = to_kind(client, h, pid, headers, kind)
     before = snapshot(study_state)
     for body in BAD_BODIES[kind]:
+        body = with_seq(body, step["seq"])
         r = client.post(f"/api/participants/{pid}/answer", content=body,
                         headers={**headers, "Content-Type": "application/json"})
         assert 400 <= r.status_code < 500, (body, r.status_code, r.text)
@@ -70,21 +96,22 @@ def test_feedback_messages_say_what_to_do(client, h, study_state):
     pid, headers = h.join(client)
     to_kind(client, h, pid, headers, "language")
     url = f"/api/participants/{pid}/answer"
-    r = client.post(url, json={"feedback": "  ", "client_ms": 1}, headers=headers)
+    seq = client.get(f"/api/participants/{pid}/step", headers=headers).json()["seq"]
+    r = client.post(url, json={"feedback": "  ", "client_ms": 1, "seq": seq}, headers=headers)
     is_error(r, 400)
     assert "type your feedback" in r.json()["error"]
-    r = client.post(url, json={"feedback": "slower " * 80, "client_ms": 1}, headers=headers)
+    r = client.post(url, json={"feedback": "slower " * 80, "client_ms": 1, "seq": seq}, headers=headers)
     is_error(r, 400)
     assert "500" in r.json()["error"]
     before = snapshot(study_state)
     for nonsense in ("asdf", "qwertyuiop", "I like pizza."):
-        r = client.post(url, json={"feedback": nonsense, "client_ms": 1}, headers=headers)
+        r = client.post(url, json={"feedback": nonsense, "client_ms": 1, "seq": seq}, headers=headers)
         is_error(r, 400)
         assert "does not read as feedback" in r.json()["error"]
     assert snapshot(study_state) == before
     text = ("Move a little faster please. " * 17).strip()
     assert len(text) <= 500
-    assert client.post(url, json={"feedback": text, "client_ms": 1}, headers=headers).status_code == 200
+    assert client.post(url, json={"feedback": text, "client_ms": 1, "seq": seq}, headers=headers).status_code == 200
 
 
 def test_participants_act_only_with_their_own_token(client, h, study_state):
@@ -114,9 +141,9 @@ def test_script_in_feedback_is_stored_verbatim_and_escaped_in_reports(client, h,
     from langpref.study.export import export
 
     pid, headers = h.join(client)
-    to_kind(client, h, pid, headers, "language")
+    step = to_kind(client, h, pid, headers, "language")
     evil = "<script>alert('x')</script> move faster"
-    assert client.post(f"/api/participants/{pid}/answer", json={"feedback": evil, "client_ms": 2},
+    assert client.post(f"/api/participants/{pid}/answer", json={"feedback": evil, "client_ms": 2, "seq": step["seq"]},
                        headers=headers).status_code == 200
     data = client.get("/api/admin/participants", headers=h.admin).json()
     assert data["participants"][0]["recent_feedback"][0]["text"] == evil  # JSON, shown with textContent
@@ -148,7 +175,7 @@ def test_video_is_rendered_on_demand_cached_and_served_as_webm(client, h, study_
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "language")
     url = step["videos"][0]
-    r = client.get(url)
+    r = get_video(client, url)
     assert r.status_code == 200 and r.headers["content-type"] == "video/webm"
     assert r.content[:4] == b"\x1a\x45\xdf\xa3"  # EBML header: a WebM file
     assert study_state.videos.progress()["done"] == 1

@@ -40,7 +40,7 @@ from langpref.tasks.base import Task
 @dataclass(frozen=True)
 class GenerateConfig:
     env: str
-    """Task with a simulator: metaworld, robosuite, or a plugin's task."""
+    """Task with a simulator: metaworld, robosuite, or a plugin's task (see `langpref tasks`)."""
     out: Path
     """Dataset directory to create."""
     num_trajectories: int | None = None
@@ -54,7 +54,8 @@ class GenerateConfig:
     force: bool = False
     """Overwrite an existing dataset."""
     backend: str = "local"
-    """Where the rollouts run: local worker processes, or Ray tasks (one per chunk of trajectories)."""
+    """Where the rollouts run: local worker processes, or Ray tasks, one per chunk of trajectories (pip install
+    'langpref[ray]')."""
     ray_address: str | None = None
     """With --backend ray: a running cluster to join (e.g. auto or HOST:6379); default a local instance."""
 

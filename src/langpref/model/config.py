@@ -53,6 +53,7 @@ class TrainConfig:
     freeze_language: bool = False
     """Stop after stage 1 (the paper's "Freeze T5" ablation)."""
     seed: int = 0
+    """The same seed gives the same model on CPU."""
     device: str = "auto"
     """auto (cuda when available), cpu or cuda."""
     mixed_precision: bool = True
@@ -99,6 +100,7 @@ class TrainConfig:
     patience: int = 3
     """Early stopping: epochs without a better validation accuracy before a stage ends."""
     weight_decay: float = 0.0
+    """Adam weight decay of every parameter group, both stages."""
     force: bool = False
     """Overwrite an existing checkpoint directory."""
 

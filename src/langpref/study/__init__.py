@@ -10,4 +10,7 @@
     serve.py     starting a server (CLI, tests)
     export.py    CSVs, analyses, figures, report
     simulate.py  simulated participants over HTTP (load test, benchmark, demo data)
+    bench.py     20 simulated participants: answer latency (`python -m langpref.study.bench`)
+    faultbench.py  unrendered-video flood, SIGTERM and SIGKILL figures (`python -m langpref.study.faultbench`)
+    deploy/      a TLS reverse proxy in front of the server (nginx site, tested by tests/study/test_proxy.py)
 """

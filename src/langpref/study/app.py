@@ -10,6 +10,7 @@ consent), `/study`, `/admin`. Every error is a 4xx `{"error": "one line"}`; bad 
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import hmac
 import html
@@ -32,7 +33,17 @@ from langpref.errors import LangprefError
 from langpref.study import db as sdb
 from langpref.study.config import METHODS, StudyConfig
 from langpref.study.engine import StudyEngine, StudyRobot
-from langpref.study.flow import AnswerError, Participant, Step, advance, first_step, parse_answer, progress, questions
+from langpref.study.flow import (
+    AnswerError,
+    Participant,
+    Step,
+    advance,
+    clean_text,
+    first_step,
+    parse_answer,
+    progress,
+    questions,
+)
 from langpref.study.hook import ShowHook
 from langpref.study.surveys import METHOD_LABELS, SURVEY_TITLES, task_text
 from langpref.study.videos import VideoCache
@@ -46,11 +57,23 @@ NOT_FEEDBACK = ("That does not read as feedback on how the robot moves. Please s
                 "for example \"Move faster.\" or \"Stay lower.\"")
 
 
+VIDEO_WAIT_S = 2.0
+"""A request for a video that is being made waits this long (asynchronously: no server thread is held) before it is
+answered 503 with Retry-After; the page retries and shows its progress meanwhile."""
+MAX_VIDEO_WAITERS = 32
+"""Requests waiting for a video at once; beyond that they are answered 503 with Retry-After at once."""
+VIDEO_RETRY_S = 2
+LOCK_STRIPES = 64
+MAX_RESUME_FAILURES = 20
+"""Wrong resume codes accepted per minute, all clients together (then 429): about 2^50 codes cannot be tried."""
+
+
 class HttpError(Exception):
-    def __init__(self, status: int, message: str):
+    def __init__(self, status: int, message: str, headers: dict[str, str] | None = None):
         super().__init__(message)
         self.status = status
         self.message = message
+        self.headers = headers
 
 
 def _sha256(text: str) -> str:
@@ -63,9 +86,16 @@ def _decode(body: bytes, allow_empty: bool = False) -> Any:
     if allow_empty and not body.strip():
         return {}
     try:
-        return json.loads(body)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise HttpError(400, f"the body is not valid JSON ({exc.__class__.__name__}: {str(exc)[:80]})") from None
+        return json.loads(body, parse_constant=_no_constant)
+    except RecursionError:
+        raise HttpError(400, "the body is nested too deeply") from None
+    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError, and integers of over 4300 digits
+        line = " ".join(str(exc).split())[:80]
+        raise HttpError(400, f"the body is not valid JSON ({exc.__class__.__name__}: {line})") from None
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
 
 
 class StudyApp:
@@ -73,7 +103,7 @@ class StudyApp:
     `--on-show` hook (told of every step handed out; it never blocks a request)."""
 
     def __init__(self, db_path: str | Path, engine: StudyEngine, videos: VideoCache, admin_token: str,
-                 cfg: StudyConfig | None = None, hook: ShowHook | None = None):
+                 cfg: StudyConfig | None = None, hook: ShowHook | None = None, allowed_origins: tuple[str, ...] = ()):
         self.db_path = str(db_path)
         self.engine = engine
         self.cfg = cfg or engine.cfg
@@ -81,9 +111,14 @@ class StudyApp:
         self.admin_token = admin_token
         self.hook = hook
         self.robot = StudyRobot(engine, self._history)
-        self._locks: dict[str, threading.Lock] = {}
-        self._locks_guard = threading.Lock()
+        # answers of one participant run one at a time; a fixed set of locks (by hash of the id, taken only after
+        # the token is checked) keeps memory bounded whatever ids unauthenticated requests send
+        self._locks = [threading.Lock() for _ in range(LOCK_STRIPES)]
+        self._resume_failures: list[float] = []
+        self._resume_guard = threading.Lock()
         self._local = threading.local()
+        self.video_waiters = 0  # changed only on the event loop
+        self.allowed_origins = {o.rstrip("/").lower() for o in allowed_origins}
 
     # ---- database helpers ----
 
@@ -100,14 +135,14 @@ class StudyApp:
         return sdb.stored_answers(self.connect(), pid, method)
 
     def _lock(self, pid: str) -> threading.Lock:
-        with self._locks_guard:
-            return self._locks.setdefault(pid, threading.Lock())
+        return self._locks[int(_sha256(pid)[:8], 16) % LOCK_STRIPES]
 
     @staticmethod
     def _participant(row) -> Participant:
         return Participant(row["id"], int(row["number"]), tuple(row["method_order"].split(",")), int(row["seed"]))
 
-    def _auth(self, conn, pid: str, token: str | None) -> Participant:
+    def _auth(self, conn, pid: str, token: str | None) -> tuple[Participant, Any]:
+        """The participant `pid` if `token` is one of theirs (the first, or one issued on resume), and its row."""
         if not isinstance(pid, str) or len(pid) > 64:
             raise HttpError(404, "unknown participant")
         row = conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone()
@@ -115,9 +150,12 @@ class StudyApp:
             raise HttpError(404, "unknown participant")
         if not token:
             raise HttpError(401, "missing X-Participant-Token header")
-        if not hmac.compare_digest(_sha256(token), row["token_sha256"]):
+        digest = _sha256(token)
+        if not hmac.compare_digest(digest, row["token_sha256"]) and conn.execute(
+                "SELECT 1 FROM participant_tokens WHERE participant_id=? AND token_sha256=?", (pid, digest)
+        ).fetchone() is None:
             raise HttpError(403, "this token does not belong to this participant")
-        return self._participant(row)
+        return self._participant(row), row
 
     @staticmethod
     def _current(conn, pid: str) -> tuple[Step, dict]:
@@ -128,7 +166,7 @@ class StudyApp:
 
     # ---- JSON of a step ----
 
-    def step_json(self, step: Step) -> dict[str, Any]:
+    def step_json(self, step: Step, resume_code: str | None = None, p: Participant | None = None) -> dict[str, Any]:
         out = {
             "phase": step.phase,
             "kind": step.kind,
@@ -143,11 +181,20 @@ class StudyApp:
         if step.survey:
             out["title"] = SURVEY_TITLES[step.survey]
         out.update(step.extra)
+        if "previous" in step.extra:
+            out["previous_video"] = self.videos.url(int(step.extra["previous"]))
+        if resume_code:
+            out["resume_code"] = resume_code
+        if p is not None and step.method:
+            out["method_position"] = p.method_order.index(step.method) + 1  # the page's introduction of a method
+        if step.phase == "improve":
+            out["last_round"] = step.number >= self.cfg.improve_max_iterations
         return out
 
     # ---- participant endpoints ----
 
-    def create_participant(self, body: bytes, user_agent: str | None) -> dict[str, Any]:
+    def create_participant(self, body: bytes) -> dict[str, Any]:
+        """A new participant; nothing about the browser or the person is stored (no User-Agent, no address)."""
         data = _decode(body, allow_empty=True)
         if not isinstance(data, dict):
             raise HttpError(400, "the body must be a JSON object ({})")
@@ -159,28 +206,51 @@ class StudyApp:
             # counterbalancing: odd arrivals start Study 2 with language, even ones with comparisons
             order = METHODS if number % 2 == 1 else tuple(reversed(METHODS))
             conn.execute("INSERT INTO participants (id, token_sha256, number, method_order, seed, created_at, "
-                         "user_agent) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                         (pid, _sha256(token), number, ",".join(order), number, now, (user_agent or "")[:300]))
+                         "resume_code) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                         (pid, _sha256(token), number, ",".join(order), number, now, sdb.new_resume_code(conn)))
             step = first_step()
             conn.execute("INSERT INTO steps (participant_id, seq, phase, kind, payload, created_at) "
                          "VALUES (?, ?, ?, ?, ?, ?)", (pid, step.seq, step.phase, step.kind, step.payload(), now))
         return {"participant_id": pid, "token": token}
 
+    def resume(self, body: bytes) -> dict[str, Any]:
+        """`{"code": "XXXXX-XXXXX"}` -> a new token of the participant with that resume code (their other tokens
+        keep working). Failed tries are limited for everyone together, so codes cannot be guessed by trying."""
+        data = _decode(body)
+        code = sdb.normalise_resume_code(data.get("code", "")) if isinstance(data, dict) and \
+            isinstance(data.get("code"), str) else None
+        now = time.time()
+        with self._resume_guard:
+            self._resume_failures = [t for t in self._resume_failures if now - t < 60.0]
+            if len(self._resume_failures) >= MAX_RESUME_FAILURES:
+                raise HttpError(429, "too many wrong resume codes; wait a minute and try again", {"Retry-After": "60"})
+        conn = self.connect()
+        row = conn.execute("SELECT id FROM participants WHERE resume_code=?", (code,)).fetchone() if code else None
+        if row is None:
+            with self._resume_guard:
+                self._resume_failures.append(now)
+            raise HttpError(404, "no participant has this resume code; check it (it looks like ABCDE-FGH23)")
+        token = secrets.token_urlsafe(32)
+        with sdb.transaction(conn):
+            conn.execute("INSERT INTO participant_tokens (participant_id, token_sha256, created_at) VALUES (?, ?, ?)",
+                         (row["id"], _sha256(token), now))
+        return {"participant_id": row["id"], "token": token}
+
     def get_step(self, pid: str, token: str | None) -> dict[str, Any]:
         conn = self.connect()
-        self._auth(conn, pid, token)
+        p, prow = self._auth(conn, pid, token)
         step, row = self._current(conn, pid)
         if row["first_shown_at"] is None:
             conn.execute("UPDATE steps SET first_shown_at=? WHERE participant_id=? AND seq=? AND "
                          "first_shown_at IS NULL", (time.time(), pid, step.seq))
         if self.hook is not None:
             self.hook.show(pid, step.seq, step.kind, step.shown)
-        return self.step_json(step)
+        return self.step_json(step, prow["resume_code"], p)
 
     def answer(self, pid: str, token: str | None, body: bytes) -> dict[str, Any]:
+        conn = self.connect()
+        p, prow = self._auth(conn, pid, token)  # before the lock: unknown ids never reach it
         with self._lock(pid):
-            conn = self.connect()
-            p = self._auth(conn, pid, token)
             step, row = self._current(conn, pid)
             data = _decode(body)
             try:
@@ -205,7 +275,7 @@ class StudyApp:
                 raise
             if self.hook is not None:
                 self.hook.show(pid, tr.next.seq, tr.next.kind, tr.next.shown)
-            return self.step_json(tr.next)
+            return self.step_json(tr.next, prow["resume_code"], p)
 
     def _store(self, conn, p: Participant, step: Step, row: dict, ans, data: dict, tr, received: float) -> None:
         shown_at = row["first_shown_at"] or row["created_at"]
@@ -218,7 +288,7 @@ class StudyApp:
                 raise HttpError(409, "this step was answered meanwhile; GET the current step")
             conn.execute("INSERT INTO answers (participant_id, seq, phase, kind, body, client_ms, server_ms, "
                          "time_consistent, answered_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                         (p.id, step.seq, step.phase, step.kind, json.dumps(data), ans.client_ms, server_ms,
+                         (p.id, step.seq, step.phase, step.kind, json.dumps(ans.body), ans.client_ms, server_ms,
                           consistent, now))
             for table, record in tr.records:
                 record = {"participant_id": p.id, "seq": step.seq, **record, "answered_at": now}
@@ -254,12 +324,34 @@ class StudyApp:
             feedback = [dict(r) for r in conn.execute(
                 "SELECT phase, number, text, understood_feature, understood_direction FROM feedback "
                 "WHERE participant_id=? ORDER BY seq DESC LIMIT 5", (p["id"],))]
-            out.append({"participant_id": p["id"], "number": p["number"], "method_order": p["method_order"],
+            out.append({"participant_id": p["id"], "number": p["number"], "resume_code": p["resume_code"],
+                        "excluded": bool(p["excluded"]), "excluded_reason": p["excluded_reason"],
+                        "method_order": p["method_order"],
                         "created_at": p["created_at"], "finished_at": p["finished_at"], "phase": step.phase,
                         "kind": step.kind, "progress": progress(self.cfg, step), "answers": n_answers,
                         "recent_feedback": feedback})
         return {"participants": out, "videos": self.videos.progress(), "study": self.cfg.to_dict(),
                 "hooks": self.hook.status() if self.hook else None}
+
+    def set_excluded(self, pid: str, body: bytes) -> dict[str, Any]:
+        """`{"excluded": true|false, "reason": "..."}`: leave a participant out of the analyses (or back in)."""
+        data = _decode(body)
+        if not isinstance(data, dict) or not isinstance(data.get("excluded"), bool):
+            raise HttpError(400, 'send {"excluded": true or false, "reason": "why (optional)"}')
+        try:
+            reason = clean_text(data.get("reason") or "")
+        except AnswerError as exc:
+            raise HttpError(400, str(exc)) from None
+        if not isinstance(reason, str) or len(reason) > 300:
+            raise HttpError(400, "'reason' must be a text of at most 300 characters")
+        conn = self.connect()
+        with sdb.transaction(conn):
+            n = conn.execute("UPDATE participants SET excluded=?, excluded_reason=? WHERE id=?",
+                             (int(data["excluded"]), reason.strip() or None if data["excluded"] else None,
+                              pid)).rowcount
+        if not n:
+            raise HttpError(404, "unknown participant")
+        return {"participant_id": pid, "excluded": data["excluded"]}
 
     def admin_export(self) -> dict[str, Any]:
         from langpref.study.export import analyse, read_tables
@@ -278,12 +370,23 @@ class StudyApp:
             "EXAMPLES": ", ".join(f"\u201c{e}\u201d" for e in task["examples"]),
             "IMPROVE_MAX": str(c.improve_max_iterations), "PREF_QUERIES": str(c.pref_queries),
             "RATING_EVERY": str(c.rating_every), "LANGUAGE": METHOD_LABELS["language"],
-            "COMPARISON": METHOD_LABELS["comparison"],
+            "COMPARISON": METHOD_LABELS["comparison"], "DURATION": duration_text(c),
         }
         text = (HERE / "templates" / name).read_text()
         for key, value in values.items():
             text = text.replace("{{" + key + "}}", html.escape(value))
         return text
+
+
+def duration_text(c: StudyConfig) -> str:
+    """How long the study takes, from its protocol, for the guidelines ("30 to 45 minutes" for the paper's): surveys
+    8-10 minutes in all, a Study-1 round 40-60 s (most people are satisfied within 3), a language query 30-40 s, a
+    comparison 20-25 s, a rating 10-15 s."""
+    ratings = 2 * len(c.rating_points())
+    lo = 8 * 60 + 40 * min(c.improve_max_iterations, 3) + c.pref_queries * (30 + 20) + ratings * 10
+    hi = 10 * 60 + 60 * c.improve_max_iterations + c.pref_queries * (40 + 25) + ratings * 15
+    lo_min = max(5, 5 * round(lo / 300))
+    return f"{lo_min} to {max(5 * round(hi / 300), lo_min + 5)} minutes"
 
 
 SECURITY_HEADERS = {
@@ -293,6 +396,29 @@ SECURITY_HEADERS = {
     "Referrer-Policy": "no-referrer",
     "X-Frame-Options": "DENY",
 }
+
+
+def cross_site(headers, allowed: set[str]) -> str | None:
+    """Why a state-changing request comes from another site's page (None when it does not): its Origin (or, without
+    one, its Referer) must be the host it was sent to, or one of `allowed`. Requests of tools, which send neither,
+    pass: they hold a token or create only a participant, and no browser page of another site can make them."""
+    from urllib.parse import urlsplit
+
+    origin = headers.get("origin")
+    if origin is None and headers.get("referer"):
+        parts = urlsplit(headers["referer"])
+        origin = f"{parts.scheme}://{parts.netloc}"
+    if origin is None:
+        return None
+    origin = origin.strip().rstrip("/").lower()
+    if origin in allowed:
+        return None
+    netloc = urlsplit(origin).netloc if "://" in origin else ""
+    host = (headers.get("host") or "").strip().lower()
+    if netloc and netloc == host:
+        return None
+    return (f"cross-site request refused: the page at {origin[:100]} is not this study's; open the study at its own "
+            "address (behind a proxy that rewrites Host, list its address in allowed_origins)")
 
 
 def create_app(state: StudyApp) -> FastAPI:
@@ -305,7 +431,9 @@ def create_app(state: StudyApp) -> FastAPI:
 
     @app.exception_handler(HttpError)
     async def _http_error(request: Request, exc: HttpError):
-        return error(exc.status, exc.message)
+        response = error(exc.status, exc.message)
+        response.headers.update(exc.headers or {})
+        return response
 
     @app.exception_handler(StarletteHTTPException)
     async def _starlette_error(request: Request, exc: StarletteHTTPException):
@@ -323,10 +451,18 @@ def create_app(state: StudyApp) -> FastAPI:
 
     @app.middleware("http")
     async def _headers(request: Request, call_next):
-        response = await call_next(request)
+        if request.method not in ("GET", "HEAD", "OPTIONS"):
+            refused = cross_site(request.headers, state.allowed_origins)
+            if refused:
+                return error(403, refused)
+        try:
+            response = await call_next(request)
+        except Exception:  # answered here, so that the keep-alive connection stays up
+            log.exception("unexpected error on %s %s", request.method, request.scope["path"][:200])
+            response = error(500, "internal error; nothing was stored, please retry")
         for key, value in SECURITY_HEADERS.items():
             response.headers.setdefault(key, value)
-        if request.url.path.startswith("/api/"):
+        if request.scope["path"].startswith("/api/"):  # not request.url: it caches every URL parsed
             response.headers.setdefault("Cache-Control", "no-store")
         return response
 
@@ -355,7 +491,12 @@ def create_app(state: StudyApp) -> FastAPI:
     @app.post("/api/participants")
     async def new_participant(request: Request):
         body = await request.body()
-        return await run_in_threadpool(state.create_participant, body, request.headers.get("user-agent"))
+        return await run_in_threadpool(state.create_participant, body)
+
+    @app.post("/api/participants/resume")
+    async def resume(request: Request):
+        body = await request.body()
+        return await run_in_threadpool(state.resume, body)
 
     @app.get("/api/participants/{pid}/step")
     def get_step(pid: str, request: Request):
@@ -368,22 +509,42 @@ def create_app(state: StudyApp) -> FastAPI:
 
     # videos
     @app.get("/videos/{name:path}")
-    def video(name: str):
+    async def video(name: str):
+        # async and never blocking: a video that is not made yet holds no worker thread (issue: 80 such requests
+        # froze every other endpoint); it waits here a little, then the client is told to come back
         index = state.videos.index_of(name)
         if index is None:
             raise HttpError(404, "no such video")
-        try:
-            path = state.videos.ensure(index)
-        except LangprefError as exc:
-            raise HttpError(503, str(exc)) from None
-        return FileResponse(path, media_type=state.videos.media_type,
-                            headers={"Cache-Control": "public, max-age=86400, immutable"})
+        status, info = state.videos.request(index)
+        if status == "pending" and state.video_waiters < MAX_VIDEO_WAITERS:
+            state.video_waiters += 1
+            try:
+                loop = asyncio.get_running_loop()
+                deadline = loop.time() + VIDEO_WAIT_S
+                while status == "pending" and loop.time() < deadline:
+                    await asyncio.sleep(0.05)
+                    status, info = state.videos.request(index)
+            finally:
+                state.video_waiters -= 1
+        if status == "ready":
+            return FileResponse(info, media_type=state.videos.media_type,
+                                headers={"Cache-Control": "public, max-age=86400, immutable"})
+        retry = {"Retry-After": str(VIDEO_RETRY_S), "Cache-Control": "no-store"}
+        if status == "failed":
+            raise HttpError(503, f"the video could not be made ({info}); it is being tried again", retry)
+        raise HttpError(503, f"the video is being made ({info} ahead of it); retry in {VIDEO_RETRY_S} s", retry)
 
     # admin
     @app.get("/api/admin/participants")
     def admin_participants(request: Request):
         state.check_admin(request.headers.get("authorization"))
         return state.admin_participants()
+
+    @app.post("/api/admin/participants/{pid}/exclude")
+    async def admin_exclude(pid: str, request: Request):
+        state.check_admin(request.headers.get("authorization"))
+        body = await request.body()
+        return await run_in_threadpool(state.set_excluded, pid, body)
 
     @app.get("/api/admin/export")
     def admin_export(request: Request):

@@ -3,7 +3,7 @@
 20 simulated participants (synthetic humans, `langpref.study.simulate`) run whole sessions of the paper's protocol
 (10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve` in
 its own process on loopback, on this machine's cores. Measured on the client: the latency of every answer, by kind;
-the target is a p95 under 300 ms for a language answer (embedding, reward update, next query). Two runs:
+the target is a p95 under 150 ms for a language answer (embedding, reward update, next query). Two runs:
 
 - `paced`: each participant pauses 0.5-1.5 s before an answer (people take several seconds to watch and type);
 - `burst`: no pause at all, every participant answering as fast as the server allows (a stress figure).
@@ -142,7 +142,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
          f"{n} simulated participants at once run whole sessions of the paper's protocol against "
          f"`langpref study serve` on loopback (server in its own process; {model_note}). Latency per answer as the "
          "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
-         "query) under 300 ms.\n"),
+         "query) under 150 ms.\n"),
         "| run | sessions completed | answers | wall | language | comparison | rating | satisfaction | survey |",
         "|---|---|---|---|---|---|---|---|---|",
         _row("paced (0.5-1.5 s pause before each answer)", paced),

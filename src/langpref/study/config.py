@@ -11,6 +11,7 @@ from langpref.study.hook import parse_command
 
 METHODS = ("language", "comparison")
 VIDEO_FORMATS = ("webm", "mp4")
+ADMIN_TOKEN_ENV = "LANGPREF_STUDY_ADMIN_TOKEN"
 
 
 @dataclass
@@ -63,9 +64,13 @@ class VideoConfig:
     """`webm` (VP9, plays in Debian's Chromium and every current browser) or `mp4` (H.264); a recorded video in
     another format is transcoded once."""
     width: int = 320
+    """Width of rendered videos in pixels (recorded videos keep their own size and frame rate)."""
     height: int = 240
+    """Height of rendered videos in pixels."""
     fps: int = 30
+    """Frame rate of rendered videos."""
     stride: int = 2
+    """Rendered videos show one frame per this many stored steps."""
 
     def validate(self) -> None:
         if self.format not in VIDEO_FORMATS:
@@ -89,9 +94,14 @@ class ServeConfig:
     videos: str | None = None
     """Video cache folder; default `DB.videos/` beside the database."""
     host: str = "127.0.0.1"
+    """Address to listen on: 127.0.0.1 is this machine only; 0.0.0.0 opens the study to the network."""
     port: int = 8000
+    """Port to listen on; 0 picks a free one."""
     admin_token: str | None = None
-    """Bearer token of the admin pages and export; a random one is made and printed when not given."""
+    """Bearer token of the admin pages and export. A command line shows in `ps`: prefer the environment variable
+    LANGPREF_STUDY_ADMIN_TOKEN or `admin_token_file`. A random one is made and printed when none is given."""
+    admin_token_file: str | None = None
+    """File holding the admin token (its first line; keep it readable only by you): `--admin-token-file`."""
     prerender: bool = True
     """Render every study video in the background at start (with progress), so that no participant waits."""
     torch_threads: int = 1
@@ -99,6 +109,9 @@ class ServeConfig:
     on_show: str | None = None
     """Command line run (without a shell) before each trajectory is shown, e.g. to replay it on the real robot;
     what to show comes in LANGPREF_* environment variables (see `langpref.study.hook`)."""
+    allowed_origins: tuple[str, ...] = ()
+    """Origins (`https://study.lab.example`) whose pages may send answers besides the server's own (the Host it was
+    reached at): needed only behind a proxy that rewrites the Host header. Cross-site POSTs are refused."""
     on_show_timeout: float = 60.0
     """Seconds an `on_show` run may take before it is killed and reported as timed out."""
     study: StudyConfig = field(default_factory=StudyConfig)
@@ -111,8 +124,9 @@ class ServeConfig:
             raise LangprefError("no dataset given: pass --data DIR (`langpref generate`)")
         if not 0 <= self.port <= 65535:
             raise LangprefError(f"--port must be 0..65535, got {self.port}")
-        if self.admin_token is not None and len(self.admin_token) < 16:
-            raise LangprefError("--admin-token must be at least 16 characters (or leave it out for a random one)")
+        if self.admin_token is not None and self.admin_token_file is not None:
+            raise LangprefError("pass --admin-token or --admin-token-file, not both")
+        self.resolve_admin_token()
         if self.on_show is not None:
             try:
                 program = parse_command(self.on_show)[0]
@@ -125,3 +139,37 @@ class ServeConfig:
             raise LangprefError(f"--on-show-timeout must be > 0 seconds, got {self.on_show_timeout}")
         self.study.validate()
         self.video.validate()
+
+    def resolve_admin_token(self) -> str | None:
+        """The admin token given: `admin_token`, else the first line of `admin_token_file`, else the environment
+        variable LANGPREF_STUDY_ADMIN_TOKEN; None when none is given (the server then makes a random one)."""
+        import os
+        from pathlib import Path
+
+        token, where = self.admin_token, "--admin-token"
+        if token is None and self.admin_token_file is not None:
+            path, where = Path(self.admin_token_file), f"--admin-token-file {self.admin_token_file}"
+            try:
+                token = (path.read_text().splitlines() or [""])[0].strip()
+            except (OSError, UnicodeDecodeError) as exc:
+                raise LangprefError(f"cannot read the admin token from {path} ({exc.__class__.__name__}); pass a "
+                                    "readable text file") from None
+        if token is None and os.environ.get(ADMIN_TOKEN_ENV):
+            token, where = os.environ[ADMIN_TOKEN_ENV].strip(), ADMIN_TOKEN_ENV
+        if token is not None and len(token) < 16:
+            raise LangprefError(f"the admin token ({where}) must be at least 16 characters (or give none for a random "
+                                "one)")
+        return token
+
+
+@dataclass
+class ExportConfig:
+    """`langpref study export`: tables, analyses and figures of a study."""
+
+    db: str = ""
+    """The study's SQLite database (`langpref study serve --db`)."""
+    out: str = ""
+    """Output directory (created if missing; an existing file is refused)."""
+    exclude: tuple[str, ...] = ()
+    """Participants to leave out of the analyses (`--exclude 3,7`: arrival numbers, or ids as the dashboard shows them),
+    besides those marked excluded on the dashboard; the tables keep every row."""

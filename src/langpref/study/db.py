@@ -14,6 +14,11 @@ Tables (one CSV each in `langpref study export`):
     satisfaction      Study 1 "are you satisfied?" answers
     ratings           Study 2 ratings of the best trajectory under the reward learned so far
 
+Schema 2 adds to `participants` a short `resume_code` (shown to the participant and on the dashboard; it restores a
+session in any browser, `POST /api/participants/resume`) and `excluded`/`excluded_reason` (set from the dashboard:
+left out of the analyses), and the table `participant_tokens`: further tokens of a participant, issued on resume
+(never exported).
+
 The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
 killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
 against a killed process (a power cut may lose the last commits, never corrupt the file).
@@ -32,7 +37,7 @@ from typing import Any
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 _V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -130,8 +135,23 @@ CREATE TABLE ratings (
 CREATE INDEX steps_open ON steps (participant_id, answered_at);
 """
 
+_V2 = """
+ALTER TABLE participants ADD COLUMN resume_code TEXT;
+ALTER TABLE participants ADD COLUMN excluded INTEGER NOT NULL DEFAULT 0;
+ALTER TABLE participants ADD COLUMN excluded_reason TEXT;
+CREATE UNIQUE INDEX participants_resume ON participants (resume_code);
+CREATE TABLE participant_tokens (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    token_sha256 TEXT NOT NULL,
+    created_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, token_sha256)
+);
+"""
+
 # schema version -> SQL taking the database from the previous version to it
-MIGRATIONS: dict[int, str] = {1: _V1}
+MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2}
+RESUME_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
+"""Resume codes: no 0/O, 1/I/L, so that a code read aloud or copied by hand is typed right."""
 TABLES = ("meta", "participants", "steps", "answers", "survey_responses", "feedback", "comparisons", "satisfaction",
           "ratings")
 
@@ -192,6 +212,8 @@ def init_db(path: str | Path, meta: dict[str, Any]) -> dict[str, Any]:
                 for statement in filter(str.strip, MIGRATIONS[v].split(";")):
                     conn.execute(statement)
                 conn.execute("INSERT OR REPLACE INTO meta VALUES ('schema_version', ?)", (str(v),))
+            for (pid,) in conn.execute("SELECT id FROM participants WHERE resume_code IS NULL").fetchall():
+                conn.execute("UPDATE participants SET resume_code=? WHERE id=?", (new_resume_code(conn), pid))
             if version == 0:
                 for key, value in meta.items():
                     conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
@@ -199,6 +221,25 @@ def init_db(path: str | Path, meta: dict[str, Any]) -> dict[str, Any]:
         return read_meta(conn)
     finally:
         conn.close()
+
+
+def new_resume_code(conn: sqlite3.Connection) -> str:
+    """A resume code no participant of this database has: 10 symbols (about 50 bits), shown as XXXXX-XXXXX."""
+    import secrets
+
+    while True:
+        raw = "".join(secrets.choice(RESUME_ALPHABET) for _ in range(10))
+        code = f"{raw[:5]}-{raw[5:]}"
+        if conn.execute("SELECT 1 FROM participants WHERE resume_code=?", (code,)).fetchone() is None:
+            return code
+
+
+def normalise_resume_code(text: str) -> str | None:
+    """A typed resume code in its stored form (case, spaces and dashes forgiven); None if it cannot be one."""
+    raw = "".join(ch for ch in str(text).upper() if ch not in " -\t")
+    if len(raw) != 10 or any(ch not in RESUME_ALPHABET for ch in raw):
+        return None
+    return f"{raw[:5]}-{raw[5:]}"
 
 
 def read_meta(conn: sqlite3.Connection) -> dict[str, Any]:

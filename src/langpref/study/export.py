@@ -18,11 +18,13 @@ import csv
 import html
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 from langpref.study import db as sdb
 from langpref.study.config import METHODS
@@ -31,14 +33,18 @@ from langpref.study.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM
 FIGURES = ("study1_attributes", "study1_iterations", "study2_attributes", "study2_ratings", "study2_time")
 
 
+PRIVATE = {"participants": ("token_sha256", "resume_code", "user_agent")}
+"""Columns never exported: credentials (token hash, resume code) and the User-Agent an older version stored."""
+
+
 def read_tables(conn) -> dict[str, list[dict[str, Any]]]:
-    """Every table as a list of rows (dicts); participants without their token hash."""
+    """Every table as a list of rows (dicts), without the `PRIVATE` columns."""
     out = {}
     for table in sdb.TABLES:
         rows = sdb.rows(conn, f"SELECT * FROM {table}")
-        if table == "participants":
-            for r in rows:
-                r.pop("token_sha256", None)
+        for r in rows:
+            for col in PRIVATE.get(table, ()):
+                r.pop(col, None)
         out[table] = rows
     return out
 
@@ -79,14 +85,40 @@ def _paired_tests(a: list[float], b: list[float]) -> dict[str, Any]:
     return out
 
 
-def analyse(tables: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
-    """The paper's analyses of a study from its tables (see the module docstring)."""
+def resolve_exclusions(participants: list[dict[str, Any]], given: Sequence[str | int] = ()) -> dict[str, str]:
+    """Participants left out of the analyses: id -> why. Those marked on the dashboard, and `given` (arrival numbers,
+    ids, or id prefixes of 8 or more characters as the dashboard shows them); an unknown one is an error."""
+    out = {p["id"]: "excluded on the dashboard: "
+           f"{p.get('excluded_reason') or 'no reason given'}" for p in participants if p.get("excluded")}
+    for item in given:
+        text = str(item).strip().rstrip("\u2026")
+        if text.isdigit():
+            found = [p for p in participants if int(p["number"]) == int(text)]
+        else:
+            found = [p for p in participants if len(text) >= 8 and p["id"].startswith(text)]
+        if len(found) != 1:
+            raise LangprefError(f"--exclude {item}: no single participant has this number or id (prefix of 8+ "
+                                "characters); see the dashboard or tables/participants.csv")
+        out.setdefault(found[0]["id"], "excluded on the command line (--exclude)")
+    return out
+
+
+def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int] = ()) -> dict[str, Any]:
+    """The paper's analyses of a study from its tables (see the module docstring), without the excluded
+    participants (`resolve_exclusions`)."""
+    excluded = resolve_exclusions(tables["participants"], exclude)
+    every = tables["participants"]
+    tables = {name: [r for r in rows if r.get("participant_id", r.get("id")) not in excluded]
+              if name != "meta" else rows for name, rows in tables.items()}
     participants = tables["participants"]
     meta = {r["key"]: json.loads(r["value"]) for r in tables["meta"]} if tables.get("meta") else {}
     study = meta.get("study", {})
     max_iter = study.get("improve_max_iterations", 10)
     out: dict[str, Any] = {
         "participants": len(participants),
+        "participants_total": len(every),
+        "excluded": [{"number": p["number"], "participant_id": p["id"], "why": excluded[p["id"]]}
+                     for p in every if p["id"] in excluded],
         "finished": sum(1 for p in participants if p["finished_at"]),
         "method_order": {o: sum(1 for p in participants if p["method_order"] == o)
                          for o in sorted({p["method_order"] for p in participants})},
@@ -139,11 +171,16 @@ def analyse(tables: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
                                 for m in METHODS}
 
     # ---- Study 2: time per query ----
+    # the page's own clock (from the videos playing to the answer) where it agrees with the server's (step handed
+    # out -> answer received, at most TIME_TOLERANCE over it); the server's time where it does not, or is missing
+    consistent = {(r["participant_id"], r["seq"]): r["time_consistent"] for r in tables["answers"]}
     times: dict[str, dict[str, list[float]]] = {m: {} for m in METHODS}
+    sources = {m: {"client_ms": 0, "server_ms": 0} for m in METHODS}
     for m in METHODS:
         for r in sdb.method_rows(tables[get_kind(m).table], m):
-            times[m].setdefault(r["participant_id"], []).append(
-                r["client_ms"] if r["client_ms"] is not None else r["server_ms"])
+            use_client = r["client_ms"] is not None and consistent.get((r["participant_id"], r["seq"])) != 0
+            sources[m]["client_ms" if use_client else "server_ms"] += 1
+            times[m].setdefault(r["participant_id"], []).append(r["client_ms"] if use_client else r["server_ms"])
     t_out: dict[str, Any] = {}
     for m in METHODS:
         every = [t / 1000.0 for ts in times[m].values() for t in ts]
@@ -154,9 +191,11 @@ def analyse(tables: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     both = sorted(set(times["language"]) & set(times["comparison"]))
     t_out["paired"] = _paired_tests([t_out["language"]["per_participant_s"][p] for p in both],
                                     [t_out["comparison"]["per_participant_s"][p] for p in both])
-    consistent = [r for r in tables["answers"] if r["time_consistent"] is not None]
-    t_out["client_times_consistent_with_server"] = {"checked": len(consistent),
-                                                    "consistent": sum(r["time_consistent"] for r in consistent)}
+    checked = [r for r in tables["answers"] if r["time_consistent"] is not None]
+    t_out["client_times_consistent_with_server"] = {"checked": len(checked),
+                                                    "consistent": sum(r["time_consistent"] for r in checked)}
+    t_out["source"] = {**sources, "rule": "the page's time (client_ms) where it is consistent with the server's "
+                       "clock, else the server's time from handing out the step to receiving the answer (server_ms)"}
     out["study2_time_per_query_s"] = t_out
 
     # ---- Study 2: ratings and their area under the curve ----
@@ -337,7 +376,9 @@ def report_html(summary: dict[str, Any], figs: dict[str, str], texts: list[tuple
 margin:1em 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}figure{{display:inline-block;margin:.5em}}
 img{{max-width:460px}}</style></head><body>
 <h1>Study report</h1>
-<p>{s['participants']} participants ({s['finished']} finished), env {_fmt(s.get('env'))};
+<p>{s['participants']} participants ({s['finished']} finished), env {_fmt(s.get('env'))}; excluded from the
+analyses: {len(s['excluded'])}{html.escape(' (#' + ', #'.join(str(e['number']) for e in s['excluded']) + ')')
+                                    if s['excluded'] else ''};
 Study-2 orders: {html.escape(json.dumps(s['method_order']))}.</p>
 <h2>Study 1: trajectory improvement</h2>
 <table><tr><th>attribute</th><th>score</th></tr>
@@ -356,7 +397,10 @@ Study-2 orders: {html.escape(json.dumps(s['method_order']))}.</p>
 <p>Overall preference: {html.escape(json.dumps(s['study2_preference']))}</p>
 <h3>Time per query (s)</h3>
 <p>Language {_ms(t['language'])}; comparison {_ms(t['comparison'])}; language takes
-{_fmt(t['language_less_time_percent'], 1)}% less time.</p>
+{_fmt(t['language_less_time_percent'], 1)}% less time. Timing used: the page's clock for
+{t['source']['language']['client_ms'] + t['source']['comparison']['client_ms']} answers, the server's for
+{t['source']['language']['server_ms'] + t['source']['comparison']['server_ms']} (where the page's was inconsistent
+with it or missing).</p>
 <h3>Ratings of the best trajectory under the learned reward</h3>
 <table><tr><th>queries</th><th>language</th><th>comparison</th></tr>{rating_rows}</table>
 <p>Area under the rating curve: language {_ms(r['language']['auc'])}, comparison {_ms(r['comparison']['auc'])};
@@ -369,38 +413,50 @@ paired t-test p = {_fmt(test['t_p_value'], 4)}, Wilcoxon p = {_fmt(test['wilcoxo
 """
 
 
-def export(db_path: str | Path, out: str | Path) -> dict[str, Any]:
-    """Write the CSVs, summary.json, the figures and report.html of the study in `db_path` into `out`."""
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value: Any) -> Any:
+    """A value as written to a CSV: text a spreadsheet would run as a formula (`=HYPERLINK(...)`, `+`, `-`, `@`, a
+    leading tab or carriage return) gets a leading apostrophe, so it shows as the text it is. Numbers stay numbers."""
+    if isinstance(value, str) and (value.startswith(FORMULA_START) or value.lstrip().startswith(FORMULA_START[:4])):
+        return "'" + value
+    return value
+
+
+def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = ()) -> dict[str, Any]:
+    """Write the CSVs, summary.json, the figures and report.html of the study in `db_path` into `out`; the analyses
+    leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids)."""
     from langpref.study.surveys import SURVEYS
 
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise LangprefError(f"--out {out} is a file; pass a directory (it is created if missing)")
     conn = sdb.open_existing(db_path)
     try:
         tables = read_tables(conn)
+        columns = {name: [d[1] for d in conn.execute(f"PRAGMA table_info({name})")] for name in tables}
     finally:
         conn.close()
-    (out / "tables").mkdir(parents=True, exist_ok=True)
-    for name, rows_ in tables.items():
-        cols = [d[1] for d in _columns(db_path, name)]
-        with open(out / "tables" / f"{name}.csv", "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=[c for c in cols if not (name == "participants" and c == "token_sha256")])
-            w.writeheader()
-            w.writerows(rows_)
-    summary = analyse(tables)
-    figs = figures(summary, out)
-    text_ids = {(s, q["id"]) for s, qs in SURVEYS.items() for q in qs if q["type"] == "text"}
-    texts = [(r["participant_id"], r["question_id"], json.loads(r["value"])) for r in tables["survey_responses"]
-             if (r["survey"], r["question_id"]) in text_ids and json.loads(r["value"])]
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "report.html").write_text(report_html(summary, figs, texts))
+    summary = analyse(tables, exclude)  # first: a bad --exclude writes nothing
+    try:
+        (out / "tables").mkdir(parents=True, exist_ok=True)
+        for name, rows_ in tables.items():
+            with open(out / "tables" / f"{name}.csv", "w", newline="") as fh:
+                w = csv.DictWriter(fh, fieldnames=[c for c in columns[name] if c not in PRIVATE.get(name, ())])
+                w.writeheader()
+                w.writerows({k: csv_cell(v) for k, v in r.items()} for r in rows_)
+        figs = figures(summary, out)
+        excluded = {e["participant_id"] for e in summary["excluded"]}
+        text_ids = {(s, q["id"]) for s, qs in SURVEYS.items() for q in qs if q["type"] == "text"}
+        texts = [(r["participant_id"], r["question_id"], json.loads(r["value"])) for r in tables["survey_responses"]
+                 if (r["survey"], r["question_id"]) in text_ids and json.loads(r["value"])
+                 and r["participant_id"] not in excluded]
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (out / "report.html").write_text(report_html(summary, figs, texts))
+    except OSError as exc:
+        raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
     return {"out": str(out), "report": str(out / "report.html"), "summary": str(out / "summary.json"),
             "tables": sorted(f"tables/{t}.csv" for t in tables), "figures": sorted(figs.values()),
-            "participants": summary["participants"], "finished": summary["finished"]}
-
-
-def _columns(db_path, table: str) -> list:
-    conn = sdb.connect(db_path)
-    try:
-        return list(conn.execute(f"PRAGMA table_info({table})"))
-    finally:
-        conn.close()
+            "participants": summary["participants"], "finished": summary["finished"],
+            "excluded": len(summary["excluded"])}

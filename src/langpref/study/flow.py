@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -82,11 +83,32 @@ class Step:
 
 @dataclass(frozen=True)
 class Answer:
-    """A checked answer to a step; `value` is the feedback kind's typed answer on language and comparison steps."""
+    """A checked answer to a step; `value` is the feedback kind's typed answer on language and comparison steps;
+    `body` is what is stored of the request: the contract's fields only, checked and cleaned."""
 
     kind: str
     value: Any
     client_ms: float | None = None
+    body: dict[str, Any] = field(default_factory=dict)
+
+
+_CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
+_BIDI = re.compile(r"[\u202a-\u202e\u2066-\u2069]")
+"""Bidirectional embeddings, overrides and isolates: invisible, they reverse how a line is shown (dashboard, CSV)."""
+
+
+def clean_text(value: Any) -> Any:
+    """Every string in `value` with bidirectional controls removed; control characters (NUL, escape, ...; tab and
+    line breaks are fine) refused with an AnswerError."""
+    if isinstance(value, str):
+        if _CONTROL.search(value):
+            raise AnswerError("the answer contains control characters (such as NUL); send plain text")
+        return _BIDI.sub("", value)
+    if isinstance(value, list):
+        return [clean_text(v) for v in value]
+    if isinstance(value, dict):
+        return {clean_text(k): clean_text(v) for k, v in value.items()}
+    return value
 
 
 class Robot(Protocol):
@@ -124,15 +146,20 @@ def progress(cfg: StudyConfig, step: Step) -> dict[str, int]:
 def _number(body: dict, key: str, lo: float, hi: float, what: str, integer: bool) -> Any:
     value = body.get(key)
     ok = isinstance(value, int) if integer else isinstance(value, (int, float))
-    if isinstance(value, bool) or not ok or math.isnan(value) or not lo <= value <= hi:
+    # the range first: math.isnan of a huge integer raises OverflowError
+    if isinstance(value, bool) or not ok or not lo <= value <= hi or math.isnan(value):
         raise AnswerError(f"{key!r} must be {what}")
     return value
 
 
 def parse_answer(body: Any, step: Step) -> Answer:
-    """Check an answer body against the current step: a WrongStep (409) for another kind, else AnswerError (400)."""
+    """Check an answer body against the current step: a WrongStep (409) for another kind or another step's `seq`,
+    else AnswerError (400): a bad value, control characters in text."""
     if not isinstance(body, dict):
         raise AnswerError("the body must be a JSON object")
+    # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in DESIGN.md's
+    # contract that outside clients follow; when it is sent, an old answer sent again is never taken for the current
+    # step (our pages and simulated participants always send it)
     kinds = {ANSWER_KEYS[k] for k in body if k in ANSWER_KEYS}
     if not kinds:
         raise AnswerError("missing answer field: send one of " + ", ".join(f"'{k}'" for k in ANSWER_KEYS))
@@ -143,8 +170,11 @@ def parse_answer(body: Any, step: Step) -> Answer:
         raise WrongStep("the study is finished; there is nothing left to answer")
     if kind != step.kind:
         raise WrongStep(f"the current step is a {step.kind} step, not {kind}: GET the step and answer it")
-    if "seq" in body and body["seq"] != step.seq:
+    if "seq" in body and (isinstance(body["seq"], bool) or not isinstance(body["seq"], int)):
+        raise AnswerError("'seq' must be the integer seq of the step you answer")
+    if body.get("seq", step.seq) != step.seq:
         raise WrongStep(f"step {body['seq']!r} was already answered; the current step is {step.seq}")
+    body = clean_text(body)
     client_ms = None
     if kind in METHODS:
         client_ms = float(_number(body, "client_ms", 0, MAX_CLIENT_MS, "the milliseconds from showing the videos to "
@@ -165,7 +195,15 @@ def parse_answer(body: Any, step: Step) -> Answer:
         raise
     except LangprefError as exc:
         raise AnswerError(str(exc)) from None
-    return Answer(kind, value, client_ms)
+    stored: dict[str, Any] = {"seq": step.seq}
+    if kind == "survey":
+        stored["answers"] = value
+    else:
+        key = next(k for k, v in ANSWER_KEYS.items() if v == kind)
+        stored[key] = body[key]
+        if client_ms is not None:
+            stored["client_ms"] = client_ms
+    return Answer(kind, value, client_ms, stored)
 
 
 @dataclass

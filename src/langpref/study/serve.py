@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import os
 import secrets
+import signal
 import socket
 import sys
 import threading
@@ -60,9 +61,11 @@ def resolve_study_config(db_path: str | Path, overrides: dict[str, Any]) -> Stud
     return cfg
 
 
-def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True) -> StudyApp:
+def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True,
+                admin_token: str | None = None) -> StudyApp:
     """Engine, database (created or checked), video cache and `--on-show` hook of a study."""
     cfg.validate()
+    check_db_path(cfg.db)
     engine = engine or StudyEngine.load(cfg.model, cfg.data, cfg.study)
     model_dir, data_dir = Path(cfg.model).resolve(), Path(cfg.data).resolve()
     meta = {"study": cfg.study.to_dict(), "model": str(model_dir), "model_sha256": _file_sha(model_dir / "config.json"),
@@ -78,8 +81,8 @@ def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: b
                                 f"that {what} again, or a new --db for a new study")
     videos = VideoCache(cfg.data, cfg.videos or f"{cfg.db}.videos", cfg.video, engine.study, progress=progress)
     hook = ShowHook(cfg.on_show, engine.dataset, cfg.on_show_timeout) if cfg.on_show else None
-    token = cfg.admin_token or secrets.token_urlsafe(24)
-    return StudyApp(cfg.db, engine, videos, token, cfg.study, hook=hook)
+    token = admin_token or cfg.resolve_admin_token() or secrets.token_urlsafe(24)
+    return StudyApp(cfg.db, engine, videos, token, cfg.study, hook=hook, allowed_origins=cfg.allowed_origins)
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -100,34 +103,89 @@ def bind(host: str, port: int) -> socket.socket:
 def _uvicorn_server(app, log_level: str = "warning"):
     import uvicorn
 
+    # a stop waits at most 2 s for requests in flight (none waits long: videos are not waited for in threads)
     return uvicorn.Server(uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
-                                         timeout_keep_alive=30))
+                                         timeout_keep_alive=30, timeout_graceful_shutdown=2))
+
+
+class _Stopped(BaseException):
+    """SIGTERM: stop serving, clean up, exit normally."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise _Stopped
+
+
+def check_db_path(db: str | Path) -> None:
+    """What can be said about `--db` before the model is loaded: a directory or an unwritable place is refused."""
+    path = Path(db)
+    if path.is_dir():
+        raise LangprefError(f"--db {path} is a directory; pass a file name such as {path / 'study.sqlite'}")
+    if path.exists() and not path.is_file():
+        raise LangprefError(f"--db {path} is not a regular file; pass a file name")
+    parent = path.resolve().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.R_OK | os.W_OK)):
+        raise LangprefError(f"--db {path} cannot be written here (permissions); pass another --db")
+
+
+def network_warning(host: str) -> str | None:
+    """The warning printed when the server listens beyond this machine: plain HTTP, with a pointer to the proxy."""
+    import ipaddress
+
+    try:
+        loopback = ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        loopback = host == "localhost"
+    if loopback:
+        return None
+    return (f"warning: --host {host} serves plain HTTP to the network: participants' tokens and answers travel "
+            "unencrypted. On a shared network put a TLS reverse proxy in front and keep the server on 127.0.0.1 (README: "
+            "'Running a user study'; example configurations in langpref/study/deploy/)")
 
 
 def serve(cfg: ServeConfig) -> None:
-    """Run the study server until interrupted."""
-    import torch
-
-    torch.set_num_threads(max(1, cfg.torch_threads))
-    state = build_state(cfg)
-    sock = bind(cfg.host, cfg.port)
-    host, port = sock.getsockname()[:2]
-    shown = f"[{host}]" if ":" in host else host
-    url = f"http://{shown}:{port}"
-    print(f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
-          f"database {cfg.db}", file=sys.stderr)
-    if state.hook is not None:
-        print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
-    print(f"participants: {url}/", flush=True)
-    print(f"admin:        {url}/admin   token: {state.admin_token}", flush=True)
-    state.videos.start(prerender=cfg.prerender)
+    """Run the study server until interrupted (SIGINT) or stopped (SIGTERM: it exits within a few seconds)."""
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if threading.current_thread() is threading.main_thread() \
+        else None
+    state = sock = None
     try:
-        _uvicorn_server(create_app(state)).run(sockets=[sock])
-    finally:
-        state.videos.close()
+        # everything that can be checked without the model first: a taken port or a bad --db fails in a second
+        cfg.validate()
+        admin_token = cfg.resolve_admin_token()
+        check_db_path(cfg.db)
+        sock = bind(cfg.host, cfg.port)
+        warning = network_warning(cfg.host)
+        if warning:
+            print(warning, file=sys.stderr, flush=True)
+        import torch
+
+        torch.set_num_threads(max(1, cfg.torch_threads))
+        state = build_state(cfg, admin_token=admin_token)
+        host, port = sock.getsockname()[:2]
+        shown = f"[{host}]" if ":" in host else host
+        url = f"http://{shown}:{port}"
+        print(f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
+              f"database {cfg.db}", file=sys.stderr)
         if state.hook is not None:
-            state.hook.close()
-        sock.close()
+            print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
+        print(f"participants: {url}/", flush=True)
+        print(f"admin:        {url}/admin   token: "
+              f"{state.admin_token if admin_token is None else '(as given)'}", flush=True)
+        state.videos.start(prerender=cfg.prerender)
+        _uvicorn_server(create_app(state)).run(sockets=[sock])
+    except _Stopped:
+        print("stopped (SIGTERM)", file=sys.stderr, flush=True)
+    finally:
+        if state is not None:
+            state.videos.close()
+            if state.hook is not None:
+                state.hook.close()
+        if sock is not None:
+            sock.close()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 class BackgroundServer:
@@ -156,15 +214,3 @@ class BackgroundServer:
         self.server.should_exit = True
         self.thread.join(timeout=30)
         self.sock.close()
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python -m langpref.study.serve ...`: the same as `langpref study serve ...`."""
-    from langpref.cli import main as cli_main
-
-    return cli_main(["study", "serve", *(argv if argv is not None else sys.argv[1:])])
-
-
-if __name__ == "__main__":
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    sys.exit(main())

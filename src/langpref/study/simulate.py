@@ -139,7 +139,7 @@ class SimParticipant:
                     self.errors.append("deadline reached")
                     return
                 received = time.perf_counter()
-                body = self._body(step, received)
+                body = {**self._body(step, received), "seq": step["seq"]}  # every answer names its step
                 t0 = time.perf_counter()
                 r = self.client.post(f"{path}/answer", json=body, headers=headers)
                 self.latency.setdefault(step["kind"], []).append((time.perf_counter() - t0) * 1000.0)

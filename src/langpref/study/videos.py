@@ -6,7 +6,9 @@ videos are rendered from the stored simulator states. Names are `traj000012-<tag
 dataset and (for rendered videos) the render settings, so a cache folder never serves a video made another way.
 Videos are made in one worker process (MuJoCo on EGL, or PyAV's encoder, apart from the server's threads) that keeps
 its env between trajectories. At start every study trajectory is queued (`prerender`), and a video asked for before
-its turn goes to the front of the queue; the request waits for it.
+its turn goes to the front of the queue (`request`); no server thread waits for it: the app answers 503 with
+Retry-After, or waits asynchronously for a short while (`langpref.study.app`). The worker exits by itself when the
+server process dies (it watches its parent), and `close` kills it rather than waiting for a render to finish.
 """
 
 from __future__ import annotations
@@ -45,11 +47,24 @@ def _close_worker_envs() -> None:
     _WORKER_STATE.clear()
 
 
-def _worker_init() -> None:
-    """The video worker yields the CPU to the server's requests and closes its envs at exit."""
+def _watch_parent(parent: int, interval: float = 0.5) -> None:
+    """Exit this worker as soon as `parent` (the server) is gone: a SIGKILLed server leaves no render worker."""
+    import os
+    import time
+
+    while True:
+        time.sleep(interval)
+        if os.getppid() != parent:
+            os._exit(0)
+
+
+def _worker_init(parent: int | None = None) -> None:
+    """The video worker yields the CPU to the server's requests, closes its envs at exit and dies with its parent."""
     import os
 
     atexit.register(_close_worker_envs)
+    if parent is not None:
+        threading.Thread(target=_watch_parent, args=(parent,), name="parent-watch", daemon=True).start()
     try:
         os.nice(10)
     except (AttributeError, OSError):
@@ -171,6 +186,7 @@ class VideoCache:
 
     def _run(self) -> None:
         import multiprocessing
+        import os
 
         bar = None
         if self.show_progress and self._queue:
@@ -186,7 +202,7 @@ class VideoCache:
                 try:
                     if self._pool is None:
                         self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                                     initializer=_worker_init)
+                                                         initializer=_worker_init, initargs=(os.getpid(),))
                     c = self.cfg
                     self._pool.submit(make_video, self.data_dir, index, str(self.path(index)), c.width, c.height,
                                       c.fps, c.stride).result()
@@ -211,6 +227,27 @@ class VideoCache:
             if bar is not None:
                 bar.close()
 
+    def request(self, index: int) -> tuple[str, Any]:
+        """Ask for the video of `index` without waiting: `("ready", path)`, `("pending", videos ahead of it)` (it is
+        now at the front of the queue) or `("failed", message)` (the last try failed; asking again retries it)."""
+        path = self.path(index)
+        if path.is_file():
+            return "ready", path
+        with self._cond:
+            if index in self._errors and index not in self._urgent and self._rendering != index:
+                message = self._errors.pop(index)
+                self._urgent.append(index)
+                self._ensure_thread()
+                self._cond.notify_all()
+                return "failed", message
+            if self._rendering == index:
+                return "pending", 0
+            if index not in self._urgent:
+                self._urgent.append(index)
+                self._ensure_thread()
+                self._cond.notify_all()
+            return "pending", 1 + list(self._urgent).index(index) - (self._rendering is None)
+
     def ensure(self, index: int, timeout: float = 180.0) -> Path:
         """The video of `index`, made first (ahead of the queue) if it is not cached yet."""
         path = self.path(index)
@@ -234,14 +271,23 @@ class VideoCache:
             return self._cond.wait_for(lambda: not self._queue and not self._urgent and self._rendering is None,
                                        timeout)
 
-    def close(self) -> None:
+    def close(self, timeout: float = 3.0) -> None:
+        """Stop rendering now: the worker is killed (a half-written video is never served: it is written to a
+        temporary name first), the render thread ends within `timeout` seconds."""
         with self._cond:
             self._stopped = True
             self._queue.clear()
             self._urgent.clear()
             self._cond.notify_all()
+        pool = self._pool
+        if pool is not None:
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                try:
+                    proc.kill()
+                except (OSError, AttributeError):
+                    pass
         if self._thread is not None:
-            self._thread.join(timeout=30)
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._thread.join(timeout=timeout)
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None

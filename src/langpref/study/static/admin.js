@@ -13,6 +13,29 @@ function cell(text) {
 
 function when(t) { return t ? new Date(t * 1000).toLocaleString() : ""; }
 
+async function post(path, body) {
+  const res = await fetch(path, {method: "POST", cache: "no-store", body: JSON.stringify(body),
+                                 headers: {Authorization: "Bearer " + sessionStorage.getItem(TOKEN_KEY),
+                                           "Content-Type": "application/json"}});
+  const data = await res.json().catch(() => ({error: "HTTP " + res.status}));
+  if (!res.ok) throw new Error(data.error || ("HTTP " + res.status));
+  return data;
+}
+
+// Leave a participant out of the analyses (a test run, someone who gave up), or take them back in.
+async function toggleExcluded(p) {
+  let reason = "";
+  if (!p.excluded) {
+    reason = prompt(`Exclude participant #${p.number} from the analyses? Why (optional):`, "test participant");
+    if (reason === null) return;
+  }
+  try {
+    await post(`/api/admin/participants/${encodeURIComponent(p.participant_id)}/exclude`,
+               {excluded: !p.excluded, reason});
+    refresh();
+  } catch (e) { showError(e.message); }
+}
+
 async function get(path) {
   const res = await fetch(path, {headers: {Authorization: "Bearer " + sessionStorage.getItem(TOKEN_KEY)},
                                  cache: "no-store"});
@@ -35,8 +58,9 @@ async function refresh() {
     document.getElementById("dashboard").hidden = false;
     const ps = data.participants;
     const finished = ps.filter((p) => p.finished_at).length;
+    const excluded = ps.filter((p) => p.excluded).length;
     document.getElementById("summary").textContent =
-      `${ps.length} participants, ${finished} finished. Protocol: ${data.study.pref_queries} queries per method, ` +
+      `${ps.length} participants, ${finished} finished, ${excluded} excluded from the analyses. Protocol: ${data.study.pref_queries} queries per method, ` +
       `rating every ${data.study.rating_every}, up to ${data.study.improve_max_iterations} improvement rounds, ` +
       `split ${data.study.split}.`;
     const v = data.videos;
@@ -48,7 +72,9 @@ async function refresh() {
     body.replaceChildren();
     for (const p of ps) {
       const tr = document.createElement("tr");
-      tr.append(cell(p.number), cell(p.participant_id.slice(0, 8) + "\u2026"), cell(p.method_order.replace(",", " \u2192 ")),
+      if (p.excluded) tr.className = "excluded";
+      tr.append(cell(p.number), cell(p.participant_id.slice(0, 8) + "\u2026"), cell(p.resume_code),
+                cell(p.method_order.replace(",", " \u2192 ")),
                 cell(p.phase), cell(p.kind), cell(`${p.progress.done} / ${p.progress.total}`), cell(p.answers),
                 cell(when(p.created_at)), cell(when(p.finished_at)));
       const fb = document.createElement("td");
@@ -56,11 +82,20 @@ async function refresh() {
       for (const f of p.recent_feedback) {
         const li = document.createElement("li");
         li.className = "feedback-text";
+        li.dir = "auto";  // each text isolated: right-to-left text never reorders the rest of the line
         li.textContent = `${f.text}  [${f.understood_feature}/${f.understood_direction}]`;
         ul.append(li);
       }
       fb.append(ul);
       tr.append(fb);
+      const ex = document.createElement("td");
+      const b = document.createElement("button");
+      b.type = "button";
+      b.className = "secondary exclude";
+      b.textContent = p.excluded ? "Include again" : "Exclude";
+      b.addEventListener("click", () => toggleExcluded(p));
+      ex.append(p.excluded ? `excluded${p.excluded_reason ? ": " + p.excluded_reason : ""} ` : "", b);
+      tr.append(ex);
       body.append(tr);
     }
   } catch (e) {

@@ -24,6 +24,8 @@ const MEANINGS = {
 };
 
 let me = null;
+let staleNotice = null;
+const TOUCH = window.matchMedia("(hover: none) and (pointer: coarse)").matches;
 let current = null;
 let shownAt = null;
 let busy = false;
@@ -66,6 +68,12 @@ function meaning(u) {
 
 function setHeader(step) {
   document.getElementById("phase-title").textContent = PHASE_TITLES[step.phase] || step.phase;
+  const code = document.getElementById("resume-code-shown");
+  if (step.resume_code) {
+    code.textContent = `Resume code: ${step.resume_code}`;
+    code.title = "Write it down: with it you can continue in any browser if this page loses your session.";
+    code.hidden = false;
+  }
   const p = step.progress;
   let text = "";
   if (step.phase === "improve") {
@@ -81,8 +89,25 @@ function setHeader(step) {
   bar.value = step.kind === "done" ? bar.max : p.done;
 }
 
+// A video that is not made yet is answered 503 (Retry-After): the figure says it is being prepared and asks again.
+async function whenVideoFails(v, url, status) {
+  if (!document.body.contains(v)) return;
+  let wait = 2;
+  let text = "Preparing the video\u2026";
+  try {
+    const res = await fetch(url, {headers: {Range: "bytes=0-0"}, cache: "no-store"});
+    if (res.ok) { v.load(); return; }
+    wait = parseInt(res.headers.get("Retry-After") || "2", 10) || 2;
+    const data = await res.json().catch(() => ({}));
+    const ahead = /\((\d+) ahead/.exec(data.error || "");
+    if (ahead && ahead[1] !== "0") text = `Preparing the video (${ahead[1]} before it)\u2026`;
+  } catch (e) { text = "Waiting for the connection\u2026"; }
+  status.textContent = text;
+  setTimeout(() => { if (document.body.contains(v)) { v.src = url; v.load(); } }, wait * 1000);
+}
+
 function videos(urls, labels) {
-  const box = el("div", {class: "videos"});
+  const box = el("div", {class: "videos" + (urls.length > 1 ? " two" : "")});
   const vids = [];
   urls.forEach((url, i) => {
     const v = el("video", {src: url, muted: true, autoplay: true, loop: true, playsinline: true, preload: "auto",
@@ -92,7 +117,11 @@ function videos(urls, labels) {
     const replay = el("button", {type: "button", class: "secondary replay", text: "\u21BB Replay",
                                  "aria-label": "Replay " + labels[i],
                                  onclick: () => { v.currentTime = 0; v.play().catch(() => {}); }});
-    box.append(el("figure", {}, v, el("figcaption", {}, el("span", {text: labels[i]}), replay)));
+    const status = el("span", {class: "video-status", role: "status", text: "Loading the video\u2026"});
+    const frame = el("div", {class: "frame loading"}, v, status);
+    v.addEventListener("playing", () => { frame.classList.remove("loading"); });
+    v.addEventListener("error", () => { frame.classList.add("loading"); whenVideoFails(v, url, status); });
+    box.append(el("figure", {}, frame, el("figcaption", {}, el("span", {text: labels[i]}), replay)));
   });
   // the query's clock starts when every video has started playing
   let playing = 0;
@@ -130,7 +159,12 @@ async function submit(body, buttons) {
     busy = false;
     buttons.forEach((b) => { b.disabled = false; });
     if (status) status.hidden = true;
-    if (e.status === 409) { load(); return; }
+    if (e.status === 409) {  // answered meanwhile (another tab or window): say so, then show where they are
+      staleNotice = "That step had already been answered (in another tab or window?), so this answer was not "
+                    + "recorded. Here is where you are now.";
+      load();
+      return;
+    }
     showError(e.status ? e.message : "The connection was lost; your answer was not sent. Please try again.");
   }
 }
@@ -142,11 +176,15 @@ function questionField(q) {
   const name = "q_" + q.id;
   if (q.type === "likert") {
     const row = el("div", {class: "likert"});
-    if (q.labels) row.append(el("span", {class: "end", text: `${q.min} = ${q.labels[0]}`}));
+    const scale = el("div", {class: "scale", style: `--n: ${q.max - q.min + 1}`});
     for (let v = q.min; v <= q.max; v++) {
-      row.append(el("label", {class: "opt"}, el("input", {type: "radio", name, value: v}), String(v)));
+      scale.append(el("label", {class: "opt"}, el("input", {type: "radio", name, value: v}), String(v)));
     }
-    if (q.labels) row.append(el("span", {class: "end", text: `${q.max} = ${q.labels[1]}`}));
+    row.append(scale);
+    if (q.labels) {
+      row.append(el("div", {class: "ends"}, el("span", {class: "end", text: `${q.min} = ${q.labels[0]}`}),
+                    el("span", {class: "end", text: `${q.max} = ${q.labels[1]}`})));
+    }
     fs.append(row);
   } else if (q.type === "text") {
     fs.querySelector("legend").setAttribute("id", name + "_l");
@@ -203,7 +241,8 @@ function renderSurvey(main, step) {
 
 function understoodNotice(step) {
   if (!step.understood) return null;
-  const box = el("div", {class: "notice understood", role: "status"});
+  const box = el("section", {class: "notice understood", role: "status", "aria-label": "your last feedback"},
+                 el("h2", {class: "notice-title", text: "About your last feedback"}));
   if (step.understood.text) box.append(el("p", {text: `You said: \u201c${step.understood.text}\u201d`}));
   box.append(el("p", {text: meaning(step.understood)}));
   if (step.unchanged) {
@@ -216,14 +255,20 @@ function understoodNotice(step) {
 
 function renderLanguage(main, step) {
   const study1 = step.phase === "improve";
-  main.append(el("h1", {text: study1 ? "How should the robot change this trajectory?"
-                                     : "How should the robot move differently?"}));
   const notice = understoodNotice(step);
-  if (notice) main.append(notice);
-  main.append(videos(step.videos, ["The robot's trajectory"]));
+  if (notice && !study1) {  // Study 2: the last answer's reading, then clearly apart, a new trajectory
+    main.append(notice, el("hr", {class: "separator"}));
+    main.append(el("h1", {text: `Query ${step.progress.done + 1}: a new trajectory. How should the robot move `
+                                + "differently?"}));
+  } else {
+    main.append(el("h1", {text: study1 ? "How should the robot change this trajectory?"
+                                       : "How should the robot move differently?"}));
+    if (notice) main.append(notice);
+  }
+  main.append(videos(step.videos, [study1 ? "The robot's trajectory" : "A new trajectory"]));
   const form = el("form", {class: "feedback"});
-  const label = el("label", {for: "feedback", text: "Your feedback (for example \u201cMove faster.\u201d). "
-                                                   + "Press Enter to send, Shift+Enter for a new line."});
+  const label = el("label", {for: "feedback"}, "Your feedback (for example \u201cMove faster.\u201d). ",
+                   TOUCH ? null : el("span", {class: "hint", text: "Press Enter to send, Shift+Enter for a new line."}));
   const box = el("textarea", {id: "feedback", name: "feedback", rows: 3, maxlength: MAX_FEEDBACK, autocomplete: "off"});
   const counter = el("span", {class: "counter", "aria-live": "polite", text: `0 / ${MAX_FEEDBACK}`});
   box.addEventListener("input", () => { counter.textContent = `${box.value.length} / ${MAX_FEEDBACK}`; });
@@ -244,14 +289,15 @@ function renderLanguage(main, step) {
 
 function renderComparison(main, step) {
   main.append(el("h1", {text: "Which trajectory do you prefer?"}));
-  main.append(el("p", {text: "Watch both, then choose (keys 1 and 2 work too)."}));
+  main.append(el("p", {text: TOUCH ? "Watch both, then choose." : "Watch both, then choose (keys 1 and 2 work too)."}));
   main.append(videos(step.videos, ["Trajectory 1", "Trajectory 2"]));
   const b0 = el("button", {type: "button", text: "I prefer trajectory 1", "data-choice": 0});
   const b1 = el("button", {type: "button", text: "I prefer trajectory 2", "data-choice": 1});
   const choose = (c) => submit({choice: c, client_ms: clientMs()}, [b0, b1]);
   b0.addEventListener("click", () => choose(0));
   b1.addEventListener("click", () => choose(1));
-  main.append(el("div", {class: "choices"}, b0, b1), errorLine(), el("p", {id: "status", class: "thinking", hidden: true}));
+  main.append(el("div", {class: "choices sticky"}, b0, b1), errorLine(),
+              el("p", {id: "status", class: "thinking", hidden: true}));
   keyHandler = (ev) => {
     if (ev.target.tagName === "TEXTAREA" || ev.target.tagName === "INPUT") return;
     if (ev.key === "1") choose(0);
@@ -263,19 +309,29 @@ function renderSatisfaction(main, step) {
   main.append(el("h1", {text: "Here is the improved trajectory"}));
   const notice = understoodNotice(step);
   if (notice) main.append(notice);
-  main.append(videos(step.videos, ["The improved trajectory"]));
-  main.append(el("p", {text: "Are you satisfied with this trajectory?"}));
+  if (step.previous_video) {
+    main.append(videos([step.previous_video, step.videos[0]], ["Before your feedback", "After: the improved trajectory"]));
+  } else {
+    main.append(videos(step.videos, ["The improved trajectory"]));
+  }
+  main.append(el("p", {text: "Are you satisfied with the improved trajectory?"}));
+  if (step.last_round) {
+    main.append(el("p", {class: "notice last-round", text: "This was the last round: whatever you answer, "
+                                                            + "Experiment 1 ends here and a short survey follows."}));
+  }
   const yes = el("button", {type: "button", text: "Yes, I am satisfied"});
-  const no = el("button", {type: "button", class: "secondary", text: "No, keep improving"});
+  const no = el("button", {type: "button", class: "secondary",
+                           text: step.last_round ? "No, but end here (last round)" : "No, keep improving"});
   yes.addEventListener("click", () => submit({satisfied: true}, [yes, no]));
   no.addEventListener("click", () => submit({satisfied: false}, [yes, no]));
-  main.append(el("div", {class: "choices"}, yes, no), errorLine(), el("p", {id: "status", class: "thinking", hidden: true}));
+  main.append(el("div", {class: "choices sticky"}, yes, no), errorLine(),
+              el("p", {id: "status", class: "thinking", hidden: true}));
 }
 
 function renderRating(main, step) {
-  main.append(el("h1", {text: "The best trajectory under what the robot has learned so far"}));
   const notice = understoodNotice(step);
-  if (notice) main.append(notice);
+  if (notice) main.append(notice, el("hr", {class: "separator"}));
+  main.append(el("h1", {text: "The best trajectory under what the robot has learned so far"}));
   main.append(videos(step.videos, ["The robot's best trajectory"]));
   main.append(el("p", {text: "How well does it match your preferences? 1 = not at all, 5 = perfectly."}));
   const buttons = [];
@@ -284,7 +340,7 @@ function renderRating(main, step) {
     b.addEventListener("click", () => submit({rating: r}, buttons));
     buttons.push(b);
   }
-  main.append(el("div", {class: "choices", role: "group", "aria-label": "rating"}, ...buttons), errorLine(),
+  main.append(el("div", {class: "choices rating", role: "group", "aria-label": "rating"}, ...buttons), errorLine(),
               el("p", {id: "status", class: "thinking", hidden: true}));
 }
 
@@ -296,7 +352,61 @@ function renderDone(main) {
 let keyHandler = null;
 document.addEventListener("keydown", (ev) => { if (keyHandler && !busy) keyHandler(ev); });
 
+// Introductions between the parts (shown once per part in this tab, before its first step; nothing is sent).
+const INTROS = {
+  improve: ["Experiment 1: improve a trajectory",
+            "The robot shows you a trajectory. Tell it in your own words how it should move differently; it then "
+            + "shows you its improved trajectory beside the previous one and asks whether you are satisfied."],
+  language: ["Teaching with language",
+             "Each query shows one trajectory. Type how the robot should move differently, as in Experiment 1. "
+             + "The robot does not change this trajectory: it learns what you prefer."],
+  comparison: ["Teaching with comparisons",
+               "Each query shows two trajectories. Choose the one you prefer; the robot learns what you prefer "
+               + "from your choices."],
+};
+
+function introFor(step) {
+  if (step.phase === "improve" && step.kind === "language" && step.number === 0) return INTROS.improve;
+  if (step.method && step.kind === step.method && step.number === 1) {
+    const [title, text] = INTROS[step.method];
+    const part = step.method_position === 2 ? "Experiment 2, second method" : "Experiment 2, first method";
+    const lead = step.method_position === 2 ? "Now the robot learns your preferences again, another way. "
+      : "In this experiment the robot learns your preferences in two ways, one after the other, each with "
+        + `${step.progress.total} queries; after every few queries you rate its best trajectory so far. `;
+    return [`${part}: ${title.toLowerCase()}`, lead + text];
+  }
+  return null;
+}
+
+function renderIntro(main, step, intro) {
+  const key = `langpref-intro-${me.participant_id}-${step.seq}`;
+  main.dataset.kind = "intro";
+  main.append(el("h1", {text: intro[0]}), el("p", {class: "intro", text: intro[1]}));
+  const go = el("button", {type: "button", id: "begin", text: "Begin"});
+  go.addEventListener("click", () => { sessionStorage.setItem(key, "1"); render(step); });
+  main.append(el("p", {}, go));
+  go.focus({preventScroll: true});
+}
+
+function showStale(main) {
+  if (!staleNotice) return;
+  main.append(el("p", {class: "notice stale", role: "alert", text: staleNotice}));
+  staleNotice = null;
+}
+
 function render(step) {
+  const intro = introFor(step);
+  if (intro && !sessionStorage.getItem(`langpref-intro-${me.participant_id}-${step.seq}`)) {
+    current = step;
+    keyHandler = null;
+    setHeader(step);
+    const main = document.getElementById("main");
+    main.replaceChildren();
+    main.dataset.phase = step.phase;
+    showStale(main);
+    renderIntro(main, step, intro);
+    return;
+  }
   current = step;
   shownAt = null;
   keyHandler = null;
@@ -306,6 +416,7 @@ function render(step) {
   main.replaceChildren();
   main.dataset.kind = step.kind;
   main.dataset.phase = step.phase;
+  showStale(main);
   ({survey: renderSurvey, language: renderLanguage, comparison: renderComparison, satisfaction: renderSatisfaction,
     rating: renderRating, done: renderDone})[step.kind](main, step);
   if (step.kind !== "language") main.focus({preventScroll: true});
@@ -313,15 +424,21 @@ function render(step) {
   if (!step.videos.length) shownAt = renderedAt;
 }
 
+// The only copy of the session's token lives in this browser: it is never deleted by the page. When the server does
+// not know it (restarted on another --db, say), the page says so, retries, and offers the resume code.
 async function load() {
   try {
     render(await api("GET", `/api/participants/${encodeURIComponent(me.participant_id)}/step`));
   } catch (e) {
     const main = document.getElementById("main");
     if (e.status === 404 || e.status === 403 || e.status === 401) {
-      localStorage.removeItem(KEY);
-      main.replaceChildren(el("p", {class: "error", text: "This browser's study session is not known to the server."}),
-                           el("p", {}, el("a", {href: "/", class: "button", text: "Start again"})));
+      main.replaceChildren(
+        el("p", {class: "error", role: "alert", id: "unknown-session",
+                 text: "The study server does not know this browser's session right now. Your answers are not lost: "
+                       + "please tell the experimenter. This page tries again by itself."}),
+        resumeForm(),
+        el("p", {}, el("button", {type: "button", class: "secondary", text: "Try again now", onclick: load})));
+      setTimeout(() => { if (document.getElementById("unknown-session")) load(); }, 10000);
       return;
     }
     main.replaceChildren(el("p", {class: "error", role: "alert", text: "Cannot reach the study server. Retrying\u2026"}));
@@ -329,8 +446,45 @@ async function load() {
   }
 }
 
+// A resume code (shown at the top of every step) restores a session in any browser: the server issues a new token.
+function resumeForm() {
+  const input = el("input", {id: "resume-code", autocomplete: "off", spellcheck: "false", placeholder: "ABCDE-FGH23",
+                             "aria-label": "resume code", maxlength: 20});
+  const err = el("p", {class: "error", role: "alert", hidden: true});
+  const form = el("form", {class: "resume", id: "resume-form"},
+                  el("label", {for: "resume-code", text: "Have your resume code? Enter it to continue: "}), input,
+                  el("button", {type: "submit", text: "Resume"}), err);
+  form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    const res = await fetch("/api/participants/resume", {method: "POST", headers: {"Content-Type": "application/json"},
+                                                         body: JSON.stringify({code: input.value})});
+    const data = await res.json().catch(() => ({error: "HTTP " + res.status}));
+    if (!res.ok) { err.textContent = data.error; err.hidden = false; return; }
+    keepPrevious();
+    localStorage.setItem(KEY, JSON.stringify(data));
+    me = data;
+    load();
+  });
+  return form;
+}
+
+// A session replaced in this browser is kept under another key, never thrown away.
+function keepPrevious() {
+  const old = localStorage.getItem(KEY);
+  if (!old) return;
+  let list = [];
+  try { list = JSON.parse(localStorage.getItem(KEY + "-previous") || "[]"); } catch (e) { list = []; }
+  list.push(old);
+  localStorage.setItem(KEY + "-previous", JSON.stringify(list.slice(-10)));
+}
+
 document.addEventListener("DOMContentLoaded", () => {
   try { me = JSON.parse(localStorage.getItem(KEY) || "null"); } catch (e) { me = null; }
-  if (!me || !me.participant_id || !me.token) { location.href = "/"; return; }
+  if (!me || !me.participant_id || !me.token) {
+    const main = document.getElementById("main");
+    main.replaceChildren(el("p", {text: "This browser has no study session."}), resumeForm(),
+                         el("p", {}, el("a", {href: "/", class: "button secondary", text: "Go to the start page"})));
+    return;
+  }
   load();
 });

@@ -1,0 +1,194 @@
+"""The machinery of `langpref`'s command line: options derived from the config dataclasses, a registry of
+commands, and the resolved config written beside every output.
+
+`add_config(parser, Cls)` adds one option per field of a config dataclass: `--field-name` (a `bool` that defaults
+to True becomes `--no-field-name`), typed by its annotation, defaulting to its default, with the docstring under the
+field as its help. A nested config's fields join in with `DEST.` in front of their destination (not of their flag),
+and `from_args(Cls, args)` builds the config back from the parsed arguments. `opts` renames a flag (a string), leaves
+a field out (None), or overrides argparse keywords (a dict) for the few flags whose names predate this module.
+
+`@command(name, help, options)` registers a command; `make_parser` builds only the options of the command being
+run, so `--help` imports nothing heavy. `record(args, where, config)` writes the resolved config of a command with
+its command line and langpref's version.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import importlib
+import inspect
+import itertools
+import json
+import shlex
+import textwrap
+import types
+import typing
+from collections.abc import Callable
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+Options = Callable[[argparse.ArgumentParser], None]
+COMMANDS: dict[str, tuple[str, str | None, list[Options], Callable[[argparse.Namespace], None]]] = {}
+
+
+@cache
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring under each field of dataclass `cls`, whitespace collapsed."""
+    try:
+        body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
+    except (OSError, TypeError):
+        return {}
+    return {a.target.id: " ".join(b.value.value.split()) for a, b in itertools.pairwise(body)
+            if isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name) and isinstance(b, ast.Expr)
+            and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str)}
+
+
+def _comma_tuple(item: type):
+    def parse(text: str) -> tuple:
+        return tuple(item(x) for x in text.split(","))
+    parse.__name__ = f"comma-separated {item.__name__}s"
+    return parse
+
+
+def _base_type(hint: Any) -> Any:
+    """`X | None` -> X; `tuple[T, ...]` -> a parser of "a,b,c" into a tuple of T."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:
+        return _base_type(args[0])
+    if typing.get_origin(hint) is tuple:
+        return _comma_tuple(args[0])
+    return hint
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    return f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING
+
+
+def add_config(p: argparse.ArgumentParser, cls: type, opts: dict[str, Any] | None = None, *, prefix: str = "",
+               flag_prefix: str = "", only: tuple[str, ...] | None = None, unset: bool = False) -> None:
+    """Add an option for each field of `cls` (see the module docstring); `only` keeps the named (dotted) fields;
+    `unset`: options default to None ("not given") and say the field's default in their help."""
+    opts, hints, docs = opts or {}, typing.get_type_hints(cls), field_docs(cls)
+    for f in dataclasses.fields(cls):
+        name, hint, default = prefix + f.name, hints[f.name], _default(f)
+        spec = opts.get(name, {})
+        if spec is not None and dataclasses.is_dataclass(hint):
+            add_config(p, hint, opts, prefix=name + ".", flag_prefix=flag_prefix, only=only, unset=unset)
+        if spec is None or dataclasses.is_dataclass(hint) or (only is not None and name not in only):
+            continue
+        spec = {"flag": spec} if isinstance(spec, str) else dict(spec)
+        flag = spec.pop("flag", "--" + flag_prefix + f.name.replace("_", "-"))
+        text = spec.pop("help", None) or docs.get(f.name, "")
+        kw: dict[str, Any] = {"dest": name}
+        if hint is bool:
+            flag = flag if default is False or flag.startswith("--no-") else "--no-" + flag[2:]
+            kw["action"] = "store_true" if default is False else "store_false"
+        elif default is dataclasses.MISSING or default == "":
+            kw.update(required=True, type=_base_type(hint))
+        else:
+            kw.update(type=_base_type(hint), default=None if unset else default)
+            if default not in (None, ()) and "default" not in text.lower() and not spec.get("required"):
+                shown = ",".join(map(str, default)) if isinstance(default, tuple) else default
+                text += f" (default {shown})"
+        if spec.pop("positional", False):
+            flag, kw = f.name, {k: v for k, v in kw.items() if k in ("type", "default")}
+        elif "type" in kw and "choices" not in spec:
+            kw["metavar"] = flag.lstrip("-").replace("-", "_").upper()
+        kw.update(spec)
+        p.add_argument(flag, help=text.replace("%", "%%"), **kw)
+
+
+def args_of(args: argparse.Namespace, prefix: str = "") -> dict[str, Any]:
+    """The parsed values whose destination starts with `prefix`, keyed by the rest of it."""
+    return {k[len(prefix):]: v for k, v in vars(args).items() if k.startswith(prefix)}
+
+
+def from_args(cls: type, args: argparse.Namespace, prefix: str = "", **given: Any) -> Any:
+    """An instance of `cls` from the options `add_config` added (fields without an option keep their default);
+    `given` sets fields outright."""
+    hints, values, kw = typing.get_type_hints(cls), args_of(args, prefix), {}
+    for f in dataclasses.fields(cls):
+        if f.name in given:
+            kw[f.name] = given[f.name]
+        elif dataclasses.is_dataclass(hints[f.name]):
+            kw[f.name] = from_args(hints[f.name], args, prefix + f.name + ".")
+        elif f.name in values:
+            kw[f.name] = values[f.name]
+    return cls(**kw)
+
+
+# ---- commands: registry, options, output --------------------------------------------------------------------------
+
+
+def command(name: str, help: str, options: list[Options], description: str | None = None):
+    """Register the decorated function as `langpref NAME`; each of `options` adds options to its parser."""
+    def register(run: Callable[[argparse.Namespace], None]) -> Callable[[argparse.Namespace], None]:
+        COMMANDS[name] = (help, description, options, run)
+        return run
+    return register
+
+
+def opt(*flags: str, **kw: Any) -> Options:
+    return lambda p: p.add_argument(*flags, **kw)
+
+
+def path(*flags: str, **kw: Any) -> Options:
+    return opt(*flags, type=Path, **kw)
+
+
+def config(where: str, opts: dict | Callable[[], dict] | None = None, **kw: Any) -> Options:
+    """The options of the config dataclass `module:Class` (imported only when the command's options are built)."""
+    def add(p: argparse.ArgumentParser) -> None:
+        module, name = where.split(":")
+        add_config(p, getattr(importlib.import_module(module), name), opts() if callable(opts) else opts, **kw)
+    return add
+
+
+def emit(obj: Any, as_json: bool, human: Callable[[Any], str] | None = None) -> None:
+    print(json.dumps(obj) if as_json else human(obj) if human else json.dumps(obj, indent=2))
+
+
+def record(args: argparse.Namespace, where: str | Path, config: Any = None, **inputs: Any) -> None:
+    """Write the resolved `config` (default: the command's options), beside the `inputs` that are not part of it,
+    with the command line and langpref's version, as JSON at `where`."""
+    from langpref import __version__
+
+    if config is None:
+        config = {k: v for k, v in vars(args).items()
+                  if k not in ("func", "argv", "json", "command", "experiment", "study_command")}
+    out = {"langpref_version": __version__, "command": shlex.join(["langpref", *args.argv]),
+           "config": {**inputs, "config": config} if inputs else config}
+    Path(where).parent.mkdir(parents=True, exist_ok=True)
+    Path(where).write_text(json.dumps(out, indent=2, default=lambda o: dataclasses.asdict(o)
+                                      if dataclasses.is_dataclass(o) else str(o)) + "\n")
+
+
+def beside(file: str | Path) -> Path:
+    return Path(file).with_suffix(".config.json")
+
+
+def make_parser(prog: str, description: str, groups_help: dict[str, tuple[str, str, str]],
+                argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """Every registered command with its help (`groups_help`: help, dest and metavar of each group of commands); a
+    command's options only when `argv` names it (all of them without `argv`), so the others import nothing."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    top = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    groups: dict[str, Any] = {}
+    for name, (text, about_cmd, options, run) in COMMANDS.items():
+        *group, leaf = name.split()
+        if group and group[0] not in groups:
+            about, dest, metavar = groups_help[group[0]]
+            g = top.add_parser(group[0], help=about, description=about[0].upper() + about[1:] + ".")
+            groups[group[0]] = g.add_subparsers(dest=dest, required=True, metavar=metavar)
+        p = (groups[group[0]] if group else top).add_parser(leaf, help=text,
+                                                            description=about_cmd or text[0].upper() + text[1:] + ".")
+        p.set_defaults(func=run)
+        if argv is None or argv[:len(group) + 1] == [*group, leaf]:
+            for add in options:
+                add(p)
+    return parser

@@ -1,0 +1,184 @@
+"""Fault and freeze figures of the study server: `python -m langpref.study.faultbench --model M --data D`.
+
+1. 80 concurrent requests for videos that are not made yet (no prerender, a fresh cache): the latency of `/healthz`
+   and `POST /api/participants` meanwhile (target: under 1 s), and how the 80 were answered (200 or 503).
+2. SIGTERM while a video is being made: seconds until the server has exited (target: under 5 s), and whether any
+   process of it is left.
+3. SIGKILL of the server while a video is being made: whether any process of it is left 5 s later (target: none).
+
+Each server is `langpref study serve` in its own process on loopback, with a fresh database in a temporary folder.
+Prints one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+
+def _descendants(pid: int) -> set[int]:
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            children.setdefault(int(stat[stat.rindex(")") + 2:].split()[1]), []).append(int(entry.name))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pids: set[int]) -> set[int]:
+    out = set()
+    for p in pids:
+        try:
+            if Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+                out.add(p)
+        except OSError:
+            pass
+    return out
+
+
+def _start(model: Path, data: Path, db: Path, split: str) -> tuple[subprocess.Popen, str]:
+    import httpx
+
+    cmd = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data), "--db",
+           str(db), "--port", "0", "--split", split, "--no-prerender"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                            env={**os.environ, "LANGPREF_STUDY_ADMIN_TOKEN": "faultbench-admin-token-0123"})
+    url = None
+    for line in proc.stdout:
+        m = re.search(r"participants: (http://\S+?)/?$", line.strip())
+        if m:
+            url = m.group(1)
+            break
+    if url is None:
+        raise RuntimeError(f"the study server exited ({proc.wait()})")
+    for _ in range(600):
+        try:
+            if httpx.get(f"{url}/healthz", timeout=2).status_code == 200:
+                return proc, url
+        except httpx.HTTPError:
+            time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError("the study server did not answer")
+
+
+def _video_urls(url: str, n: int) -> list[str]:
+    """Video URLs of `n` participants' first Study-1 steps (distinct trajectories where the seeds give them)."""
+    import httpx
+
+    urls = []
+    with httpx.Client(base_url=url, timeout=30) as c:
+        for _ in range(n):
+            me = c.post("/api/participants", json={}).json()
+            headers = {"X-Participant-Token": me["token"]}
+            base = f"/api/participants/{me['participant_id']}"
+            step = c.get(f"{base}/step", headers=headers).json()
+            answers = {}
+            for q in step["questions"]:
+                answers[q["id"]] = {"likert": q["min"], "text": "x", "choice": (q["options"] or [None])[0],
+                                    "multi": q["options"][:1]}[q["type"]]
+            step = c.post(f"{base}/answer", json={"answers": answers, "seq": step["seq"]}, headers=headers).json()
+            urls += step["videos"]
+    return urls
+
+
+def freeze(url: str, requests: int = 80) -> dict[str, Any]:
+    import httpx
+
+    videos = sorted(set(_video_urls(url, 8)))
+
+    async def main() -> dict[str, Any]:
+        limits = httpx.Limits(max_connections=requests + 10, max_keepalive_connections=requests + 10)
+        async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as c, \
+                httpx.AsyncClient(base_url=url, timeout=60) as other:
+            t0 = time.perf_counter()
+            tasks = [asyncio.create_task(c.get(videos[k % len(videos)])) for k in range(requests)]
+            await asyncio.sleep(0.5)
+            lat: dict[str, list[float]] = {"healthz": [], "post_participant": []}
+            for _ in range(5):
+                for key, method, path in (("healthz", "GET", "/healthz"),
+                                          ("post_participant", "POST", "/api/participants")):
+                    t = time.perf_counter()
+                    r = await other.request(method, path, json={} if method == "POST" else None)
+                    lat[key].append(time.perf_counter() - t)
+                    assert r.status_code == 200, r.text
+                await asyncio.sleep(0.1)
+            done = await asyncio.gather(*tasks)
+            return {"requests": requests, "distinct_videos": len(videos),
+                    "healthz_max_s": round(max(lat["healthz"]), 3),
+                    "post_participant_max_s": round(max(lat["post_participant"]), 3),
+                    "answered": {str(s): sum(r.status_code == s for r in done) for s in sorted({r.status_code
+                                                                                                 for r in done})},
+                    "all_answered_within_s": round(time.perf_counter() - t0, 2)}
+
+    return asyncio.run(main())
+
+
+def _rendering(url: str, proc: subprocess.Popen) -> set[int]:
+    import httpx
+
+    video = _video_urls(url, 1)[0]
+    httpx.get(url + video, timeout=30)
+    deadline = time.time() + 60
+    while not (kids := _descendants(proc.pid)):
+        if time.time() > deadline:
+            raise RuntimeError("no render worker started")
+        time.sleep(0.05)
+    return kids
+
+
+def stop(model: Path, data: Path, work: Path, split: str, sig: int) -> dict[str, Any]:
+    proc, url = _start(model, data, work / f"stop{sig}.sqlite", split)
+    kids = _rendering(url, proc) | _descendants(proc.pid)
+    t = time.time()
+    proc.send_signal(sig)
+    proc.wait(timeout=120)
+    took = time.time() - t
+    deadline = time.time() + 5
+    while _alive(kids) and time.time() < deadline:
+        time.sleep(0.05)
+    return {"signal": signal.Signals(sig).name, "exit_s": round(took, 2), "returncode": proc.returncode,
+            "processes_of_it": len(kids), "left_after_5_s": len(_alive(kids))}
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", type=Path, required=True)
+    p.add_argument("--data", type=Path, required=True)
+    p.add_argument("--split", default="all")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        proc, url = _start(args.model, args.data, work / "freeze.sqlite", args.split)
+        try:
+            out: dict[str, Any] = {"freeze": freeze(url)}
+        finally:
+            proc.terminate()
+            proc.wait(timeout=60)
+        out["sigterm"] = stop(args.model, args.data, work, args.split, signal.SIGTERM)
+        out["sigkill"] = stop(args.model, args.data, work, args.split, signal.SIGKILL)
+    print(json.dumps(out), flush=True)
+    return out
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    main()

@@ -1,0 +1,145 @@
+"""The server as a process: SIGTERM stops it within a few seconds even while a video is being made, and neither a
+SIGTERM nor a SIGKILL leaves a process of it behind (the render worker watches its parent). What can be checked before
+the model is loaded (a taken port, a directory as --db) is refused at once, and --host 0.0.0.0 warns."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+
+def descendants(pid: int) -> set[int]:
+    """Every live process below `pid` (from /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            ppid = int(stat[stat.rindex(")") + 2:].split()[1])
+            children.setdefault(ppid, []).append(int(entry.name))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def alive(pids: set[int]) -> set[int]:
+    out = set()
+    for p in pids:
+        try:
+            state = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            out.add(p)
+    return out
+
+
+def start_rendering(h, tmp_path, name: str):
+    """A server with a video being made: (process, url, its render worker's pids)."""
+    proc, url = h.run_server(tmp_path / f"{name}.sqlite", "--video-width", "64", "--video-height", "48",
+                             log=tmp_path / f"{name}.log")
+    pid, headers = h.join(httpx.Client(base_url=url, timeout=30))
+    step = httpx.get(f"{url}/api/participants/{pid}/step", headers=headers).json()
+    r = httpx.post(f"{url}/api/participants/{pid}/answer", json={**h.answer_for(step), "seq": step["seq"]},
+                   headers=headers, timeout=30)
+    assert r.status_code == 200, r.text
+    video = r.json()["videos"][0]
+    httpx.get(url + video, timeout=30)  # the worker starts
+    deadline = time.time() + 60
+    while not (workers := descendants(proc.pid)):
+        assert time.time() < deadline, "no render worker started"
+        time.sleep(0.05)
+    return proc, url, workers
+
+
+def test_sigterm_stops_the_server_in_seconds_and_leaves_nothing(h, tmp_path):
+    proc, _, workers = start_rendering(h, tmp_path, "term")
+    every = workers | descendants(proc.pid)
+    t = time.time()
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=30)
+    took = time.time() - t
+    proc.stdout.close()
+    assert took < 5.0, took
+    assert proc.returncode == 0
+    deadline = time.time() + 5
+    while alive(every) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not alive(every), "processes of the server are left after SIGTERM"
+
+
+def test_sigkill_leaves_no_process_behind(h, tmp_path):
+    proc, _, workers = start_rendering(h, tmp_path, "kill")
+    every = workers | descendants(proc.pid)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    proc.stdout.close()
+    deadline = time.time() + 5
+    while alive(every) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not alive(every), "the render worker was orphaned"
+
+
+def test_taken_port_and_directory_db_fail_before_the_model_loads(h, tmp_path, monkeypatch, capsys):
+    from langpref.cli import main
+    from langpref.study import engine as sengine
+
+    def no_load(*a, **k):
+        raise AssertionError("the model was loaded before the checks")
+
+    monkeypatch.setattr(sengine.StudyEngine, "load", classmethod(no_load))
+    base = ["study", "serve", "--model", str(h.model), "--data", str(h.data)]
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen(1)
+    try:
+        port = taken.getsockname()[1]
+        assert main([*base, "--db", str(tmp_path / "a.sqlite"), "--port", str(port)]) == 2
+    finally:
+        taken.close()
+    err = capsys.readouterr().err
+    assert "cannot listen" in err and len(err.strip().splitlines()) == 1
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    assert main([*base, "--db", str(folder), "--port", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "is a directory" in err and len(err.strip().splitlines()) == 1
+
+
+def test_network_host_warns_and_loopback_does_not():
+    from langpref.study.serve import network_warning
+
+    assert network_warning("127.0.0.1") is None and network_warning("::1") is None
+    assert network_warning("localhost") is None
+    for host in ("0.0.0.0", "::", "192.168.1.20"):
+        text = network_warning(host)
+        assert text and "plain HTTP" in text and "reverse proxy" in text
+
+
+def test_admin_token_from_environment_or_file(tmp_path, monkeypatch):
+    from langpref.errors import LangprefError
+    from langpref.study.config import ADMIN_TOKEN_ENV, ServeConfig
+
+    monkeypatch.delenv(ADMIN_TOKEN_ENV, raising=False)
+    assert ServeConfig(model="m", data="d").resolve_admin_token() is None
+    monkeypatch.setenv(ADMIN_TOKEN_ENV, "from-the-environment-123")
+    assert ServeConfig(model="m", data="d").resolve_admin_token() == "from-the-environment-123"
+    f = tmp_path / "token"
+    f.write_text("from-a-file-0123456789\n")
+    assert ServeConfig(model="m", data="d", admin_token_file=str(f)).resolve_admin_token() == "from-a-file-0123456789"
+    with pytest.raises(LangprefError, match="at least 16"):
+        ServeConfig(model="m", data="d", admin_token="short").resolve_admin_token()
+    with pytest.raises(LangprefError, match="cannot read"):
+        ServeConfig(model="m", data="d", admin_token_file=str(tmp_path / "none")).resolve_admin_token()
+    assert os.environ[ADMIN_TOKEN_ENV]
