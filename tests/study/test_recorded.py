@@ -176,3 +176,28 @@ def test_mp4_study_serves_the_recorded_file_as_is(recorded_data, tmp_path):
         cache.close()
     # the render settings do not name (or invalidate) recorded videos; the format does
     assert cache.tag == VideoCache(recorded_data, tmp_path / "videos", VideoConfig(format="mp4"), [0]).tag
+
+
+def test_every_command_runs_on_the_recorded_task(recorded_data, recorded_model, tmp_path, capsys):
+    """evaluate (the bank's test split and a user file keyed by the task's name), embed, improve and learn-reward
+    on the imported task: the synthetic humans speak its bank."""
+    from langpref.cli import main
+
+    def run(*argv: str) -> dict:
+        assert main([*argv, "--json"]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    m, d = str(recorded_model), str(recorded_data)
+    ev = run("evaluate", "--model", m, "--data", d)
+    assert set(ev["per_feature"]) == set(FEATURES) and ev["num_samples"] > 0
+    mine = tmp_path / "mine.json"
+    mine.write_text(json.dumps({"tiny-colours": {"speed": {"increase": ["Zoom along faster."]}},
+                                "some-other-lab-task": {"grip": {"increase": ["Hold tighter."]}}}))
+    assert run("evaluate", "--model", m, "--data", d, "--utterances", str(mine))["num_phrasings"] == 1
+    assert run("embed", "--model", m, "Go quicker.")["feature"] in FEATURES
+    improve = run("improve", "--model", m, "--data", d, "--iterations", "2", "--seeds", "2")
+    assert len(improve["curve"]) == 3
+    for feedback in ("language", "comparison"):
+        reward = run("learn-reward", "--model", m, "--data", d, "--feedback", feedback, "--queries", "3",
+                     "--humans", "2", "--seeds", "1")
+        assert len(reward["cross_entropy"]) == 4 and len(reward["true_reward_of_best"]) == 4
