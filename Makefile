@@ -8,7 +8,7 @@ export PYOPENGL_PLATFORM ?= egl
 export TOKENIZERS_PARALLELISM ?= false
 export HF_HUB_OFFLINE ?= 1
 
-.PHONY: install demo test bench reproduce clean
+.PHONY: install demo test bench reproduce wheel-check lint docs clean
 
 install: $(STAMP)
 
@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml requirements/constraints.txt examples/plugin/pyproject.
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[test,ray]"
+	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[all,test,docs]"
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e examples/plugin  # example task plugin (metaworld-reach)
 	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here); its
 	@# reverse-proxy test runs Debian's nginx with a self-signed certificate (openssl).
@@ -57,5 +57,19 @@ reproduce: install
 	done
 	@echo "figures and tables: results/*/*/ (see docs/results.md)"
 
+# The wheel as a lab installs it: built, installed with only the core into a fresh venv, smoke-tested there
+# (import, --help, --version, import + train on a tiny recording, missing-extra messages). About 2-3 minutes.
+wheel-check: install
+	PY=$(PY) .ci/wheel_check.sh
+
+# ruff over src and tests (configured in pyproject.toml); not yet part of `make test`
+lint: install
+	$(BIN)/ruff check src tests
+	$(BIN)/ruff format --check src tests
+
+# the documentation site (mkdocs.yml, docs/), API pages generated from the docstrings; a warning fails the build
+docs: install
+	$(BIN)/mkdocs build --strict --site-dir build/site
+
 clean:
-	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache
+	rm -rf $(VENV) build dist *.egg-info src/*.egg-info .pytest_cache

@@ -73,18 +73,6 @@ def test_a_killed_worker_is_retried_and_the_result_unchanged(cluster, tmp_path):
     assert results == [(j, j * 10) for j in range(5)]
 
 
-def test_rerun_skips_what_is_done(tmp_path):
-    cfg = GenerateConfig(env="metaworld", out=tmp_path / "d", num_trajectories=4, horizon=30, workers=1, seed=2)
-    generate(cfg)
-    first = load_dataset(tmp_path / "d").features
-    (tmp_path / "d" / "meta.json").unlink()  # as if interrupted before the end
-    stamp = (tmp_path / "d" / "trajectories" / "000001.npz").stat().st_mtime_ns
-    summary = generate(cfg)
-    assert (tmp_path / "d" / "trajectories" / "000001.npz").stat().st_mtime_ns == stamp
-    assert summary["steps_per_s"] is None  # nothing was rolled out again
-    np.testing.assert_array_equal(load_dataset(tmp_path / "d").features, first)
-
-
 def test_reward_sweep_on_two_nodes_equals_local(cluster, tmp_path):
     from langpref.experiments.common import SweepConfig
     from langpref.experiments.reward import run_reward_experiment

@@ -90,10 +90,10 @@ def run_jobs(
 
 def init_ray(address: str | None, num_cpus: int | None) -> None:
     """Connect to `address`, or start a local instance with `num_cpus` CPUs, unless already connected."""
-    try:
+    from langpref.extras import needs
+
+    with needs("ray", "--backend ray"):
         import ray
-    except ImportError:
-        raise LangprefError("the ray backend needs Ray: pip install 'langpref[ray]'") from None
     if ray.is_initialized():
         return
     if address is None:  # a private local instance: no token needed (Ray 2.60 turns token auth on by default)

@@ -274,7 +274,7 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
     """The flags of the fields of the synthetic human, the reward model and the splits, where they differ from the
     derived ones."""
     from langpref.feedback import KINDS
-    from langpref.feedback.humans import HumanConfig
+    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_SCALES, HumanConfig
     from langpref.feedback.space import PHRASING_SPLITS
     from langpref.improve import OBJECTIVES, STRATEGIES
     from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES
@@ -283,12 +283,15 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
     return {
         "human.phrasing_split": {"choices": PHRASING_SPLITS, "help": docs["phrasing_split"] + out("bank-SPLIT")},
         "human.phrasings": {"metavar": "FILE", "help": docs["phrasings"] + out("phrasings")},
+        "human.feature_scale": {"choices": FEATURE_SCALES, "help": docs["feature_scale"] + out("paper-scale")},
+        "human.direction": {"choices": DIRECTION_RULES, "help": docs["direction"] + out("toward-best")},
         "reward.model": {"flag": "--reward-model", "choices": MODELS}, "reward.hidden": "--reward-hidden",
         "reward.loss": {"choices": LOSSES}, "reward.negatives": {"choices": NEGATIVES}, "reward.negative_split": None,
         "reward.weight_decay": {"help": "L2 prior on r_xi's parameters, against the weighted mean loss over feedback "
                                 "pairs (default " + ", ".join(f"{v:g} for {k}" for k, v in DEFAULT_WEIGHT_DECAY.items())
                                 + "; `langpref experiment prior` shows how the linear one was chosen)"},
-        "candidate_split": {"flag": "--candidates", "choices": SPLITS}, "query_split": {"choices": SPLITS},
+        "candidate_split": {"flag": "--candidates", "choices": (*SPLITS, "generated")},
+        "base_split": {"choices": SPLITS}, "generated_out": {"metavar": "DIR"}, "query_split": {"choices": SPLITS},
         "eval_split": {"choices": SPLITS}, "strategy": {"choices": STRATEGIES}, "objective": {"choices": OBJECTIVES},
         "feedback": {"required": True, "choices": sorted(KINDS, key=lambda k: k != "language")}}
 
@@ -305,13 +308,24 @@ def _space_options(experiment: bool = False) -> list[cc.Options]:
 def _space(args: argparse.Namespace):
     from langpref.feedback.space import load_space
 
-    return load_space(args.data, args.model, perfect=args.perfect_latent, phrasings=getattr(args, "human.phrasings"))
+    return load_space(args.data, args.model, perfect=args.perfect_latent, phrasings=getattr(args, "human.phrasings"),
+                      feature_scale=getattr(args, "human.feature_scale", "standardised"))
+
+
+PROPOSE = config("langpref.propose:ProposeConfig", prefix="propose.")
+
+
+def _generation(args: argparse.Namespace, space):
+    """The simulator search of `langpref.propose` over the dataset's controllers, with the search flags."""
+    from langpref.propose import ProposeConfig, open_generation
+
+    return open_generation(args.data, None if args.perfect_latent else args.model, space,
+                           from_args(ProposeConfig, args, "propose."))
 
 
 @command("improve", "iterative trajectory improvement with a synthetic language human (Eq. 4)",
          [*_space_options(), config("langpref.improve:ImproveConfig", lambda: {**_use_opts(), "human.rationality": None}),
-          path("--figure", default=None, help="also draw the curve into this PNG"),
-          JSON],
+          PROPOSE, path("--figure", default=None, help="also draw the curve into this PNG"), JSON],
          "From a random trajectory of the candidate split, N rounds of synthetic language feedback, each followed by "
          "the argmax over the candidates of Eq. 4's cosine objective (strategy paper) or of the reward learned from "
          "all feedback so far (strategy history). Reports the mean normalised true reward per iteration (0 = worst, "
@@ -321,7 +335,8 @@ def cmd_improve(args: argparse.Namespace) -> None:
 
     cfg = from_args(ImproveConfig, args)
     cfg.validate()
-    result = improve(_space(args), cfg)
+    space = _space(args)
+    result = improve(space, cfg, generation=_generation(args, space) if cfg.generated else None)
     if args.figure:
         result["figure"] = str(plot_improvement({cfg.strategy: result}, args.figure, f"strategy {cfg.strategy}"))
         record(args, beside(args.figure), cfg, data=args.data, model=args.model, perfect=args.perfect_latent)
@@ -332,8 +347,12 @@ def cmd_improve(args: argparse.Namespace) -> None:
 
 @command("learn-reward", "reward learning from synthetic language feedback or comparisons",
          [*_space_options(), config("langpref.reward:LearnRewardConfig", _use_opts),
-          path("--figure", default=None, help="also draw the curves into this PNG"),
-          JSON],
+          opt("--optimize", action="store_true", help="after the last query, generate r_xi's optimum in the simulator "
+              "(`langpref.propose`); adds optimized_true_reward, one per human x seed run (above 1: better than the "
+              "eval split's best)"), PROPOSE,
+          path("--save-reward", default=None, metavar="DIR", help="write each run's r_xi into DIR (reward.json is "
+               "the first run's) for the Gymnasium wrapper langpref.rewards.LearnedReward"),
+          path("--figure", default=None, help="also draw the curves into this PNG"), JSON],
          "Each query shows one train trajectory (language: the human says how to improve it; L_Explicit + "
          "L_Implicit, Eq. 5-9) or a random train pair (comparison: Bradley-Terry). After every query, r_xi is refit "
          "on all feedback so far and scored on the test split.")
@@ -342,7 +361,9 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
     cfg = from_args(LearnRewardConfig, args)
     cfg.validate()
-    result = learn_reward(_space(args), cfg)
+    space = _space(args)
+    result = learn_reward(space, cfg, generation=_generation(args, space) if args.optimize else None,
+                          save_reward=args.save_reward, model=None if args.perfect_latent else args.model)
     if args.figure:
         from langpref.experiments.reward import plot_reward_curves
 
@@ -352,7 +373,10 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
          + "cross-entropy per query:        " + " ".join(f"{v:.3f}" for v in r["cross_entropy"]) + "\n"
          + "true reward of the best, per q: " + " ".join(f"{v:.2f}" for v in r["true_reward_of_best"])
          + f"\narea under the true-reward curve {r['auc_true_reward']:.3f}; reaches 0.95 after "
-         + f"{r['queries_to_0.95']} queries" + (f"; figure {r['figure']}" if "figure" in r else ""))
+         + f"{r['queries_to_0.95']} queries" + (f"; figure {r['figure']}" if "figure" in r else "")
+         + (f"\ngenerated r_xi optimum: mean normalised true reward {r['optimized_true_reward_mean']:.2f}, above the "
+            f"split's best in {r['optimized_beats_best_of_split']:.0%} of runs" if "optimized_true_reward" in r
+            else ""))
 
 
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
@@ -360,9 +384,9 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
 
     kw = {"env": args.env, "data": args.data, "model": args.model, "out": args.out, "perfect": args.perfect_latent,
           "force": args.force, "sweep": from_args(SweepConfig, args)}
-    module = "improve" if args.experiment == "improve" else "reward"
+    module = "improve" if EXPERIMENTS[args.experiment][1] == "ImproveConfig" else "reward"
     cfg = from_args(getattr(importlib.import_module(f"langpref.{module}"), EXPERIMENTS[args.experiment][1]), args)
-    runner = {"improve": "improve", "active": "active"}.get(args.experiment, "reward")
+    runner = {"improve": "improve", "active": "active", "generate": "generate"}.get(args.experiment, "reward")
     run = getattr(importlib.import_module(f"langpref.experiments.{runner}"), f"run_{args.experiment}_experiment")
     summary = run(**kw, config=cfg)
     md = Path(summary["figure"]).with_suffix(".md")
@@ -372,7 +396,7 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
          ".config.json)")
 
 
-PHRASING = ("human.phrasing_split", "human.phrasings")
+PHRASING = ("human.phrasing_split", "human.phrasings", "human.feature_scale", "human.direction")
 REWARD_FLAGS = ("seeds", "humans", "queries", "reward.model", *PHRASING)
 EXPERIMENTS = {  # name: what it is, its config (in langpref.improve or langpref.reward), the fields given a flag
     "improve": ("Fig. 4: iterative improvement, Eq. 4 (cosine and as printed) and the history strategy, 100 seeds",
@@ -384,14 +408,16 @@ EXPERIMENTS = {  # name: what it is, its config (in langpref.improve or langpref
               REWARD_FLAGS),
     "active": ("active queries: language x {random, lal-infogain, infogain} and comparisons x {random, infogain, "
                "volume-removal}, 10 humans x 3 seeds, Q = 40", "LearnRewardConfig",
-               (*REWARD_FLAGS, "candidates", "posterior_samples"))}
+               (*REWARD_FLAGS, "candidates", "posterior_samples")),
+    "generate": ("issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "
+                 "best test trajectory (10 humans x 3 seeds, Q = 40)", "ImproveConfig", ("iterations", "seeds"))}
 ACTIVE_OPTS = {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}}
 for _name, (_text, _cls, _only) in EXPERIMENTS.items():
     command(f"experiment {_name}", _text, [
         TASK, *_space_options(experiment=True),
         path("--out", default=None, help=f"output directory (default results/{_name}/ENV, or ENV-perfect"
              + (")" if _name == "improve" else ", ENV-mlp)")),
-        config(f"langpref.{'improve' if _name == 'improve' else 'reward'}:{_cls}",
+        config(f"langpref.{'improve' if _cls == 'ImproveConfig' else 'reward'}:{_cls}",
                lambda n=_name: {**_use_opts(True), **(ACTIVE_OPTS if n == "active" else {})}, only=_only),
         opt("--force", action="store_true", help="discard finished runs in --out and start over"),
         config("langpref.experiments.common:SweepConfig", {"backend": {"choices": BACKENDS}}), JSON],
@@ -412,9 +438,11 @@ for _name, (_text, _cls, _only) in EXPERIMENTS.items():
          "Prints the participant URL and an admin token. State lives in the SQLite --db: a restart on the same --db "
          "continues every participant where they were. Protocol options are fixed when the database is created.")
 def cmd_study_serve(args: argparse.Namespace) -> None:
+    from langpref.extras import needs
     from langpref.study.config import ServeConfig
-    from langpref.study.serve import resolve_study_config, serve
 
+    with needs("study", "langpref study serve"):
+        from langpref.study.serve import resolve_study_config, serve
     serve(from_args(ServeConfig, args, study=resolve_study_config(args.db, cc.args_of(args, "study."))))
 
 
@@ -437,10 +465,14 @@ def cmd_study_export(args: argparse.Namespace) -> None:
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """Every command with its help; a command's options only when `argv` names it (all of them without `argv`)."""
-    return cc.make_parser("langpref", "Teach robots with comparative language feedback: datasets, a shared latent space "
-                       "of trajectories and language, trajectory improvement and reward learning. A command that "
-                       "writes a directory or a file writes its resolved config beside it: DIR/COMMAND.config.json, "
-                       "STEM.config.json.", GROUPS, argv)
+    from langpref import __version__
+
+    parser = cc.make_parser("langpref", "Teach robots with comparative language feedback: datasets, a shared latent "
+                            "space of trajectories and language, trajectory improvement and reward learning. A command "
+                            "that writes a directory or a file writes its resolved config beside it: "
+                            "DIR/COMMAND.config.json, STEM.config.json.", GROUPS, argv)
+    parser.add_argument("--version", action="version", version=f"langpref {__version__}")
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,12 +17,21 @@ strategy reads the true reward; it is only used to score the curve.
 
 A run starts from a trajectory of C drawn at random; the curve is the normalised true reward (0 = worst, 1 = best of
 C) of tau^0 ... tau^N. `improve` averages it over seeds, each seed a new synthetic human (weights w) and start.
+
+Candidates `generated` (`langpref.propose`): C grows with new trajectories made in the simulator. After each feedback,
+the proposer searches the controller's parameters for rollouts maximising the step's objective (Eq. 4's cosine, or the
+history strategy's learned reward) and the argmax runs over C_t = the base split (`base_split`, default test) + every
+trajectory generated in this run so far + this step's new rollouts. The start and the normalisation still come from
+the base split, so a normalised reward above 1 is a trajectory better than any of that split. The synthetic human's
+tau* (Eq. 10) stays the best of the base split; it answers about a generated trajectory from that trajectory's
+real features, which the proposer never sees.
 """
 
 from __future__ import annotations
 
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +40,7 @@ from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.language import LanguageHuman, LanguageQuery, language_pairs
 from langpref.feedback.space import LatentSpace
+from langpref.propose import GENERATED
 from langpref.reward import RewardConfig, RewardLearner
 
 STRATEGIES = ("paper", "history")
@@ -48,7 +58,14 @@ class ImproveConfig:
     seed: int = 0
     """Master seed: the same seed gives the same numbers."""
     candidate_split: str = "test"
-    """The candidate set C the argmax searches (and whose best/worst define the normalised reward)."""
+    """The candidate set C the argmax searches (and whose best/worst define the normalised reward); `generated`:
+    the base split plus new trajectories made in the simulator (`langpref.propose`)."""
+    base_split: str | None = None
+    """With candidates `generated`: the split of the start trajectory, whose trajectories stay candidates and whose
+    best/worst define the normalised reward (above 1: better than any trajectory of it); None: test."""
+    generated_out: str | None = None
+    """With candidates `generated`: also store every generated trajectory shown as a dataset in this directory (it
+    replays from its stored parameters and seed; `langpref render` makes its video)."""
     strategy: str = "paper"
     """`paper` (Eq. 4, last feedback only) or `history` (reward learned from all feedback so far)."""
     objective: str = "cosine"
@@ -58,6 +75,15 @@ class ImproveConfig:
     """`history` only: never show a trajectory twice (off: once at the best, staying there is right)."""
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
+
+    @property
+    def generated(self) -> bool:
+        return self.candidate_split == GENERATED
+
+    @property
+    def split(self) -> str:
+        """The split of the start trajectory and of the normalisation."""
+        return (self.base_split or "test") if self.generated else self.candidate_split
 
     def validate(self) -> None:
         if self.strategy not in STRATEGIES:
@@ -101,43 +127,74 @@ def human_weights(num_features: int, seed: int, run: int) -> np.ndarray:
 @dataclass
 class ImprovementRun:
     shown: list[int]
-    """Dataset index of tau^0 ... tau^N."""
+    """Row of tau^0 ... tau^N: a dataset index, or (candidates `generated`) len(dataset) + k for the k-th
+    trajectory generated in the run."""
     reward: list[float]
-    """Normalised true reward of each (0 worst, 1 best of the candidate set)."""
+    """Normalised true reward of each (0 worst, 1 best of the candidate set, or of the base split)."""
     raw_reward: list[float]
     optimal_raw: float
     feedback: list[str]
+    generated: list[bool] = field(default_factory=list)
+    """Whether each shown trajectory was generated (candidates `generated`)."""
+    step_s: list[float] = field(default_factory=list)
+    """Wall time of each generation step (candidates `generated`)."""
 
 
-def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_seed: tuple[int, ...]
-                    ) -> ImprovementRun:
-    """One improvement run with the synthetic human of weights `w`."""
+def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_seed: tuple[int, ...],
+                    generation=None, store=None) -> ImprovementRun:
+    """One improvement run with the synthetic human of weights `w`. Candidates `generated` need a
+    `langpref.propose.Generation` (and store the generated trajectories shown in `store`, a `GeneratedStore`)."""
     cfg.validate()
-    cands = space.split(cfg.candidate_split)
-    R = true_reward(w, space.theta)
+    cands = space.split(cfg.split)
+    R_split = true_reward(w, space.theta[cands])
     rng_start, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
-    human = LanguageHuman(w, space.theta, space.table(cfg.human.phrase_source), cands, space.feature_names,
-                          cfg.human.temperature, rng_human)
+    n, extra = len(space.phi), (cfg.iterations if cfg.generated else 0)
+    if cfg.generated and generation is None:
+        raise LangprefError("candidates `generated` need the simulator and the dataset's controller parameters "
+                            "(langpref.propose.Generation)")
+    # Rows n.. hold the trajectories generated in this run, filled as they are shown: phi for the method, theta for
+    # the human (and the score). The proposer sees only phi, through the objective.
+    phi = np.concatenate([space.phi, np.zeros((extra, space.dim))]) if extra else space.phi
+    theta = np.concatenate([space.theta, np.zeros((extra, space.theta.shape[1]))]) if extra else space.theta
+    units = np.concatenate([generation.units, np.zeros((extra, generation.units.shape[1]))]) if extra else None
+    view = replace(space, phi=phi, theta=theta) if extra else space
+    human = LanguageHuman(w, theta, space.table(cfg.human.phrase_source), cands, space.feature_names,
+                          cfg.human.temperature, rng_human, direction=cfg.human.direction)
     learner = RewardLearner(space.dim, cfg.reward, seed=int(run_seed[-1])) if cfg.strategy == "history" else None
-    phi_c = space.phi[cands]
+    proposer = generation.proposer(key=(*run_seed, 52711)) if cfg.generated else None
+    pool = list(cands)
     cur = int(rng_start.choice(cands))
-    shown, said = [cur], []
-    for _ in range(cfg.iterations):
+    shown, said, step_s = [cur], [], []
+    for it in range(cfg.iterations):
         answer = human.answer(LanguageQuery(cur))
         said.append(answer.text)
         if learner is None:
-            cur = int(cands[improvement_step(phi_c, space.phi[cur], space.psi_of(answer.text), cfg.objective)])
+            score = cosine_objective if cfg.objective == "cosine" else printed_objective
+            objective = partial(score, phi_current=phi[cur], psi=view.psi_of(answer.text))
         else:
-            learner.add(language_pairs(space, answer, cfg.reward, rng_neg))
+            learner.add(language_pairs(view, answer, cfg.reward, rng_neg))
             learner.fit()
-            scores = learner.predict(phi_c)
-            if cfg.exclude_shown and len(set(shown)) < len(cands):
-                scores[np.isin(cands, shown)] = -np.inf
-            cur = int(cands[int(np.argmax(scores))])
+            objective = learner.predict
+        rows = np.array(pool)
+        scores = objective(phi[rows])
+        if learner is not None and cfg.exclude_shown and len(set(shown) & set(pool)) < len(pool):
+            scores[np.isin(rows, shown)] = -np.inf
+        best = int(np.argmax(scores))
+        cur = int(rows[best])
+        if proposer is not None:
+            proposal = proposer.propose(objective, units[cur], (it,))
+            step_s.append(proposal.wall_s)
+            if proposal.scores[0] > scores[best]:
+                cur = n + len(pool) - len(cands)
+                traj = proposal.trajectories[0]
+                phi[cur], theta[cur], units[cur] = proposal.phi[0], generation.theta(traj), proposal.units[0]
+                pool.append(cur)
+                if store is not None:
+                    store.add(traj, run=[int(x) for x in run_seed], iteration=it + 1, strategy=cfg.strategy)
         shown.append(cur)
-    raw = R[shown]
-    return ImprovementRun(shown, normalised_reward(raw, R[cands]).tolist(), raw.tolist(), float(R[cands].max()),
-                          said)
+    raw = true_reward(w, theta[shown])
+    return ImprovementRun(shown, normalised_reward(raw, R_split).tolist(), raw.tolist(), float(R_split.max()),
+                          said, [s >= n for s in shown] if extra else [], step_s)
 
 
 def summarise(runs: list[ImprovementRun]) -> dict:
@@ -155,15 +212,37 @@ def summarise(runs: list[ImprovementRun]) -> dict:
     }
 
 
-def improve(space: LatentSpace, cfg: ImproveConfig, progress: bool = True) -> dict:
+def improve(space: LatentSpace, cfg: ImproveConfig, progress: bool = True, generation=None) -> dict:
     """`cfg.seeds` runs; `curve` (mean normalised true reward per iteration, iteration 0 first), `curve_std`,
-    `optimal` (the mean normalised reward of the candidate set's best: 1), raw-reward versions and the config."""
+    `optimal` (the mean normalised reward of the candidate set's best: 1), raw-reward versions and the config.
+    Candidates `generated` need `generation` (`langpref.propose.Generation`, with its search settings) and add the
+    generation steps' latency, the share of generated trajectories shown and the search settings."""
     from tqdm import tqdm
 
     cfg.validate()
-    runs = [run_improvement(space, human_weights(len(space.feature_names), cfg.seed, s), cfg, (cfg.seed, s))
+    store = None
+    if cfg.generated and cfg.generated_out:
+        from langpref.propose import GeneratedStore
+
+        store = GeneratedStore(cfg.generated_out, space.env, generation.horizon,
+                               {"source": generation.source, "command": "improve", "config": asdict(cfg)})
+    runs = [run_improvement(space, human_weights(len(space.feature_names), cfg.seed, s), cfg, (cfg.seed, s),
+                            generation, store)
             for s in tqdm(range(cfg.seeds), desc=f"improve {cfg.strategy}", disable=not progress, file=sys.stderr)]
-    return {**summarise(runs), "strategy": cfg.strategy, "config": asdict(cfg), "space": space.description}
+    out = {**summarise(runs), "strategy": cfg.strategy, "config": asdict(cfg), "space": space.description}
+    if cfg.generated:
+        out.update(generation_stats(runs), generated_out=cfg.generated_out, propose=asdict(generation.cfg))
+    return out
+
+
+def generation_stats(runs: list[ImprovementRun]) -> dict:
+    """Latency of the generation steps (p50, p95, max, in seconds) and the share of shown trajectories generated."""
+    steps = np.concatenate([r.step_s for r in runs]) if runs else np.zeros(0)
+    shown = np.array([g for r in runs for g in r.generated[1:]], dtype=bool)
+    return {"step_s_p50": float(np.percentile(steps, 50)) if len(steps) else None,
+            "step_s_p95": float(np.percentile(steps, 95)) if len(steps) else None,
+            "step_s_max": float(steps.max()) if len(steps) else None,
+            "generated_share": float(shown.mean()) if len(shown) else 0.0}
 
 
 def plot_improvement(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
@@ -185,7 +264,8 @@ def plot_improvement(results: dict[str, dict], out: str | Path, title: str = "")
     ax.axhline(1.0, ls="--", color="k", lw=1, label="optimal")
     ax.set_xlabel("iteration")
     ax.set_ylabel("normalised true reward")
-    ax.set_ylim(-0.05, 1.1)
+    top = max([1.1] + [float(np.max(np.array(r["curve"]) + np.array(r["curve_std"]))) + 0.05 for r in results.values()])
+    ax.set_ylim(-0.05, top)  # a generated trajectory may score above 1, the best of the split
     ax.set_title(title, fontsize=10)
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()

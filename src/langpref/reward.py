@@ -24,6 +24,11 @@ random stream, so that the human's answers and the negatives draw from the same 
 Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged over all its unordered pairs, and
 `reward_of_best`, the normalised true reward (0 worst, 1 best of the split) of the trajectory r_xi ranks first
 (averaged over ties, so a constant r_xi scores the split's mean).
+
+Beyond the dataset (`learn-reward --optimize`, `langpref.propose`): after the last query, r_xi's own optimum is
+generated in the simulator (CMA-ES on a surrogate of phi, decided by r_xi of real rollouts embedded by the real
+encoder) and `optimized_true_reward` is its true reward on the same scale, so above 1 is better than any trajectory of
+the eval split. `--save-reward DIR` writes each run's r_xi for `langpref.rewards.LearnedReward`.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback import bradley_terry
 from langpref.feedback.bradley_terry import PairBatch
-from langpref.feedback.humans import HumanConfig, sample_weights, true_reward
+from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.kind import get_kind, random_query
 from langpref.feedback.space import LatentSpace
 
@@ -211,6 +216,8 @@ class Curves:
 
     cross_entropy: list[float] = field(default_factory=list)
     true_reward_of_best: list[float] = field(default_factory=list)
+    optimized_true_reward: float | None = None
+    """With generation: the normalised true reward of r_xi's generated optimum after the last query."""
 
     def record(self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray,
                rationality: float) -> None:
@@ -281,11 +288,13 @@ def human_weights(num_features: int, seed: int, human: int) -> np.ndarray:
 
 
 def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfig, run_seed: tuple[int, ...],
-                        record: list | None = None) -> Curves:
+                        record: list | None = None, generation=None, learners: list | None = None) -> Curves:
     """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each. Queries
     are drawn uniformly (`random`, from their own stream) or chosen by `cfg.query_selection` (from another stream,
     so the human's answers and the negatives use the same streams whatever the strategy). With `record`, appends
-    each query's `langpref.feedback.selection.Selection` (score None for random) and answer as a pair."""
+    each query's `langpref.feedback.selection.Selection` (score None for random) and answer as a pair. With
+    `generation` (`langpref.propose.Generation`), generates r_xi's optimum after the last query and scores it
+    (`Curves.optimized_true_reward`); with `learners`, appends the final reward model."""
     from langpref.feedback.selection import Selection, make_selector
 
     cfg.validate()
@@ -313,7 +322,20 @@ def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfi
         learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
         learner.fit()
         curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+    if generation is not None:
+        best = optimize_reward(generation, learner, run_seed).trajectories[0]
+        raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
+        curves.optimized_true_reward = float(normalised_reward(raw, R_eval)[0])
+    if learners is not None:
+        learners.append(learner)
     return curves
+
+
+def optimize_reward(generation, learner: RewardLearner, run_seed: tuple[int, ...] = (0,)):
+    """r_xi's optimum made in the simulator (`langpref.propose.Proposer.optimise`), starting from the dataset
+    trajectory r_xi ranks first; the `Proposal` of every rollout, best first by r_xi."""
+    start = generation.units[int(np.argmax(learner.predict(generation.phi)))]
+    return generation.proposer(key=(*run_seed, 31337)).optimise(learner.predict, start)
 
 
 def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
@@ -332,22 +354,48 @@ def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
         "auc_cross_entropy": float(ce.mean(axis=0).mean()),
         f"queries_to_{threshold:g}": int(reached[0]) if len(reached) else None,
         "num_runs": len(runs),
+        **optimized_summary(runs),
     }
 
 
-def learn_reward(space: LatentSpace, cfg: LearnRewardConfig, progress: bool = True) -> dict:
-    """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config."""
+def optimized_summary(runs: list[Curves]) -> dict:
+    """Of runs with a generated optimum: `optimized_true_reward` (one per run), its mean, and the shares of runs where
+    it beats the eval split's best trajectory (> 1) and the split's trajectory r_xi ranks first."""
+    if not runs or any(c.optimized_true_reward is None for c in runs):
+        return {}
+    opt = np.array([c.optimized_true_reward for c in runs])
+    picked = np.array([c.true_reward_of_best[-1] for c in runs])
+    return {"optimized_true_reward": opt.tolist(), "optimized_true_reward_mean": float(opt.mean()),
+            "optimized_beats_best_of_split": float((opt > 1.0).mean()),
+            "optimized_beats_true_reward_of_best": float((opt > picked).mean())}
+
+
+def learn_reward(space: LatentSpace, cfg: LearnRewardConfig, progress: bool = True, generation=None,
+                 save_reward: str | None = None, model: str | None = None) -> dict:
+    """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config. With `generation`
+    (`langpref.propose.Generation`), each run also generates r_xi's optimum (`optimized_true_reward`, one per run);
+    with `save_reward` (a directory), each run's r_xi is written there for `langpref.rewards.LearnedReward`, beside
+    a reference to the checkpoint `model` whose trajectory encoder it reads."""
     from tqdm import tqdm
 
     cfg.validate()
-    runs = []
+    runs, saved = [], []
     with tqdm(total=cfg.humans * cfg.seeds, desc=f"learn-reward {cfg.feedback} {cfg.selection}", disable=not progress,
               file=sys.stderr) as bar:
         for h in range(cfg.humans):
             w = human_weights(len(space.feature_names), cfg.seed, h)
             for s in range(cfg.seeds):
-                runs.append(run_reward_learning(space, w, cfg, (cfg.seed, h, s)))
+                learners = [] if save_reward else None
+                runs.append(run_reward_learning(space, w, cfg, (cfg.seed, h, s), generation=generation,
+                                                learners=learners))
+                if save_reward:
+                    from langpref.rewards import save_learned_reward
+
+                    saved.append(str(save_learned_reward(learners[0], save_reward, env=space.env, model=model,
+                                                         name=f"h{h}-s{s}", default=not saved)))
                 bar.update()
+    extra = {"saved_rewards": saved} if saved else {}
+    if generation is not None:
+        extra["propose"] = asdict(generation.cfg)
     return {**summarise(runs), "feedback": cfg.feedback, "loss": cfg.reward.loss, "query_selection": cfg.selection,
-            "config": asdict(cfg),
-            "space": space.description}
+            "config": asdict(cfg), "space": space.description, **extra}

@@ -100,7 +100,10 @@ def _step_features(ep: RecordedEpisode, task: TaskFile, fn: Any, where: str) -> 
 def _episodes(cfg: ImportConfig) -> tuple[str, list[Any]]:
     """(layout name, a list of zero-argument loaders, one per episode, each returning (where, RecordedEpisode))."""
     if is_lerobot(cfg.src):
-        from langpref.dataset.lerobot import read_lerobot
+        from langpref.extras import needs
+
+        with needs("lerobot", "importing a LeRobotDataset"):
+            from langpref.dataset.lerobot import read_lerobot
 
         eps = read_lerobot(cfg.src, state_key=cfg.state_key, action_key=cfg.action_key, camera=cfg.camera)
         return "lerobot", [lambda ep=ep: (f"{cfg.src} {ep.name}", ep) for ep in eps]

@@ -65,10 +65,11 @@ class SweepConfig:
     """A running Ray cluster to join; default a local instance."""
 
 
-def worker_space(data: Path, model: Path | None, env: str, perfect: bool, phrasings: str | None = None):
+def worker_space(data: Path, model: Path | None, env: str, perfect: bool, phrasings: str | None = None,
+                 feature_scale: str = "standardised"):
     from langpref.feedback.space import load_space
 
-    return load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
+    return load_space(data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=feature_scale)
 
 
 def run_sweep(job_fn, todo: list, space, space_args: tuple, cache: RunCache, sweep: SweepConfig, desc: str,
@@ -109,8 +110,12 @@ def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path,
 
 def cli_flags(base, default, names: tuple[str, ...]) -> str:
     """The `langpref experiment` options that reproduce the config `base`: each of `names` where it differs from
-    `default`, and where its language human's phrasings come from when that is not the default."""
+    `default`, where its language human's phrasings come from when that is not the default, and the humans' feature
+    scale and direction rule when not the defaults."""
     flags = "".join(f" --{k} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k))
+    for k in ("feature_scale", "direction"):
+        if getattr(base.human, k) != getattr(default.human, k):
+            flags += f" --{k.replace('_', '-')} {getattr(base.human, k)}"
     if base.human.phrasings:
         return flags + f" --phrasings {base.human.phrasings}"
     if base.human.phrasing_split != default.human.phrasing_split:
@@ -120,10 +125,12 @@ def cli_flags(base, default, names: tuple[str, ...]) -> str:
 
 def phrasing_variant(human) -> list[str]:
     """The part of an experiment's default output name that says where its human's phrasings come from (none for
-    the bank's test split, the default): `phrasings` for an utterance file, `bank-SPLIT` for another bank split."""
+    the bank's test split, the default): `phrasings` for an utterance file, `bank-SPLIT` for another bank split; then
+    the humans' feature scale and direction rule when not the defaults (`HumanConfig.variant`)."""
+    scale = human.variant()
     if human.phrasings:
-        return ["phrasings"]
-    return [] if human.phrasing_split == "test" else [f"bank-{human.phrasing_split}"]
+        return ["phrasings", *scale]
+    return ([] if human.phrasing_split == "test" else [f"bank-{human.phrasing_split}"]) + scale
 
 
 def title_suffix(perfect: bool, human) -> str:
@@ -133,7 +140,12 @@ def title_suffix(perfect: bool, human) -> str:
     if human.phrasings:
         parts.append(f"phrasings: {human.phrasings}")
     elif human.phrasing_split != "test":
-        parts.append("all bank phrasings" if human.phrasing_split == "all" else f"bank {human.phrasing_split} phrasings")
+        parts.append("all bank phrasings" if human.phrasing_split == "all"
+                     else f"bank {human.phrasing_split} phrasings")
+    if human.feature_scale != "standardised":
+        parts.append(f"{human.feature_scale} feature scale")
+    if human.direction != "reward":
+        parts.append(f"direction {human.direction}")
     return f" ({', '.join(parts)})" if parts else ""
 
 

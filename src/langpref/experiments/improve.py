@@ -87,7 +87,8 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     base = config or ImproveConfig()
     phrasings = base.human.phrasings
     data, model, out = default_paths("improve", env, data, model, out, perfect, "-".join(phrasing_variant(base.human)))
-    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
+    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings,
+                       feature_scale=base.human.feature_scale)
     cfgs = {name: replace(base, **fields) for name, fields in CURVES.items()}
     cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
                      force=force)
@@ -95,7 +96,8 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
         cfg.validate()
     todo = [(f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds)
             if f"{name}/{s}" not in cache]
-    run_sweep(_improvement_job, todo, space, (data, model, env, perfect, phrasings), cache, sweep or SweepConfig(),
+    run_sweep(_improvement_job, todo, space, (data, model, env, perfect, phrasings, base.human.feature_scale), cache,
+              sweep or SweepConfig(),
               f"improve {env}", progress)
     results = {name: {**summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
                       "config": asdict(cfg)} for name, cfg in cfgs.items()}

@@ -3,10 +3,13 @@ comparisons) and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic human
 the L2 prior's strength, which the paper does not have, was chosen (on the val split, with other humans).
 
 Each writes into its output directory (default `results/reward/ENV`, `results/ablation/ENV`): `NAME.json` (curves
-per method, summaries, the targets checked, the config; for `reward` also `ce_difference`, language minus comparison
-cross-entropy per query count with a paired 95% interval), `NAME.png` (two panels: (a) cross-entropy, (b) normalised
-true reward of r_xi's best test trajectory; mean with a +-std band), `NAME.md` (a section for docs/results.md) and
-`runs.json` (finished runs; an interrupted experiment resumes without rerunning them).
+per method, summaries, the targets checked, the config; per method also the mean cross-entropy over 1..Q, "queries
+to 0.95" read as first touch and as stays-above (`queries_to`) and the curves of each synthetic human (`per_human`);
+for `reward` also `ce_difference`, language minus comparison cross-entropy per query count with a paired 95%
+interval, and `ce_language_lower`, at how many query counts 1..Q language's mean cross-entropy is the lower),
+`NAME.png` (two panels: (a) cross-entropy, (b) normalised true reward of r_xi's best test trajectory; mean with a
++-std band), `NAME.md` (a section for docs/results.md) and `runs.json` (finished runs; an interrupted experiment
+resumes without rerunning them).
 """
 
 from __future__ import annotations
@@ -66,31 +69,77 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
 
 
 def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out, perfect: bool, force: bool,
-                 progress: bool, sweep: SweepConfig | None
+                 progress: bool, sweep: SweepConfig | None, named_for=None
                  ) -> tuple[dict[str, dict], dict[str, dict], Any, Path, Path | None, Path]:
     """Run every (method, human, seed) not yet in the cache; the summary of each method and every run's curves
-    (keyed METHOD/HUMAN/SEED)."""
+    (keyed METHOD/HUMAN/SEED). The default output directory is named for the human `named_for` (default the
+    methods')."""
     from langpref.feedback.space import load_space
-    from langpref.reward import Curves, summarise
 
     reward_models = {cfg.reward.model for cfg in methods.values()} - {"linear"}
     human = next(iter(methods.values())).human
     phrasings = human.phrasings
-    variant = "-".join(sorted(reward_models) + phrasing_variant(human))
+    variant = "-".join(sorted(reward_models) + phrasing_variant(named_for or human))
     data, model, out = default_paths(kind, env, data, model, out, perfect, variant)
-    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
+    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings,
+                       feature_scale=human.feature_scale)
     cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
                      force=force)
     for cfg in methods.values():
         cfg.validate()
     todo = [(f"{name}/{h}/{s}", cfg, h, s) for name, cfg in methods.items() for h in range(cfg.humans)
             for s in range(cfg.seeds) if f"{name}/{h}/{s}" not in cache]
-    run_sweep(_reward_job, todo, space, (data, model, env, perfect, phrasings), cache, sweep or SweepConfig(),
+    run_sweep(_reward_job, todo, space, (data, model, env, perfect, phrasings, human.feature_scale), cache,
+              sweep or SweepConfig(),
               f"{kind} {env}", progress)
-    results = {name: {**summarise([Curves(**cache.runs[f"{name}/{h}/{s}"]) for h in range(cfg.humans)
-                                   for s in range(cfg.seeds)]), "config": asdict(cfg)}
+    results = {name: {**_summary(cache.runs, name, cfg.humans, cfg.seeds), "config": asdict(cfg)}
                for name, cfg in methods.items()}
     return results, cache.runs, space, data, model, out
+
+
+THRESHOLD = 0.95
+"""The true reward of r_xi's best test trajectory that "queries to 0.95" asks for."""
+
+
+def queries_to(curve, threshold: float = THRESHOLD) -> dict[str, int | None]:
+    """Two readings of when a mean curve (query counts 0..Q) reaches `threshold`: `first_touch`, the first query count
+    at which it is >= threshold, and `stays`, the first query count from which it never falls below it again up to Q
+    (None when it never does, or for `stays`, when it is below at Q)."""
+    above = np.asarray(curve, dtype=np.float64) >= threshold
+    touch = np.flatnonzero(above)
+    below = np.flatnonzero(~above)
+    stays = (0 if len(below) == 0 else int(below[-1]) + 1) if above[-1] else None
+    return {"first_touch": int(touch[0]) if len(touch) else None, "stays": stays}
+
+
+def _summary(runs: dict[str, dict], name: str, humans: int, seeds: int) -> dict[str, Any]:
+    """`langpref.reward.summarise` of one method's runs, plus the numbers the docs quote: the mean cross-entropy over
+    query counts 1..Q, "queries to 0.95" in both readings of `queries_to`, and the curves of each synthetic human (its
+    mean over seeds, keyed by the human's number)."""
+    from langpref.reward import Curves, summarise
+
+    curves = {h: [Curves(**runs[f"{name}/{h}/{s}"]) for s in range(seeds)] for h in range(humans)}
+    out = summarise([c for h in range(humans) for c in curves[h]])
+    reached = queries_to(out["true_reward_of_best"])
+    out.update({
+        "mean_cross_entropy_1_to_q": float(np.mean(out["cross_entropy"][1:])),
+        f"queries_to_{THRESHOLD:g}_first_touch": reached["first_touch"],
+        f"queries_to_{THRESHOLD:g}_stays": reached["stays"],
+        "per_human": {str(h): {"cross_entropy": np.mean([c.cross_entropy for c in cs], axis=0).tolist(),
+                               "true_reward_of_best": np.mean([c.true_reward_of_best for c in cs], axis=0).tolist(),
+                               "auc_true_reward": float(np.mean([c.true_reward_of_best for c in cs])),
+                               "mean_cross_entropy_1_to_q": float(np.mean([c.cross_entropy[1:] for c in cs])),
+                               **{f"queries_to_{THRESHOLD:g}_{k}": v for k, v in queries_to(
+                                   np.mean([c.true_reward_of_best for c in cs], axis=0)).items()}}
+                      for h, cs in curves.items()},
+    })
+    return out
+
+
+def ce_lower_count(a: dict, b: dict) -> dict[str, int]:
+    """At how many query counts 1..Q the mean cross-entropy of method `a` is lower than that of `b` (and higher)."""
+    ca, cb = np.array(a["cross_entropy"][1:]), np.array(b["cross_entropy"][1:])
+    return {"lower": int((ca < cb).sum()), "higher": int((ca > cb).sum()), "of": len(ca)}
 
 
 def _reward_job(space, job) -> tuple[str, dict]:
@@ -125,14 +174,35 @@ def _ce_difference_line(diff: dict[str, list]) -> str:
 
 
 def _table(results: dict[str, dict], at: list[int]) -> list[str]:
-    lines = ["| method | " + " | ".join(f"CE q={q}" for q in at) + " | " + " | ".join(f"best q={q}" for q in at)
-             + " | AUC best | queries to 0.95 |", "|---|" + "---|" * (2 * len(at) + 2)]
+    lines = ["| method | " + " | ".join(f"CE q={q}" for q in at) + " | mean CE 1..Q | "
+             + " | ".join(f"best q={q}" for q in at) + " | AUC best | queries to 0.95 (first touch) | "
+             "queries to 0.95 (stays) |", "|---|" + "---|" * (2 * len(at) + 4)]
     for name, r in results.items():
         ce = " | ".join(f"{r['cross_entropy'][q]:.3f}" for q in at)
         best = " | ".join(f"{r['true_reward_of_best'][q]:.3f}" for q in at)
-        reached = r["queries_to_0.95"]
-        lines.append(f"| {name} | {ce} | {best} | {r['auc_true_reward']:.3f} | "
-                     f"{reached if reached is not None else 'not reached'} |")
+        lines.append(f"| {name} | {ce} | {_mean_ce(r):.3f} | {best} | {r['auc_true_reward']:.3f} | "
+                     f"{_reached(r, 'first_touch')} | {_reached(r, 'stays')} |")
+    return lines
+
+
+def _reached(r: dict, reading: str) -> str:
+    q = r.get(f"queries_to_{THRESHOLD:g}_{reading}")
+    return "not reached" if q is None else str(q)
+
+
+def _per_human_table(results: dict[str, dict]) -> list[str]:
+    """Each synthetic human's numbers (its mean over seeds) per method: AUC of the best curve, mean CE over 1..Q and
+    queries to 0.95 (first touch / stays)."""
+    humans = list(next(iter(results.values())).get("per_human", {}))
+    if not humans:
+        return []
+    lines = ["Per synthetic human (mean over its seeds): AUC best / mean CE 1..Q / queries to 0.95 (first touch, "
+             "stays).", "", "| method | " + " | ".join(f"human {h}" for h in humans) + " |",
+             "|---|" + "---|" * len(humans)]
+    for name, r in results.items():
+        cells = [f"{p['auc_true_reward']:.3f} / {p['mean_cross_entropy_1_to_q']:.3f} / {_reached(p, 'first_touch')}, "
+                 f"{_reached(p, 'stays')}" for p in (r["per_human"][h] for h in humans)]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -143,11 +213,19 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
              f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
              f"{summary['seeds']} seeds, Q = {q}; metrics on the test split). CE: cross-entropy to the human's P_w "
              "over all test pairs; best: normalised true reward of the test trajectory r_xi ranks first; AUC: the "
-             "mean of the best curve over query counts 0..Q.", ""]
+             "mean of the best curve over query counts 0..Q; queries to 0.95: the first query count at which the mean "
+             "best curve reaches 0.95 (first touch), and the first from which it stays at or above 0.95 up to Q "
+             "(stays).", ""]
     lines += _table(summary["methods"], at)
     lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
+    if "ce_language_lower" in summary:
+        c = summary["ce_language_lower"]
+        lines += ["", f"Mean cross-entropy: language lower than comparisons at {c['lower']} of {c['of']} query counts "
+                  f"(1..Q), higher at {c['higher']}."]
     if "ce_difference" in summary:
         lines += ["", _ce_difference_line(summary["ce_difference"])]
+    per_human = _per_human_table(summary["methods"])
+    lines += ["", *per_human] if per_human else []
     lines += ["", f"![{title} {summary['env']}]({figure_link(summary['figure'])})", "", f"Paper: {paper}"]
     return "\n".join(lines) + "\n"
 
@@ -205,7 +283,8 @@ def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect:
     keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
     ce = {m: np.array([runs[f"{m}/{k}"]["cross_entropy"] for k in keys]) for m in methods}
     return _finish("reward", "Reward learning: language vs comparisons", PAPER_FIG5, env, results, space, data,
-                   model, out, base, targets, ce_difference=paired_difference(ce["language"], ce["comparison"]))
+                   model, out, base, targets, ce_difference=paired_difference(ce["language"], ce["comparison"]),
+                   ce_language_lower=ce_lower_count(lang, comp))
 
 
 def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
@@ -263,6 +342,12 @@ def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Pat
     return out
 
 
+def prior_human(human):
+    """The prior experiment's synthetic humans: the given ones, with the language human on the bank's val phrasings
+    (the test split's are for reporting only) unless they speak an utterance file."""
+    return human if human.phrasings else replace(human, phrasing_split="val")
+
+
 def _prior_key(name: str, wd: float) -> str:
     return f"{name} wd={wd:g}"
 
@@ -275,22 +360,25 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
                          force: bool = False, progress: bool = True, sweep: SweepConfig | None = None,
                          grid: tuple[float, ...] = PRIOR_GRID) -> dict[str, Any]:
     """Each method (language with both losses, comparisons, either language loss alone) at every weight decay of
-    `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet. Each
-    method's pick is the weight decay of its lowest mean cross-entropy over queries 1..Q; writes
+    `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet, and
+    whose language human speaks the bank's val phrasings (`prior_human`): nothing of the test split takes part in
+    the choice. Each method's pick is the weight decay of its lowest mean cross-entropy over queries 1..Q; writes
     prior.json/.png/.md."""
     from langpref.reward import DEFAULT_WEIGHT_DECAY, LearnRewardConfig
 
-    base = replace(config or LearnRewardConfig(), eval_split="val", seed=PRIOR_SEED)
+    given = config or LearnRewardConfig()
+    base = replace(given, eval_split="val", seed=PRIOR_SEED, human=prior_human(given.human))
     reward_model = base.reward.model
     methods = {_prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss,
                                                                                 weight_decay=wd))
                for name, (fb, loss) in PRIOR_METHODS.items() for wd in grid}
     results, _, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
-                                                       progress, sweep)
+                                                       progress, sweep, named_for=given.human)
     picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
     title = f"L2 prior strength, {env}, {reward_model} reward" + title_suffix(model is None, base.human)
     figure = plot_prior(results, grid, out / "prior.png", title)
-    fields = {"seed": PRIOR_SEED, "eval_split": "val", "grid": list(grid), "reward_model": reward_model,
+    fields = {"seed": PRIOR_SEED, "eval_split": "val", "phrasings": base.human.phrase_source, "grid": list(grid),
+              "reward_model": reward_model,
               "default": DEFAULT_WEIGHT_DECAY[reward_model], "picks": picks, "methods": results,
               "figure": str(figure)}
     return _save("prior", env, data, model, out, space, base, fields, _prior_markdown)
@@ -302,9 +390,10 @@ def _prior_markdown(summary: dict[str, Any]) -> str:
                                                            f", {summary['reward_model']} reward")
              + (" (perfect latent space, oracle)" if summary["perfect"] else ""), "",
              f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-             f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments'; metrics on "
-             "the val split). Mean cross-entropy over queries 1..Q for each weight decay; the lowest of each method "
-             f"in bold. The default for the {summary['reward_model']} reward is {summary['default']:g}.", "",
+             f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments', the "
+             f"language human speaking {summary.get('phrasings', 'test')} phrasings; metrics on the val split). Mean "
+             "cross-entropy over queries 1..Q for each weight decay; the lowest of each method in bold. "
+             f"The default for the {summary['reward_model']} reward is {summary['default']:g}.", "",
              "| method | " + " | ".join(f"wd {wd:g}" for wd in grid) + " | pick |", "|---|" + "---|" * (len(grid) + 1)]
     for name, pick in summary["picks"].items():
         cells = [f"{_mean_ce(results[_prior_key(name, wd)]):.3f}" for wd in grid]

@@ -1,8 +1,16 @@
-"""Synthetic humans (paper Sec. 5.1): a reward R(tau) = w . theta(tau) on normalised features, whatever they answer.
+"""Synthetic humans (paper Sec. 5.1): a reward R(tau) = w . theta(tau), whatever they answer.
 
 Weights. `sample_weights(F, seed)` draws w uniformly on the unit sphere of R^F (a standard normal vector scaled to
-norm 1): every feature matters with a random sign and size, and R differences between trajectories are O(1) because
-`theta` is in units of each feature's train-split standard deviation.
+norm 1): every feature matters with a random sign and size.
+
+Feature scale (`HumanConfig.feature_scale`). What theta(tau) is sets how noisy both humans are, since Eq. 10 and
+Eq. 11 are softmaxes of reward differences. `standardised` (the default): each feature's per-step mean over the
+trajectory, standardised by the train split's mean and std, so every feature weighs by its spread and R differences
+between trajectories are O(1). `paper`: the paper's theta(tau), the sum over the trajectory's steps of the raw
+per-step features (Sec. 5.1), not standardised: R differences are then tens of units on T = 500 steps, the
+comparison human is almost noiseless and the language human almost always names the feature of largest
+w_f (theta*_f - theta0_f). The space a command runs in holds the humans' theta (`LatentSpace.theta`, see
+`langpref.feedback.space.load_space`); the methods never see it.
 
 How a human of each kind answers is in that kind's module: `langpref.feedback.language` (Eq. 10) and
 `langpref.feedback.comparison` (Eq. 11); `HumanConfig` holds the knobs of both.
@@ -48,6 +56,12 @@ def normalised_reward(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return (np.asarray(values, dtype=np.float64) - lo) / max(hi - lo, 1e-12)
 
 
+FEATURE_SCALES = ("standardised", "paper")
+"""What theta(tau) the synthetic humans' reward weighs (see the module docstring)."""
+DIRECTION_RULES = ("reward", "toward-best")
+"""How the language human picks the direction of the feature it names (see `HumanConfig.direction`)."""
+
+
 def softmax(logits: np.ndarray) -> np.ndarray:
     z = np.asarray(logits, dtype=np.float64)
     z = np.exp(z - z.max())
@@ -68,6 +82,14 @@ class HumanConfig:
     heldout/utterances.json, phrasings written by people who never saw the bank."""
     rationality: float = 1.0
     """Of the comparison human, beta in sigmoid(beta (R_A - R_B)); 1 is Eq. 11, large is noiseless."""
+    feature_scale: str = "standardised"
+    """theta(tau) of both humans' reward w . theta: `standardised` (per-step mean, standardised by the train split;
+    reward differences O(1)) or `paper` (Sec. 5.1: raw per-step features summed over the trajectory's steps; reward
+    differences of tens of units, so both humans are nearly noiseless)."""
+    direction: str = "reward"
+    """The direction the language human says for the feature it picked (Eq. 10 does not say): `reward`, the one
+    that raises its reward (sign of w_f), or `toward-best`, the one that moves tau^0 toward tau* (sign of theta*_f -
+    theta0_f, the difference Eq. 10's softmax weighs; the sign of w_f when they are equal)."""
 
     @property
     def phrase_source(self) -> str:
@@ -79,3 +101,14 @@ class HumanConfig:
             raise LangprefError(f"the language human's temperature must be > 0, got {self.temperature}")
         if not self.rationality >= 0:
             raise LangprefError(f"the comparison human's rationality must be >= 0, got {self.rationality}")
+        if self.feature_scale not in FEATURE_SCALES:
+            raise LangprefError(f"unknown feature scale {self.feature_scale!r}: choose one of "
+                                f"{', '.join(FEATURE_SCALES)}")
+        if self.direction not in DIRECTION_RULES:
+            raise LangprefError(f"unknown direction rule {self.direction!r}: choose one of "
+                                f"{', '.join(DIRECTION_RULES)}")
+
+    def variant(self) -> list[str]:
+        """What sets these humans apart from the default ones, for an output's name (none for the defaults)."""
+        return ([] if self.feature_scale == "standardised" else [f"{self.feature_scale}-scale"]) + (
+            [] if self.direction == "reward" else [self.direction])

@@ -2,8 +2,9 @@
 
 Human (Eq. 10). Shown tau^0, with tau* the best trajectory of its candidate set under w, it samples a feature f from
 softmax(w (.) (theta*_f - theta0_f) / temperature), says the direction that raises its reward (`increase` when
-w_f >= 0), and picks a phrasing of that feature and direction uniformly from one split of the bank (default `test`,
-phrasings the model never trained on). The paper's Eq. 10 has no temperature (temperature 1).
+w_f >= 0; with `direction="toward-best"`, the direction that takes theta0_f toward theta*_f), and picks a phrasing
+of that feature and direction uniformly from one split of the bank (default `test`, phrasings the model never trained
+on). The paper's Eq. 10 has no temperature (temperature 1).
 
 Likelihood. Feedback l about tau becomes Bradley-Terry pairs on the frozen embeddings: the imagined improvement
 phi + psi_l beats phi (L_Explicit, Eq. 7), and beats phi + psi_l~ for k other utterances l~ of the robot's own pool
@@ -27,7 +28,7 @@ import numpy as np
 
 from langpref.errors import LangprefError
 from langpref.feedback.bradley_terry import PairBatch
-from langpref.feedback.humans import HumanConfig, Seed, rng_of, softmax, true_reward
+from langpref.feedback.humans import DIRECTION_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
 from langpref.feedback.kind import FeedbackKind, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
 from langpref.language.bank import DIRECTIONS
@@ -67,7 +68,7 @@ class LanguageHuman:
     """Answers language queries about trajectories with Eq. 10, relative to the best of its candidate set."""
 
     def __init__(self, w: np.ndarray, theta: np.ndarray, phrases: PhraseTable, candidates: Sequence[int],
-                 feature_names: Sequence[str], temperature: float = 1.0, seed: Seed = 0):
+                 feature_names: Sequence[str], temperature: float = 1.0, seed: Seed = 0, direction: str = "reward"):
         self.w = np.asarray(w, dtype=np.float64)
         self.theta = np.asarray(theta, dtype=np.float64)
         if self.theta.shape[1] != len(self.w):
@@ -77,6 +78,9 @@ class LanguageHuman:
         self.phrases = phrases
         self.feature_names = tuple(feature_names)
         self.temperature = float(temperature)
+        if direction not in DIRECTION_RULES:
+            raise LangprefError(f"unknown direction rule {direction!r}: choose one of {', '.join(DIRECTION_RULES)}")
+        self.direction_rule = direction
         cands = np.asarray(candidates, dtype=np.int64)
         self.best = int(cands[np.argmax(true_reward(self.w, self.theta[cands]))])
         """tau*, the best trajectory of the candidate set under w."""
@@ -86,13 +90,18 @@ class LanguageHuman:
         """softmax(w (.) (theta* - theta0) / temperature) over the features (Eq. 10)."""
         return softmax(self.w * (self.theta[self.best] - self.theta[shown]) / self.temperature)
 
-    def direction(self, feature: int) -> int:
-        """The direction (0 increase, 1 decrease) of `feature` that raises the reward."""
+    def direction(self, feature: int, shown: int | None = None) -> int:
+        """The direction (0 increase, 1 decrease) of `feature` that raises the reward; with the `toward-best` rule
+        and the `shown` trajectory, the one that takes theta0_f toward theta*_f (the reward's when they are equal)."""
+        if self.direction_rule == "toward-best" and shown is not None:
+            gap = self.theta[self.best, feature] - self.theta[shown, feature]
+            if gap != 0:
+                return 0 if gap > 0 else 1
         return 0 if self.w[feature] >= 0 else 1
 
     def answer(self, query: LanguageQuery) -> LanguageAnswer:
         feature = int(self.rng.choice(len(self.w), p=self.feature_probabilities(query.shown)))
-        direction = self.direction(feature)
+        direction = self.direction(feature, query.shown)
         rows = self.phrases.rows(feature, direction)
         if len(rows) == 0:
             raise LangprefError(f"the phrasings this human speaks from have none of {self.feature_names[feature]}/"
@@ -105,7 +114,7 @@ def make_human(w: np.ndarray, space: LatentSpace, candidates: Sequence[int], cfg
                rng: np.random.Generator) -> LanguageHuman:
     """The Eq. 10 human speaking the phrasings `cfg` names, tau* the best of `candidates`."""
     return LanguageHuman(w, space.theta, space.table(cfg.phrase_source), candidates, space.feature_names,
-                         cfg.temperature, rng)
+                         cfg.temperature, rng, direction=cfg.direction)
 
 
 # ---- likelihood -----------------------------------------------------------------------------------------------

@@ -4,9 +4,11 @@
     space = perfect_latent_space(dataset)                 # oracle: phi = (normalised features, 3), psi = (+-e_f, 0)
 
 `theta` holds every trajectory's features normalised with the train split's mean and standard deviation (so a true
-reward R = w . theta weighs features in units of their spread). `phi` holds the trajectory embeddings and each
-`PhraseTable` the embeddings psi of one split of the utterance bank. The algorithms in `langpref.improve` and
-`langpref.reward` only see `phi` and `psi`; the synthetic humans only see `theta` and the phrasings.
+reward R = w . theta weighs features in units of their spread); `load_space(..., feature_scale="paper")` puts the
+paper's theta(tau) there instead, the raw per-step features summed over the trajectory (`paper_theta`). `phi` holds
+the trajectory embeddings and each `PhraseTable` the embeddings psi of one split of the utterance bank. The
+algorithms in `langpref.improve` and `langpref.reward` only see `phi` and `psi`; the synthetic humans only see
+`theta` and the phrasings.
 """
 
 from __future__ import annotations
@@ -190,6 +192,28 @@ def _normalised_theta(dataset) -> np.ndarray:
     return FeatureScale.fit(feats[dataset.split("train")])(feats)
 
 
+def paper_theta(dataset) -> np.ndarray:
+    """The paper's theta(tau) (Sec. 5.1): the sum over each trajectory's steps of its raw per-step features, not
+    normalised. The dataset's features are those per-step features averaged over the trajectory's steps, so this is
+    that mean times the trajectory's length."""
+    feats = np.asarray(dataset.features, dtype=np.float64)
+    lengths = np.array([dataset.meta.length(i) for i in range(len(feats))], dtype=np.float64)
+    return feats * lengths[:, None]
+
+
+def with_feature_scale(space: LatentSpace, dataset, feature_scale: str) -> LatentSpace:
+    """`space` with the synthetic humans' theta of `feature_scale` (`langpref.feedback.humans.FEATURE_SCALES`); the
+    methods' phi and psi are unchanged. `standardised` is the space as built."""
+    from langpref.feedback.humans import FEATURE_SCALES
+
+    if feature_scale not in FEATURE_SCALES:
+        raise LangprefError(f"unknown feature scale {feature_scale!r}: choose one of {', '.join(FEATURE_SCALES)}")
+    if feature_scale == "standardised":
+        return space
+    return replace(space, theta=paper_theta(dataset),
+                   description=space.description + "; humans' theta: paper scale (raw features summed over steps)")
+
+
 def build_latent_space(model, dataset, bank_splits: Sequence[str] = BANK_SPLITS, name: str = "a model"
                        ) -> LatentSpace:
     """phi of every trajectory of `dataset` and psi of the bank's phrasings of `bank_splits`, from a trained model.
@@ -255,21 +279,23 @@ def perfect_latent_space(dataset, bank_splits: Sequence[str] = BANK_SPLITS, scal
 
 def load_space(data: str | Path, model: str | Path | None = None, *, env: str | None = None,
                perfect: bool = False, bank_splits: Sequence[str] = BANK_SPLITS,
-               phrasings: str | Path | None = None) -> LatentSpace:
+               phrasings: str | Path | None = None, feature_scale: str = "standardised") -> LatentSpace:
     """Open a dataset and the latent space a command runs in: the trained `model`'s, or with `perfect` the oracle
-    `perfect_latent_space` (labelled as such), with the phrasings of the utterance file `phrasings` when given.
-    Fails with one line when the model's env differs from the data's."""
+    `perfect_latent_space` (labelled as such), with the phrasings of the utterance file `phrasings` when given, and
+    the synthetic humans' theta of `feature_scale` (`with_feature_scale`). Fails with one line when the model's env
+    differs from the data's."""
     from langpref.dataset.storage import load_dataset
 
     dataset = load_dataset(data, env=env)
     if perfect:
-        return perfect_latent_space(dataset, bank_splits, phrasings=phrasings)
+        return with_feature_scale(perfect_latent_space(dataset, bank_splits, phrasings=phrasings), dataset,
+                                  feature_scale)
     if model is None:
         raise LangprefError("give --model MODEL (a `langpref train` checkpoint) or --perfect-latent (the oracle space)")
     from langpref.model.checkpoint import load_model
 
     space = build_latent_space(load_model(model, dataset=dataset), dataset, bank_splits, name=f"model {model}")
-    return space.with_file(phrasings) if phrasings else space
+    return with_feature_scale(space.with_file(phrasings) if phrasings else space, dataset, feature_scale)
 
 
 def toy_latent_space(env: str = "metaworld", n: int = 60, dim: int | None = None, seed: int = 0,

@@ -5,6 +5,13 @@ than the model's tie threshold), and every phrasing of that feature in the direc
 share with psi_l . (phi_B - phi_A) > 0. The score is psi_l . phi_B - psi_l . phi_A, so S = Psi @ Phi^T is computed
 once and every sample is two lookups.
 
+Ties: a pair whose feature differs by no more than the model's tie threshold (a fraction of the feature's train
+std, `tie_fraction` in training) is left out of `accuracy`. `accuracy_ties_at_chance` puts those samples back (every
+pair whose feature differs at all, with every phrasing of the direction taking A to B) each scored 1/2, as a model
+that cannot tell would; `accuracy_no_tie_threshold` scores them by the model (`tie_fraction` 0).
+
+Per phrasing: `per_phrasing` gives each phrasing's accuracy over its samples, with its meaning.
+
 Reading accuracy: the share of the phrasings that `embed_text` (`langpref embed`) reads as their own meaning, i.e.
 whose psi is closest in cosine to that meaning's prototype; what a person typing one sentence sees.
 """
@@ -58,6 +65,39 @@ def alignment_counts(
     return correct, total
 
 
+def phrasing_counts(phi, psi, pairs: Pairs, group_ids: Sequence[np.ndarray], num_phrasings: int,
+                    chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
+    """(correct, total) per phrasing id: the samples of `alignment_counts`, counted by the phrasing that scored them."""
+    phi_t = torch.as_tensor(phi, dtype=torch.float64)
+    scores = torch.as_tensor(psi, dtype=torch.float64).to(phi_t.device) @ phi_t.T  # (P, N)
+    correct = np.zeros(num_phrasings, dtype=np.int64)
+    total = np.zeros(num_phrasings, dtype=np.int64)
+    for g, ids in enumerate(group_ids):
+        sel = np.nonzero(pairs.group == g)[0]
+        if len(ids) == 0 or len(sel) == 0:
+            continue
+        ids = np.asarray(ids)
+        s = scores[torch.as_tensor(ids, device=scores.device)]
+        step = max(1, chunk // len(ids))
+        for start in range(0, len(sel), step):
+            a = torch.as_tensor(pairs.a[sel[start:start + step]], device=s.device)
+            b = torch.as_tensor(pairs.b[sel[start:start + step]], device=s.device)
+            correct[ids] += ((s[:, b] - s[:, a]) > 0).sum(dim=1).cpu().numpy()
+        total[ids] += len(sel)
+    return correct, total
+
+
+def per_phrasing(correct: np.ndarray, total: np.ndarray, phrasings: Phrasings) -> dict[str, dict]:
+    """{text: {"meaning": "feature/direction", "accuracy", "num_samples"}} for every phrasing with samples."""
+    out = {}
+    for g, ids in enumerate(phrasings.group_ids):
+        for i in ids:
+            if total[i]:
+                out[phrasings.texts[i]] = {"meaning": "/".join(phrasings.group_name(g)),
+                                           "accuracy": float(correct[i] / total[i]), "num_samples": int(total[i])}
+    return out
+
+
 def summarise(correct: np.ndarray, total: np.ndarray, feature_names: Sequence[str]) -> dict:
     """{"accuracy", "per_feature", "num_samples"}; features without samples are left out of per_feature."""
     n = int(total.sum())
@@ -99,9 +139,24 @@ def evaluate_split(model, dataset, split: str, phrasings: Phrasings) -> dict:
     out = summarise(correct, total, model.feature_names)
     out.update(split=split, num_trajectories=len(idx), num_phrasings=len(phrasings.texts),
                num_pairs=len(pairs))
+    out.update(_with_ties(phi, psi, dataset.features[idx], phrasings, correct, total, len(model.feature_names)))
+    out["per_phrasing"] = per_phrasing(*phrasing_counts(phi, psi, pairs, phrasings.group_ids, len(phrasings.texts)),
+                                       phrasings)
     if bool(model.prototypes.abs().sum() > 0):
         out.update(reading(psi, model.prototypes.cpu(), phrasings))
     return out
+
+
+def _with_ties(phi, psi, features: np.ndarray, phrasings: Phrasings, correct: np.ndarray, total: np.ndarray,
+               num_features: int) -> dict:
+    """The accuracy with the samples the tie threshold left out: scored at chance, and scored by the model."""
+    every = build_pairs(features, np.zeros(features.shape[1]))
+    correct_all, total_all = alignment_counts(phi, psi, every, phrasings.group_ids, num_features)
+    ties = int(total_all.sum() - total.sum())
+    n = int(total_all.sum())
+    return {"accuracy_ties_at_chance": float((correct.sum() + 0.5 * ties) / n) if n else float("nan"),
+            "accuracy_no_tie_threshold": float(correct_all.sum() / n) if n else float("nan"),
+            "num_tie_samples": ties}
 
 
 def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) -> dict:

@@ -86,6 +86,10 @@ def get_simulator(name: str) -> Simulator:
     if task.simulator is None:
         raise LangprefError(f"task {name!r} has no simulator (it is a recorded task): its trajectories come from "
                             "`langpref import`, and its videos from the recording")
+    if task.simulator.extra:
+        from langpref.extras import require
+
+        require(task.simulator.extra, f"task {name!r}")
     return task.simulator
 
 

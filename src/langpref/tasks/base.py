@@ -41,6 +41,9 @@ class Simulator:
     default_horizon: int = 500
     default_num_trajectories: int = 324
     success_name: str = "success"
+    extra: str | None = None
+    """The langpref extra that installs this simulator (`pip install 'langpref[EXTRA]'`), checked before any rollout
+    starts; None for a plugin, whose own package brings its simulator."""
 
 
 @dataclass(frozen=True)

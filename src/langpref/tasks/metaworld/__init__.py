@@ -28,5 +28,6 @@ TASK = Task(
     utterances=resources.files(__name__).joinpath("utterances.json"),
     default_splits=(260, 32, 32),
     simulator=Simulator(make_env=make, make_controller=make_controller, controller_dim=CONTROLLER_DIM,
-                        default_horizon=500, default_num_trajectories=324, success_name="button pressed"),
+                        default_horizon=500, default_num_trajectories=324, success_name="button pressed",
+                        extra="metaworld"),
 )

@@ -36,8 +36,11 @@ class MetaWorldButtonPress:
     """`SimEnv` over Meta-World's SawyerButtonPressEnvV3."""
 
     def __init__(self, horizon: int = 500):
-        import metaworld  # noqa: F401  (registers the envs; needs `packaging`)
-        from metaworld.envs.sawyer_button_press_v3 import SawyerButtonPressEnvV3
+        from langpref.extras import needs
+
+        with needs("metaworld", "task 'metaworld'"):
+            import metaworld  # noqa: F401  (registers the envs; needs `packaging`)
+            from metaworld.envs.sawyer_button_press_v3 import SawyerButtonPressEnvV3
 
         self.horizon = horizon
         self._env = SawyerButtonPressEnvV3()

@@ -31,5 +31,6 @@ TASK = Task(
     utterances=resources.files(__name__).joinpath("utterances.json"),
     default_splits=(359, 44, 45),
     simulator=Simulator(make_env=make, make_controller=make_controller, controller_dim=CONTROLLER_DIM,
-                        default_horizon=500, default_num_trajectories=448, success_name="cube lifted"),
+                        default_horizon=500, default_num_trajectories=448, success_name="cube lifted",
+                        extra="robosuite"),
 )

@@ -109,12 +109,15 @@ def quiet_robosuite() -> None:
 @lru_cache(maxsize=1)
 def _lift_with_bottle_class() -> type:
     """robosuite's Lift plus a bottle; built on first use so that robosuite is imported only then."""
-    quiet_robosuite()
-    from robosuite.environments.manipulation.lift import Lift
-    from robosuite.models.objects import BottleObject
-    from robosuite.models.tasks import ManipulationTask
-    from robosuite.utils.observables import Observable, sensor
-    from robosuite.utils.placement_samplers import SequentialCompositeSampler, UniformRandomSampler
+    from langpref.extras import needs
+
+    with needs("robosuite", "task 'robosuite'"):
+        quiet_robosuite()
+        from robosuite.environments.manipulation.lift import Lift
+        from robosuite.models.objects import BottleObject
+        from robosuite.models.tasks import ManipulationTask
+        from robosuite.utils.observables import Observable, sensor
+        from robosuite.utils.placement_samplers import SequentialCompositeSampler, UniformRandomSampler
 
     class LiftWithBottle(Lift):
         """Lift with a `BottleObject` ("bottle") placed beside the cube and a `bottle_pos` observable."""

@@ -1,0 +1,183 @@
+"""The trajectory proposer (langpref.propose): surrogate, search, real rollouts that replay, and what it can see."""
+
+from __future__ import annotations
+
+import gc
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from langpref.feedback.language import LanguageHuman
+from langpref.feedback.space import perfect_latent_space
+from langpref.improve import ImproveConfig, human_weights, run_improvement
+from langpref.propose import (
+    AffineScale,
+    GeneratedStore,
+    Generation,
+    ProposeConfig,
+    Proposer,
+    Surrogate,
+    dataset_units,
+)
+
+HORIZON = 30
+
+
+@pytest.fixture(scope="module")
+def real_data(tmp_path_factory):
+    """A tiny Meta-World dataset made by `langpref generate` (30 rollouts of 30 steps)."""
+    from langpref.dataset.generate import GenerateConfig, generate
+    from langpref.dataset.storage import load_dataset
+
+    out = tmp_path_factory.mktemp("gen") / "mw"
+    generate(GenerateConfig(env="metaworld", out=out, num_trajectories=30, horizon=HORIZON, workers=1))
+    return load_dataset(out)
+
+
+@pytest.fixture(scope="module")
+def generation(real_data):
+    space = perfect_latent_space(real_data)
+    return space, Generation.open(real_data, space, None, ProposeConfig(rollouts=2, search_generations=5,
+                                                                         optimize_rounds=2))
+
+
+def test_surrogate_fits_a_hand_built_map():
+    rng = np.random.default_rng(0)
+    f = lambda U: np.stack([np.sin(3 * U[:, 0]) + U[:, 1], U[:, 2] * U[:, 3], U[:, 0] ** 2 - U[:, 3]], 1)  # noqa
+    U, V = rng.random((300, 4)), rng.random((50, 4))
+    pred = Surrogate(1e-3).fit(U, f(U)).predict(V)
+    r2 = 1 - ((pred - f(V)) ** 2).sum() / ((f(V) - f(V).mean(0)) ** 2).sum()
+    assert r2 > 0.97
+    assert Surrogate(1e-3).fit(U, U @ np.ones((4, 2))).predict(V) == pytest.approx(V @ np.ones((4, 2)), abs=1e-2)
+
+
+def test_the_search_finds_a_toy_optimum_with_a_tiny_budget():
+    rng = np.random.default_rng(1)
+    M = rng.standard_normal((14, 5))
+    U = rng.random((150, 14))
+    target = np.full(14, 0.3)
+    target[:3] = [0.8, 0.1, 0.6]
+    proposer = Proposer("metaworld", HORIZON, U, U @ M, embed=lambda t: None,
+                        cfg=ProposeConfig(rollouts=3, search_generations=60, search_sigma=0.3))
+    goal = target @ M
+    X, scores = proposer.search(lambda P: -np.linalg.norm(P - goal, axis=1), np.full(14, 0.5), seed=3)
+    assert len(X) == 3 and scores[0] == max(scores)
+    assert np.linalg.norm((X[0] - target) @ M) < 0.05 * np.linalg.norm(goal)
+
+
+def test_dataset_units_are_the_controllers_that_made_it(real_data):
+    from langpref.tasks import get_simulator
+
+    units = dataset_units(real_data)
+    sim = get_simulator("metaworld")
+    t = real_data.load(4)
+    assert sim.make_controller(units[4], np.random.default_rng(t.seed)).params == pytest.approx(t.controller_params)
+
+
+def test_a_generated_trajectory_replays_bit_identically(generation, tmp_path):
+    from langpref.dataset.generate import rollout
+    from langpref.dataset.storage import load_dataset
+    from langpref.tasks import get_simulator, get_task
+
+    space, gen = generation
+    psi = space.psi_of(space.table("test").texts[0])
+    proposal = gen.proposer(key=(5,)).propose(lambda P: P @ psi, gen.units[0], (0,))
+    assert proposal.scores[0] == max(proposal.scores) and len(proposal.trajectories) == 2
+    assert proposal.scores == pytest.approx(proposal.phi @ psi)
+    store = GeneratedStore(tmp_path / "gen", "metaworld", HORIZON, {"why": "test"})
+    store.add(proposal.trajectories[0], run=[0], iteration=1)
+    stored = load_dataset(tmp_path / "gen").load(0)
+    env = get_simulator("metaworld").make_env(HORIZON)
+    again = rollout(env, get_task("metaworld"), np.array(stored.controller_params["unit"]), stored.seed, HORIZON, 0)
+    for name in ("observations", "actions", "step_features", "qpos", "qvel"):
+        assert np.array_equal(getattr(again, name), getattr(stored, name)), name
+
+
+def _reachable(*roots):
+    """Every object reachable from `roots` through instances, containers, closures and bound methods (not through
+    modules, classes or a function's globals, which reach everything loaded)."""
+    module_dicts = {id(m.__dict__) for m in list(sys.modules.values()) if m is not None}
+    seen, stack, out = set(), list(roots), []
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen or isinstance(obj, (types.ModuleType, type)) or id(obj) in module_dicts:
+            continue
+        seen.add(id(obj))
+        out.append(obj)
+        if isinstance(obj, types.FunctionType):
+            stack.extend([obj.__closure__ or (), obj.__defaults__ or (), obj.__kwdefaults__ or {}])
+            continue
+        stack.extend(gc.get_referents(obj))
+    return out
+
+
+@pytest.mark.parametrize("strategy", ["paper", "history"])
+def test_the_proposer_cannot_reach_the_true_reward(generation, monkeypatch, strategy):
+    """Spy on every generation step of a real improvement run: nothing reachable from the proposer or the objective
+    it is given is the synthetic human, its weights, or the humans' features."""
+    space, gen = generation
+    w = human_weights(len(space.feature_names), 0, 0)
+    seen = []
+    real = Proposer.propose
+
+    def spy(self, objective, start, step=()):
+        for obj in _reachable(self, objective, start, step):
+            assert not isinstance(obj, LanguageHuman)
+            assert obj is not w and obj is not space.theta
+            if isinstance(obj, np.ndarray) and obj.dtype.kind == "f":
+                assert not (obj.shape == w.shape and np.allclose(obj, w)), "the human's weights are reachable"
+                assert not (obj.shape[-1:] == space.theta.shape[-1:] and obj.ndim == 2 and len(obj) >= len(space.theta)
+                            and np.allclose(obj[:len(space.theta)], space.theta)), "the humans' theta is reachable"
+        seen.append(step)
+        return real(self, objective, start, step)
+
+    monkeypatch.setattr(Proposer, "propose", spy)
+    cfg = ImproveConfig(iterations=2, seeds=1, candidate_split="generated", strategy=strategy)
+    run = run_improvement(space, w, cfg, (0, 0), gen)
+    assert seen == [(0,), (1,)]
+    assert len(run.reward) == 3 and len(run.generated) == 3 and len(run.step_s) == 2
+
+
+def test_generated_improvement_keeps_the_split_scale(generation, tmp_path):
+    space, gen = generation
+    w = human_weights(len(space.feature_names), 0, 1)
+    base = run_improvement(space, w, ImproveConfig(iterations=3, seeds=1), (0, 1))
+    store = GeneratedStore(tmp_path / "shown", "metaworld", HORIZON)
+    run = run_improvement(space, w, ImproveConfig(iterations=3, seeds=1, candidate_split="generated"), (0, 1), gen,
+                          store)
+    assert run.shown[0] == base.shown[0] and run.reward[0] == base.reward[0]  # same start, same normalisation
+    assert run.optimal_raw == base.optimal_raw
+    n = len(space.phi)
+    assert [s >= n for s in run.shown] == run.generated
+    assert len(store) == len({s for s in run.shown if s >= n})
+    theta = np.array([gen.theta(store_traj) for store_traj in _stored(tmp_path / "shown")]) if len(store) else None
+    if theta is not None:  # the stored trajectories are the ones scored
+        raw = theta @ w
+        assert np.isin(np.round(raw, 9), np.round(run.raw_reward, 9)).all()
+
+
+def _stored(root):
+    from langpref.dataset.storage import load_dataset
+
+    ds = load_dataset(root)
+    return [ds.load(i) for i in range(len(ds))]
+
+
+def test_learn_reward_optimize_scores_the_generated_optimum(generation):
+    from langpref.reward import LearnRewardConfig, learn_reward
+
+    space, gen = generation
+    out = learn_reward(space, LearnRewardConfig(queries=4, humans=2, seeds=1), progress=False, generation=gen)
+    assert len(out["optimized_true_reward"]) == 2
+    assert all(np.isfinite(out["optimized_true_reward"]))
+    assert 0 <= out["optimized_beats_best_of_split"] <= 1
+
+
+def test_affine_scale_recovers_the_space_scale(real_data):
+    from langpref.feedback.space import paper_theta
+
+    feats = np.asarray(real_data.features)
+    for theta in (perfect_latent_space(real_data).theta, paper_theta(real_data)):
+        assert AffineScale.fit(feats, theta)(feats) == pytest.approx(theta)

@@ -1,0 +1,117 @@
+"""The learned reward outside langpref: Gymnasium registration, the per-step wrapper, an RL library training on it."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+import pytest
+import torch
+
+HORIZON = 40
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    """A Meta-World checkpoint with a small random trajectory encoder (the reward only reads that part)."""
+    from langpref.model.checkpoint import build_model, save_model
+    from langpref.model.config import ModelConfig
+    from langpref.model.encoders import step_input_dim
+    from langpref.model.latent import DataInfo
+    from langpref.tasks import get_task
+
+    task = get_task("metaworld")
+    torch.manual_seed(0)
+    cfg = ModelConfig(latent_dim=8, traj_hidden=(16, 16), max_length=12)
+    info = DataInfo("metaworld", list(task.features), [asdict(f) for f in task.obs_layout], task.obs_dim,
+                    task.action_dim, HORIZON, 2, [0.1, 0.1, 0.1], [1.0, 1.0, 1.0])
+    dim = step_input_dim(task.obs_dim, task.action_dim, True)
+    rng = np.random.default_rng(0)
+    model = build_model(cfg, info, rng.normal(size=dim) * 0.1, 0.5 + rng.random(dim))
+    return save_model(model, tmp_path_factory.mktemp("ckpt") / "mw", model_cfg=cfg, lang_finetuned=False)
+
+
+def _learner(kind: str, dim: int = 8):
+    from langpref.reward import RewardConfig, RewardLearner
+
+    learner = RewardLearner(dim, RewardConfig(model=kind), seed=1)
+    with torch.no_grad():
+        for p in learner.params:
+            p.copy_(torch.randn(p.shape, generator=torch.Generator().manual_seed(p.numel()), dtype=torch.float64))
+    return learner
+
+
+def test_simulated_tasks_are_gymnasium_envs():
+    import gymnasium as gym
+
+    import langpref.tasks.gym  # noqa: F401
+    from langpref.tasks import get_task
+
+    env = gym.make("langpref/metaworld-button-press", horizon=5)
+    obs, info = env.reset(seed=3)
+    assert obs.shape == (get_task("metaworld").obs_dim,) and obs.dtype == np.float32
+    for t in range(5):
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        assert r == 0.0 and not term and trunc == (t == 4) and info["features"].shape == (3,)
+    again, _ = env.reset(seed=3)
+    first, _ = gym.make("langpref/metaworld").reset(seed=3)
+    assert np.array_equal(again, first)  # the seed fixes the scene, whatever the id
+
+
+@pytest.mark.parametrize("kind", ["linear", "mlp"])
+def test_per_step_rewards_sum_to_T_r_xi_on_a_real_rollout(checkpoint, tmp_path, kind):
+    import gymnasium as gym
+
+    from langpref.model.checkpoint import load_model
+    from langpref.rewards import LearnedReward, save_learned_reward
+    from langpref.tasks.metaworld.controller import expert_unit, make_controller
+
+    learner = _learner(kind)
+    save_learned_reward(learner, tmp_path, env="metaworld", model=checkpoint, name="x", default=True)
+    env = LearnedReward(gym.make("langpref/metaworld-button-press", horizon=HORIZON), tmp_path)
+    obs, _ = env.reset(seed=7)
+    controller = make_controller(expert_unit(), np.random.default_rng(7))
+    inner = env.unwrapped.sim
+    observations, actions, rewards, done = [], [], [], False
+    while not done:
+        action = controller.act(inner, obs, len(actions)).astype(np.float32)
+        observations.append(obs)
+        actions.append(action)
+        obs, r, term, trunc, info = env.step(action)
+        rewards.append(r)
+        done = term or trunc
+    assert len(rewards) == HORIZON
+    phi = load_model(checkpoint).encode_trajectories(np.array(observations)[None], np.array(actions)[None])
+    r_xi = float(learner.predict(phi.double().numpy())[0])
+    assert sum(rewards) == pytest.approx(HORIZON * r_xi, rel=1e-4, abs=1e-4)
+    assert info["r_xi"] == pytest.approx(r_xi, rel=1e-4, abs=1e-5)
+
+
+def test_a_reward_of_another_task_is_refused(checkpoint, tmp_path):
+    import gymnasium as gym
+
+    from langpref.errors import LangprefError
+    from langpref.rewards import LearnedReward, save_learned_reward
+
+    save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=checkpoint, default=True)
+    with pytest.raises(LangprefError, match="langpref/metaworld"):
+        LearnedReward(gym.make("CartPole-v1"), tmp_path)
+    with pytest.raises(LangprefError, match="needs --model"):
+        save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=None)
+
+
+def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp_path):
+    sb3 = pytest.importorskip("stable_baselines3", reason="stable-baselines3 is not installed (pip install "
+                              "'langpref[test]')")
+    import gymnasium as gym
+
+    from langpref.rewards import LearnedReward, save_learned_reward
+
+    save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=checkpoint, default=True)
+    env = LearnedReward(gym.make("langpref/metaworld-button-press", horizon=64), tmp_path)
+    model = sb3.PPO("MlpPolicy", env, n_steps=256, batch_size=64, n_epochs=2, seed=0, device="cpu", verbose=0)
+    model.learn(total_timesteps=2048)
+    assert model.num_timesteps >= 2048
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs, deterministic=True)
+    assert env.action_space.contains(np.asarray(action, dtype=np.float32))
