@@ -30,6 +30,7 @@ demo: install
 	$(BIN)/langpref demo
 
 test: install
+	$(BIN)/ruff check src tests
 	$(BIN)/python -m pytest -q
 
 bench: install

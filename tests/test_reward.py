@@ -214,10 +214,10 @@ def test_cli_learn_reward_json(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def untrained_model(tmp_path_factory):
     """A real (untrained) checkpoint of a metaworld model: encoders exercised end to end."""
-    from langpref.tasks import get_task
     from langpref.model.checkpoint import build_model, save_model
     from langpref.model.config import ModelConfig
     from langpref.model.latent import DataInfo
+    from langpref.tasks import get_task
 
     spec = get_task("metaworld")
     info = DataInfo(env="metaworld", feature_names=list(spec.features),

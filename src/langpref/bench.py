@@ -185,8 +185,8 @@ def gate_table(envs: list[str], today: str) -> str:
     nonsense = json.loads(Path("heldout/not_feedback.json").read_text())["texts"]
     lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref.language.relevance` "
              f"(highest cosine to a bank phrasing in the pretrained MiniLM space; refused below {RELEVANCE_FLOOR}, "
-             f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary) on the 12 x features x 2 held-out "
-             "phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
+             f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary) on the 12 x features x 2 "
+             "held-out phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
              "| env | held-out phrasings let through | lowest held-out score | not-feedback texts refused "
              "| highest score among those let through | check, median (ms) |", "|---|---|---|---|---|---|"]
     for env_name in envs:

@@ -31,7 +31,8 @@ os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
 TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
 SPLITS = ("train", "val", "test")
 BACKENDS = ("local", "ray")
-GROUPS = {"experiment": ("the paper's experiments, one command each", "experiment", "EXPERIMENT"),  # help, dest, metavar
+# Command groups: name -> (help, dest, metavar)
+GROUPS = {"experiment": ("the paper's experiments, one command each", "experiment", "EXPERIMENT"),
           "study": ("the web app for user studies with real people (paper Sec. 5.2)", "study_command", "SUBCOMMAND")}
 
 
@@ -324,8 +325,9 @@ def _generation(args: argparse.Namespace, space):
 
 
 @command("improve", "iterative trajectory improvement with a synthetic language human (Eq. 4)",
-         [*_space_options(), config("langpref.improve:ImproveConfig", lambda: {**_use_opts(), "human.rationality": None}),
-          PROPOSE, path("--figure", default=None, help="also draw the curve into this PNG"), JSON],
+         [*_space_options(),
+          config("langpref.improve:ImproveConfig", lambda: {**_use_opts(), "human.rationality": None}), PROPOSE,
+          path("--figure", default=None, help="also draw the curve into this PNG"), JSON],
          "From a random trajectory of the candidate split, N rounds of synthetic language feedback, each followed by "
          "the argmax over the candidates of Eq. 4's cosine objective (strategy paper) or of the reward learned from "
          "all feedback so far (strategy history). Reports the mean normalised true reward per iteration (0 = worst, "

@@ -51,7 +51,8 @@ def write_task(root: Path, features_from: str | None = "features.py:step_feature
     line = f'features_from = "{features_from}"\n' if features_from else ""
     (root / "task.toml").write_text(
         f'name = "{name}"\ndescription = "A robot reaches for a cup."\nfeatures = ["reach", "effort"]\n{line}'
-        'utterances = "bank.json"\nexamples = ["Reach further."]\n[feature_descriptions]\nreach = "how far it reaches"\n'
+        'utterances = "bank.json"\nexamples = ["Reach further."]\n'
+        '[feature_descriptions]\nreach = "how far it reaches"\n'
     )
     return root / "task.toml"
 
@@ -132,7 +133,8 @@ def test_lerobot_fixture_written_by_lerobot(tmp_path):
     from langpref.dataset.video import check_video
 
     summary = run_import(LEROBOT_FIXTURE, write_task(tmp_path / "task", name="lerobot-tiny"), tmp_path / "ds")
-    assert summary["layout"] == "lerobot" and summary["videos"] and summary["splits"] == {"train": 2, "val": 1, "test": 1}
+    assert (summary["layout"] == "lerobot" and summary["videos"]
+            and summary["splits"] == {"train": 2, "val": 1, "test": 1})
     ds = load_dataset(tmp_path / "ds")
     assert [ds.load(i).horizon for i in range(4)] == [12, 15, 10, 14]
     assert ds.meta.obs_dim == 6 and ds.meta.action_dim == 3

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import FrozenInstanceError
+
 import numpy as np
 import pytest
 
@@ -99,5 +101,5 @@ def test_answers_are_typed_and_validated():
     with pytest.raises(LangprefError):
         LanguageAnswer(LanguageQuery(0), "   ")
     assert LanguageAnswer(LanguageQuery(0), "Move faster.").feature is None  # a real participant's answer
-    with pytest.raises(Exception):
+    with pytest.raises(FrozenInstanceError):
         q.a = 4  # frozen

@@ -52,8 +52,9 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
     the language human says only those; a text the file and the bank file under different meanings is refused."""
     import json
 
-    from langpref.feedback import HumanConfig, LanguageHuman, LanguageQuery, load_space
     from tests.test_improve import write_features_dataset
+
+    from langpref.feedback import HumanConfig, LanguageHuman, LanguageQuery, load_space
 
     data = write_features_dataset(tmp_path / "d")
     mine = {"speed": {"increase": ["Zoom zoom."], "decrease": ["Easy, tiger."]},
@@ -80,8 +81,9 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
 
 def test_the_all_table_is_every_bank_split_in_order(tmp_path):
     """--phrasing-split all (the paper's human): train, val and test phrasings with their meanings and psi."""
-    from langpref.feedback import load_space
     from tests.test_improve import write_features_dataset
+
+    from langpref.feedback import load_space
 
     space = load_space(write_features_dataset(tmp_path / "d"), perfect=True)
     parts = [space.table(s) for s in ("train", "val", "test")]

@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-from importlib import resources
 from pathlib import Path
 
 import pytest
 
 from langpref.errors import LangprefError
-from langpref.tasks import get_task
 from langpref.language.bank import (
     DIRECTIONS,
     SPLITS,
@@ -18,6 +16,7 @@ from langpref.language.bank import (
     load_user_utterances,
     normalise,
 )
+from langpref.tasks import get_task
 
 # The paper's numbers (Sec. 5.1): total phrasings and train/val/test split sizes.
 PAPER_TOTAL = {"metaworld": 660, "robosuite": 629}

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
+from langpref.language.bank import load_bank, load_user_utterances, normalise
 from langpref.tasks import get_task
 
 ENV_NAMES = ("metaworld", "robosuite")
-from langpref.language.bank import load_bank, load_user_utterances, normalise
 
 HELDOUT = Path(__file__).resolve().parents[2] / "heldout" / "utterances.json"
 DIRECTIONS = ("increase", "decrease")

@@ -25,7 +25,8 @@ TASKS = ("metaworld", "robosuite", "drawer-open", "metaworld-reach")
 
 
 DRAWER_TASK_FILE = ROOT / "examples" / "own_robot" / "task.toml"
-DRAWER_OBS_DIM, DRAWER_ACTION_DIM = 39, 4  # Meta-World's Sawyer: 39-number observation ([observation] in task.toml), 4 actions
+# Meta-World's Sawyer: 39-number observation ([observation] in task.toml), 4 actions
+DRAWER_OBS_DIM, DRAWER_ACTION_DIM = 39, 4
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -59,7 +60,8 @@ def _sealed() -> dict:
 
 
 def _phrasings(section: dict) -> list[str]:
-    return [p for f, dirs in section.items() if not f.startswith("_") for d in ("increase", "decrease") for p in dirs[d]]
+    return [p for f, dirs in section.items() if not f.startswith("_")
+            for d in ("increase", "decrease") for p in dirs[d]]
 
 
 @pytest.mark.parametrize("task", TASKS)

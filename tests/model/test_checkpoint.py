@@ -4,8 +4,8 @@ import shutil
 import numpy as np
 import pytest
 import torch
-from conftest import make_dataset
 
+from conftest import make_dataset
 from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
 from langpref.model.checkpoint import load_model, save_model

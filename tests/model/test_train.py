@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 import torch
-from conftest import tiny_config
 
+from conftest import tiny_config
 from langpref.errors import LangprefError
 from langpref.model.encoders import transformer_state_fingerprint
 from langpref.model.train import Trainer, train

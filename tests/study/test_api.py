@@ -77,7 +77,8 @@ def test_whole_session_follows_the_contract(client, h, study_state):
     assert conn.execute("SELECT count(*) FROM feedback WHERE participant_id=?", (pid,)).fetchone()[0] == 3 + 4
     assert conn.execute("SELECT count(*) FROM comparisons WHERE participant_id=?", (pid,)).fetchone()[0] == 4
     assert conn.execute("SELECT count(*) FROM ratings WHERE participant_id=?", (pid,)).fetchone()[0] == 4
-    assert conn.execute("SELECT count(*) FROM answers WHERE answered_at IS NULL OR server_ms IS NULL").fetchone()[0] == 0
+    assert conn.execute("SELECT count(*) FROM answers WHERE answered_at IS NULL "
+                        "OR server_ms IS NULL").fetchone()[0] == 0
     assert conn.execute("SELECT finished_at FROM participants WHERE id=?", (pid,)).fetchone()[0] is not None
     # a finished study takes no more answers
     r = client.post(f"/api/participants/{pid}/answer", json={"rating": 3, "seq": steps[-1]["seq"]}, headers=headers)

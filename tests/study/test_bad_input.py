@@ -75,7 +75,8 @@ def test_bad_bodies_are_one_line_4xx_on_a_connection_that_survives(live, h):
         assert step["kind"] == "language"
         invalid = [NESTED, b'{"a": ' + BIG.encode() + b"}", b"\xc3\x28", b'{"a": NaN}']
         for bad in [*bodies(step["seq"]), *invalid]:
-            targets = (f"{path}/answer", "/api/participants/resume", *(("/api/participants",) if bad in invalid else ()))
+            targets = (f"{path}/answer", "/api/participants/resume",
+                       *(("/api/participants",) if bad in invalid else ()))
             for target in targets:
                 status, hdrs, body = http(sock, "POST", target, bad, auth)
                 assert 400 <= status < 500, (target, bad[:60], status, body[:300])

@@ -166,7 +166,8 @@ def test_parse_answer_accepts_and_trims():
     for bad in (2, -1, True, "1", 0.0):
         with pytest.raises(AnswerError):
             parse_answer({"choice": bad, "client_ms": 1, "seq": 4}, comp)
-    assert parse_answer({"choice": 1, "client_ms": 1, "seq": 4}, comp).value == ComparisonAnswer(ComparisonQuery(0, 1), 1)
+    assert (parse_answer({"choice": 1, "client_ms": 1, "seq": 4}, comp).value
+            == ComparisonAnswer(ComparisonQuery(0, 1), 1))
     with pytest.raises(WrongStep):
         parse_answer({"rating": 3}, Step(9, "done", "done"))
 

@@ -1,7 +1,8 @@
 """What is stored and exported is clean: spreadsheet formulas are neutralised in every CSV, control characters are
 refused and bidirectional overrides removed, only the contract's fields are stored, `seq`, when sent, must be the
-current step's (an old answer sent again with its seq is not taken), time per query uses the server's timing where the page's is inconsistent (and says so), and
-excluded participants (dashboard, `--exclude`) are left out of the analyses."""
+current step's (an old answer sent again with its seq is not taken), time per query uses the server's timing where the
+page's is inconsistent (and says so), and excluded participants (dashboard, `--exclude`) are left out of the
+analyses."""
 
 from __future__ import annotations
 

@@ -85,8 +85,8 @@ def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine,
         upstream = int(url.rsplit(":", 1)[1])
         https, http = free_port(), free_port()
         conf = local_config(tmp_path, upstream, https, http)
-        check = subprocess.run([nginx_bin, "-t", "-p", str(tmp_path), "-c", str(conf)], check=False, capture_output=True,
-                               text=True)
+        check = subprocess.run([nginx_bin, "-t", "-p", str(tmp_path), "-c", str(conf)], check=False,
+                               capture_output=True, text=True)
         assert check.returncode == 0, check.stderr
         proc = subprocess.Popen([nginx_bin, "-p", str(tmp_path), "-c", str(conf)], stderr=subprocess.PIPE, text=True)
         try:

@@ -133,7 +133,8 @@ def test_study_shows_the_recorded_videos(recorded_state, recorded_data, tmp_path
                 # the recording's own video (its episode's colour), transcoded to webm
                 assert nearest_episode(mean_colour(served)) == ds.load(seen[-1][1]).source
             if step["kind"] == "language":  # feedback phrased as in the task's bank
-                body = {"feedback": BANK["height"]["decrease"][language_answers % 4], "client_ms": 1.0, "seq": step["seq"]}
+                body = {"feedback": BANK["height"]["decrease"][language_answers % 4], "client_ms": 1.0,
+                        "seq": step["seq"]}
                 language_answers += 1
             else:
                 body = h.answer_for(step)

@@ -1,5 +1,4 @@
 import imageio.v2 as imageio
-import numpy as np
 import pytest
 
 from langpref.dataset.generate import GenerateConfig, generate

@@ -136,7 +136,7 @@ def test_bottle_is_in_the_scene_and_observed(env):
     assert "bottle_main" in bodies and any("bottle" in g for g in geoms)
     assert "cube_main" in bodies
     obs = env.reset(3)
-    for t in range(5):
+    for _ in range(5):
         obs = env.step(np.array([0.3, 0.0, 0.0, -1.0]))
     bid, cid = _body_id(model, "bottle_main"), _body_id(model, "cube_main")
     np.testing.assert_allclose(obs[FIELDS["bottle_pos"]], data.xpos[bid], atol=1e-6)

@@ -59,7 +59,7 @@ class GenerateConfig:
     ray_address: str | None = None
     """With --backend ray: a running cluster to join (e.g. auto or HOST:6379); default a local instance."""
 
-    def resolved(self) -> "GenerateConfig":
+    def resolved(self) -> GenerateConfig:
         sim = get_simulator(self.env)
         cfg = GenerateConfig(
             env=self.env,
@@ -173,7 +173,8 @@ def _prepare_out(cfg: GenerateConfig) -> None:
         shutil.rmtree(out)
     if out.exists() and any(out.iterdir()):
         if not stamp.exists() or json.loads(stamp.read_text()) != cfg.identity():
-            raise LangprefError(f"{out} exists and is not an interrupted run of the same generation; choose another --out")
+            raise LangprefError(f"{out} exists and is not an interrupted run of the same generation; "
+                                "choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     stamp.write_text(json.dumps(cfg.identity()) + "\n")
 

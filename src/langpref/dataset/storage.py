@@ -120,7 +120,8 @@ def write_meta(root: Path, meta: DatasetMeta, features: np.ndarray) -> None:
 def _read_meta(root: Path) -> DatasetMeta:
     path = root / "meta.json"
     if not root.exists():
-        raise LangprefError(f"dataset {root} does not exist: create one with `langpref generate --env ENV --out {root}`")
+        raise LangprefError(f"dataset {root} does not exist: "
+                            f"create one with `langpref generate --env ENV --out {root}`")
     if not path.is_file():
         raise LangprefError(f"{root} is not a langpref dataset (no meta.json); create one with `langpref generate`")
     try:

@@ -88,7 +88,8 @@ def alignment_table(summaries: list[dict[str, Any]]) -> str:
     sep = "|---|" + "---|---|" * len(summaries)
     lines = [head, sep]
     for key, label in (("cofinetune", "Co-finetune"), ("frozen", "Frozen language model")):
-        cells = " | ".join(f"{s[key]['accuracy']:.3f} | " + (f"{s['paper'][key]:.3f}" if s['paper'] else "-") for s in summaries)
+        cells = " | ".join(f"{s[key]['accuracy']:.3f} | " + (f"{s['paper'][key]:.3f}" if s['paper'] else "-")
+                           for s in summaries)
         lines.append(f"| {label} | {cells} |")
     per = []
     for s in summaries:

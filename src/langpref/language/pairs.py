@@ -154,7 +154,8 @@ def phrasings_from_mapping(
                 if index[text] not in ids:
                     ids.append(index[text])
             if require_all and not ids:
-                raise LangprefError(f"{source}: no phrasing for {f}/{d}; every feature and direction needs at least one")
+                raise LangprefError(f"{source}: no phrasing for {f}/{d}; "
+                                    "every feature and direction needs at least one")
             group_ids.append(np.array(ids, dtype=np.int64))
     return Phrasings(tuple(texts), feature_names, tuple(group_ids))
 

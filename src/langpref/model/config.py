@@ -1,4 +1,6 @@
-"""Configuration of the latent-space model and its training, as dataclasses saved into every checkpoint's config.json."""
+"""Configuration of the latent-space model and its training, as dataclasses saved into every checkpoint's
+config.json.
+"""
 
 from __future__ import annotations
 

@@ -3,15 +3,16 @@
 Stage 1 freezes the language model: its pooled sentence embeddings are computed once, and only the trajectory
 encoder (Adam, lr 1e-3, as the authors) and the language head (lr 1e-4: on frozen embeddings a faster head soon fits
 the train phrasings' quirks) learn. Stage 2 co-finetunes the transformer too (lr 1e-4, the token embedding table
-kept frozen); `freeze_language` stops after stage 1. Every epoch ends with the validation accuracy (val trajectories x the
-bank's val phrasings); each stage keeps its best epoch and stops early after `patience` epochs without a better one.
+kept frozen); `freeze_language` stops after stage 1. Every epoch ends with the validation accuracy (val trajectories
+x the bank's val phrasings); each stage keeps its best epoch and stops early after `patience` epochs without a better
+one.
 
 Cost on a CPU. A step computes phi once per distinct trajectory of its batch, over `time_samples` stratified random
 time steps of each (50 of 500: the mean of the per-step embeddings is estimated without bias at a tenth of the cost;
-validation and every later use take all steps), and, in stage 2, psi once per distinct utterance. The transformer dominates, so stage 2
-draws a few phrasings per (feature, direction) group for each step (`stage2_phrasings_per_step`) and lets each pair
-pick among its group's; a pair's phrasing stays uniform over its group. Pairs themselves cost almost nothing, which
-is why stage 2 takes large batches of them.
+validation and every later use take all steps), and, in stage 2, psi once per distinct utterance. The transformer
+dominates, so stage 2 draws a few phrasings per (feature, direction) group for each step (`stage2_phrasings_per_step`)
+and lets each pair pick among its group's; a pair's phrasing stays uniform over its group. Pairs themselves cost
+almost nothing, which is why stage 2 takes large batches of them.
 """
 
 from __future__ import annotations

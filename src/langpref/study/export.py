@@ -167,7 +167,8 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     out["study2_aspects"] = {"respondents": n_pref, **{
         m: {a: sum(1 for x in pref.values() if a in (x.get(f"aspects_{m}") or [])) for a in (*ASPECTS, NONE_OF_THEM)}
         for m in METHODS}}
-    out["study2_preference"] = {METHOD_LABELS[m]: sum(1 for x in pref.values() if x.get("preferred") == METHOD_LABELS[m])
+    out["study2_preference"] = {METHOD_LABELS[m]: sum(1 for x in pref.values()
+                                                      if x.get("preferred") == METHOD_LABELS[m])
                                 for m in METHODS}
 
     # ---- Study 2: time per query ----
@@ -356,7 +357,8 @@ def report_html(summary: dict[str, Any], figs: dict[str, str], texts: list[tuple
     asp = s["study2_aspects"]
     n = asp["respondents"]
     aspect_rows = "".join(
-        f"<tr><td>{html.escape(label)}</td><td>{asp['language'][a]} / {n}</td><td>{asp['comparison'][a]} / {n}</td></tr>"
+        f"<tr><td>{html.escape(label)}</td><td>{asp['language'][a]} / {n}</td>"
+        f"<td>{asp['comparison'][a]} / {n}</td></tr>"
         for a, label in (("Time efficiency", "Time efficient"), ("Convenience", "Convenient"),
                          ("Adaptability", "Adaptable")))
     r = s["study2_ratings"]

@@ -49,7 +49,8 @@ IMPROVE = [
        labels=("Completely unsatisfied", "Completely satisfied")),
     _q("iterations_to_adapt", 2, "How many iterations did it take for the robot to adapt to your feedback?", "choice",
        options=[str(i) for i in range(1, 11)] + ["It did not adapt"]),
-    _q("adapt_speed", 3, "How fast does the robot adapt to your feedback?", "likert", labels=("Very slow", "Very fast")),
+    _q("adapt_speed", 3, "How fast does the robot adapt to your feedback?", "likert",
+       labels=("Very slow", "Very fast")),
     _q("experience", 4, "How did the robot's learning capabilities affect your interaction experience?", "likert",
        labels=("Negatively", "Positively")),
     _q("effective", 5, "Overall, do you think the approach is effective?", "choice", options=["Yes", "No"]),
@@ -58,7 +59,8 @@ IMPROVE = [
 
 # The per-method Likert items of the preference-learning survey: (id stem, item, text, labels).
 PREF_LIKERT = [
-    ("adapt_speed", 3, "How long did it take for the robot to adapt to your feedback?", ("Very slowly", "Very quickly")),
+    ("adapt_speed", 3, "How long did it take for the robot to adapt to your feedback?",
+     ("Very slowly", "Very quickly")),
     ("experience", 4, "How did the robot's learning capabilities affect your interaction experience?",
      ("Negatively", "Positively")),
     ("noticed_learning", 5, "Did you notice the robot learning or adapting to your behavior?",

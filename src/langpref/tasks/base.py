@@ -35,8 +35,8 @@ class Simulator:
     processes, so they must be importable functions, not lambdas.
     """
 
-    make_env: Callable[[int], "SimEnv"]
-    make_controller: Callable[[np.ndarray, np.random.Generator], "Controller"]
+    make_env: Callable[[int], SimEnv]
+    make_controller: Callable[[np.ndarray, np.random.Generator], Controller]
     controller_dim: int
     default_horizon: int = 500
     default_num_trajectories: int = 324
@@ -116,7 +116,9 @@ class SimEnv(Protocol):
         ...
 
     def camera(self) -> dict:
-        """Default camera for videos: either {"name": cam} or {"lookat": [x,y,z], "distance", "azimuth", "elevation"}."""
+        """Default camera for videos: either {"name": cam} or
+        {"lookat": [x,y,z], "distance", "azimuth", "elevation"}.
+        """
         ...
 
     def close(self) -> None: ...

@@ -24,13 +24,13 @@ import importlib.util
 import json
 import re
 import sys
+import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomllib
 
 from langpref.errors import LangprefError
 from langpref.tasks.base import ObsField, Task
