@@ -55,12 +55,15 @@ def prepare(work: Path, num_trajectories: int) -> tuple[Path, Path]:
     return data, model
 
 
-def start_server(model: Path, data: Path, db: Path, split: str) -> tuple[subprocess.Popen, str]:
+def start_server(model: Path, data: Path, db: Path, split: str, env: dict[str, str] | None = None,
+                 quiet: bool = False) -> tuple[subprocess.Popen, str]:
+    """`langpref study serve` in a subprocess on a free port, once it answers /healthz: (process, base URL)."""
     import httpx
 
     cmd = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data),
            "--db", str(db), "--port", "0", "--split", split, "--no-prerender"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL if quiet else None, text=True,
+                            env=None if env is None else {**os.environ, **env})
     url = None
     for line in proc.stdout:
         m = re.search(r"participants: (http://\S+?)/?$", line.strip())
@@ -69,7 +72,7 @@ def start_server(model: Path, data: Path, db: Path, split: str) -> tuple[subproc
             break
     if url is None:
         raise RuntimeError(f"the study server exited ({proc.wait()})")
-    for _ in range(300):
+    for _ in range(600):
         try:
             if httpx.get(f"{url}/healthz", timeout=2).status_code == 200:
                 return proc, url

@@ -16,14 +16,14 @@ import argparse
 import asyncio
 import json
 import os
-import re
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+from langpref.study.bench import start_server
 
 
 def _descendants(pid: int) -> set[int]:
@@ -55,28 +55,8 @@ def _alive(pids: set[int]) -> set[int]:
 
 
 def _start(model: Path, data: Path, db: Path, split: str) -> tuple[subprocess.Popen, str]:
-    import httpx
-
-    cmd = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data), "--db",
-           str(db), "--port", "0", "--split", split, "--no-prerender"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                            env={**os.environ, "LANGPREF_STUDY_ADMIN_TOKEN": "faultbench-admin-token-0123"})
-    url = None
-    for line in proc.stdout:
-        m = re.search(r"participants: (http://\S+?)/?$", line.strip())
-        if m:
-            url = m.group(1)
-            break
-    if url is None:
-        raise RuntimeError(f"the study server exited ({proc.wait()})")
-    for _ in range(600):
-        try:
-            if httpx.get(f"{url}/healthz", timeout=2).status_code == 200:
-                return proc, url
-        except httpx.HTTPError:
-            time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError("the study server did not answer")
+    return start_server(model, data, db, split, env={"LANGPREF_STUDY_ADMIN_TOKEN": "faultbench-admin-token-0123"},
+                        quiet=True)
 
 
 def _video_urls(url: str, n: int) -> list[str]:
