@@ -24,11 +24,11 @@ from tqdm import tqdm
 
 from langpref.backends import run_jobs
 from langpref.dataset.storage import (
-    SPLITS,
     DatasetMeta,
     Trajectory,
     load_trajectory,
     save_trajectory,
+    shuffle_into_splits,
     trajectory_path,
     write_meta,
 )
@@ -95,13 +95,7 @@ def split_sizes(env: str, n: int) -> dict[str, int]:
 
 
 def assign_splits(env: str, n: int, seed: int) -> dict[str, list[int]]:
-    order = np.random.default_rng([seed, 1]).permutation(n)
-    sizes = split_sizes(env, n)
-    out, start = {}, 0
-    for name in SPLITS:
-        out[name] = sorted(int(i) for i in order[start : start + sizes[name]])
-        start += sizes[name]
-    return out
+    return shuffle_into_splits(n, split_sizes(env, n), seed)
 
 
 def controller_units(env: str, n: int, seed: int) -> np.ndarray:

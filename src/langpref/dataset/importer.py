@@ -22,7 +22,14 @@ import numpy as np
 from tqdm import tqdm
 
 from langpref.dataset.recording import RecordedEpisode, plain_episode_files, read_plain_episode
-from langpref.dataset.storage import SPLITS, DatasetMeta, Trajectory, save_trajectory, video_path, write_meta
+from langpref.dataset.storage import (
+    DatasetMeta,
+    Trajectory,
+    save_trajectory,
+    shuffle_into_splits,
+    video_path,
+    write_meta,
+)
 from langpref.errors import LangprefError
 from langpref.tasks.taskfile import TaskFile, save_task
 
@@ -137,7 +144,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         counts = split_counts(n, cfg.splits)
         fn = task.step_features()
         obs_dim = action_dim = None
-        lengths, features, success, videos = [], np.zeros((n, len(task.features))), [], []
+        lengths, features, success, videos, wheres = [], np.zeros((n, len(task.features))), [], [], []
         for i, load in enumerate(tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress,
                                       dynamic_ncols=True)):
             where, ep = load()
@@ -156,10 +163,11 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
             features[i] = traj.features
             success.append(ep.success)
             videos.append(ep.video)
+            wheres.append(where)
         with_video = [v is not None for v in videos]
         if any(with_video) and not all(with_video):
             missing = with_video.index(False)
-            raise LangprefError(f"episode {loaders[missing]()[0]} has no video while others have one; give every "
+            raise LangprefError(f"episode {wheres[missing]} has no video while others have one; give every "
                                 "episode its video (NAME.mp4 or NAME.webm) or none")
         if all(with_video):
             from langpref.dataset.video import write_clip
@@ -167,11 +175,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
             for i, clip in enumerate(tqdm(videos, desc="videos", unit="video", disable=not progress,
                                           dynamic_ncols=True)):
                 write_clip(clip, video_path(tmp, i))
-        order = np.random.default_rng([cfg.seed, 1]).permutation(n)
-        splits, at = {}, 0
-        for name in SPLITS:
-            splits[name] = sorted(int(i) for i in order[at:at + counts[name]])
-            at += counts[name]
+        splits = shuffle_into_splits(n, counts, cfg.seed)
         task_obj = task.task(obs_dim, action_dim, tmp / "utterances.json")
         save_task(task_obj, tmp, bank)
         horizon = max(lengths)

@@ -6,7 +6,6 @@ layout that is not in qpos, such as Meta-World's button box or robosuite's objec
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -27,18 +26,13 @@ def replay_video(ds: Dataset, index: int, out: Path, env: Any, width: int = 320,
 
 
 def recorded_video(ds: Dataset, index: int, out: Path) -> Path:
-    """The recorded video of trajectory `index`, copied to `out` (.mp4) or transcoded once (.webm)."""
+    """The recorded video of trajectory `index` at `out`: copied when the format is the same (imported videos are
+    browser-playable H.264), else transcoded."""
     from langpref.dataset.video import VideoClip, write_clip
 
     src = ds.video_path(index)
     if src is None or not src.is_file():
         raise LangprefError(f"trajectory {index} of {ds.root} has no recorded video ({src} is missing)")
-    if out.suffix == src.suffix:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(f".{out.stem}.partial{out.suffix}")
-        shutil.copyfile(src, tmp)
-        tmp.replace(out)
-        return out
     return write_clip(VideoClip(src), out)
 
 

@@ -87,6 +87,16 @@ class DatasetMeta:
         return self.horizon if self.lengths is None else int(self.lengths[index])
 
 
+def shuffle_into_splits(n: int, sizes: dict[str, int], seed: int) -> dict[str, list[int]]:
+    """Trajectory indices 0..n-1 dealt into the splits at random (seeded), `sizes[split]` each, sorted per split."""
+    order = np.random.default_rng([seed, 1]).permutation(n)
+    out, start = {}, 0
+    for name in SPLITS:
+        out[name] = sorted(int(i) for i in order[start:start + sizes[name]])
+        start += sizes[name]
+    return out
+
+
 def trajectory_path(root: Path, index: int) -> Path:
     return Path(root) / "trajectories" / f"{index:06d}.npz"
 

@@ -26,7 +26,8 @@ from typing import Any
 from langpref.study.bench import start_server
 
 
-def _descendants(pid: int) -> set[int]:
+def descendants(pid: int) -> set[int]:
+    """Every live process below `pid` (from /proc)."""
     children: dict[int, list[int]] = {}
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
@@ -43,7 +44,8 @@ def _descendants(pid: int) -> set[int]:
     return out
 
 
-def _alive(pids: set[int]) -> set[int]:
+def alive(pids: set[int]) -> set[int]:
+    """Those of `pids` that still run (not gone, not zombies)."""
     out = set()
     for p in pids:
         try:
@@ -117,7 +119,7 @@ def _rendering(url: str, proc: subprocess.Popen) -> set[int]:
     video = _video_urls(url, 1)[0]
     httpx.get(url + video, timeout=30)
     deadline = time.time() + 60
-    while not (kids := _descendants(proc.pid)):
+    while not (kids := descendants(proc.pid)):
         if time.time() > deadline:
             raise RuntimeError("no render worker started")
         time.sleep(0.05)
@@ -126,16 +128,16 @@ def _rendering(url: str, proc: subprocess.Popen) -> set[int]:
 
 def stop(model: Path, data: Path, work: Path, split: str, sig: int) -> dict[str, Any]:
     proc, url = _start(model, data, work / f"stop{sig}.sqlite", split)
-    kids = _rendering(url, proc) | _descendants(proc.pid)
+    kids = _rendering(url, proc) | descendants(proc.pid)
     t = time.time()
     proc.send_signal(sig)
     proc.wait(timeout=120)
     took = time.time() - t
     deadline = time.time() + 5
-    while _alive(kids) and time.time() < deadline:
+    while alive(kids) and time.time() < deadline:
         time.sleep(0.05)
     return {"signal": signal.Signals(sig).name, "exit_s": round(took, 2), "returncode": proc.returncode,
-            "processes_of_it": len(kids), "left_after_5_s": len(_alive(kids))}
+            "processes_of_it": len(kids), "left_after_5_s": len(alive(kids))}
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:

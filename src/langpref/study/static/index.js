@@ -1,16 +1,6 @@
 "use strict";
 // The guidelines page: consent and start, or continue a session this browser already has (the start button is then
 // hidden: one browser, one participant, unless the person says they are someone else), or resume with a code.
-const KEY = "langpref-participant";
-
-function keepPrevious() {
-  const old = localStorage.getItem(KEY);
-  if (!old) return;
-  let list = [];
-  try { list = JSON.parse(localStorage.getItem(KEY + "-previous") || "[]"); } catch (e) { list = []; }
-  list.push(old);
-  localStorage.setItem(KEY + "-previous", JSON.stringify(list.slice(-10)));
-}
 
 async function postJson(path, body) {
   const res = await fetch(path, {method: "POST", headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)});

@@ -3,7 +3,6 @@
 // Everything shown is built with DOM calls and textContent (no HTML from data). The time per query runs from the
 // moment the step's videos play (or the step appears, when it has none) to the answer.
 
-const KEY = "langpref-participant";
 const MAX_FEEDBACK = 500;
 const PHASE_TITLES = {
   pre_survey: "Before we begin",
@@ -466,16 +465,6 @@ function resumeForm() {
     load();
   });
   return form;
-}
-
-// A session replaced in this browser is kept under another key, never thrown away.
-function keepPrevious() {
-  const old = localStorage.getItem(KEY);
-  if (!old) return;
-  let list = [];
-  try { list = JSON.parse(localStorage.getItem(KEY + "-previous") || "[]"); } catch (e) { list = []; }
-  list.push(old);
-  localStorage.setItem(KEY + "-previous", JSON.stringify(list.slice(-10)));
 }
 
 document.addEventListener("DOMContentLoaded", () => {
