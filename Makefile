@@ -8,7 +8,7 @@ export PYOPENGL_PLATFORM ?= egl
 export TOKENIZERS_PARALLELISM ?= false
 export HF_HUB_OFFLINE ?= 1
 
-.PHONY: install demo test bench reproduce wheel-check lint docs clean
+.PHONY: install demo test bench reproduce wheel-check lint format docs clean
 
 install: $(STAMP)
 
@@ -30,7 +30,8 @@ demo: install
 	$(BIN)/langpref demo
 
 test: install
-	$(BIN)/ruff check src tests
+	$(BIN)/ruff check src tests examples
+	$(BIN)/ruff format --check src tests examples
 	$(BIN)/python -m pytest -q
 
 bench: install
@@ -63,10 +64,14 @@ reproduce: install
 wheel-check: install
 	PY=$(PY) .ci/wheel_check.sh
 
-# ruff over src and tests (configured in pyproject.toml); not yet part of `make test`
+# ruff over src, tests and examples (configured in pyproject.toml), as `make test` runs it; `make format` fixes it
 lint: install
-	$(BIN)/ruff check src tests
-	$(BIN)/ruff format --check src tests
+	$(BIN)/ruff check src tests examples
+	$(BIN)/ruff format --check src tests examples
+
+format: install
+	$(BIN)/ruff format src tests examples
+	$(BIN)/ruff check --fix src tests examples
 
 # the documentation site (mkdocs.yml, docs/), API pages generated from the docstrings; a warning fails the build
 docs: install

@@ -36,12 +36,28 @@ def write_synthetic_dataset(root: Path, n: int = 12, horizon: int = 20, env: str
     for i in range(n):
         obs = rng.normal(size=(horizon, spec.obs_dim)).astype(np.float32) * 0.1 + rng.normal(size=spec.obs_dim)
         step_features = obs[:, :nf].copy()
-        traj = Trajectory(i, obs, rng.normal(size=(horizon, spec.action_dim)).astype(np.float32), step_features,
-                          np.zeros((horizon, 3)), np.zeros((horizon, 3)), bool(i % 2), i, {"i": i})
+        traj = Trajectory(
+            i,
+            obs,
+            rng.normal(size=(horizon, spec.action_dim)).astype(np.float32),
+            step_features,
+            np.zeros((horizon, 3)),
+            np.zeros((horizon, 3)),
+            bool(i % 2),
+            i,
+            {"i": i},
+        )
         save_trajectory(root, traj)
         feats[i] = traj.features
-    meta = DatasetMeta(env, horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim, list(spec.features),
-                       assign_splits(env, n, seed), n)
+    meta = DatasetMeta(
+        env,
+        horizon,
+        [asdict(f) for f in spec.obs_layout],
+        spec.action_dim,
+        list(spec.features),
+        assign_splits(env, n, seed),
+        n,
+    )
     write_meta(root, meta, feats)
     return root
 
@@ -59,12 +75,18 @@ def make_synthetic_dataset():
 
 
 TRAIN_TEXTS = {
-    "height": {"increase": ["Move higher.", "Go up more.", "Raise your arm."],
-               "decrease": ["Move lower.", "Go down more.", "Lower your arm."]},
-    "speed": {"increase": ["Move faster.", "Speed up.", "Go quicker."],
-              "decrease": ["Move slower.", "Slow down.", "Go more slowly."]},
-    "distance_to_button": {"increase": ["Stay away from the button.", "Move farther from the button."],
-                           "decrease": ["Get closer to the button.", "Move nearer to the button."]},
+    "height": {
+        "increase": ["Move higher.", "Go up more.", "Raise your arm."],
+        "decrease": ["Move lower.", "Go down more.", "Lower your arm."],
+    },
+    "speed": {
+        "increase": ["Move faster.", "Speed up.", "Go quicker."],
+        "decrease": ["Move slower.", "Slow down.", "Go more slowly."],
+    },
+    "distance_to_button": {
+        "increase": ["Stay away from the button.", "Move farther from the button."],
+        "decrease": ["Get closer to the button.", "Move nearer to the button."],
+    },
 }
 VAL_TEXTS = {
     "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},

@@ -67,8 +67,9 @@ def test_generation_on_two_nodes_equals_local(cluster, tmp_path):
 
 
 def test_a_killed_worker_is_retried_and_the_result_unchanged(cluster, tmp_path):
-    results = sorted(run_jobs(_die_once, list(range(5)), setup=_offset, setup_args=(str(tmp_path),),
-                              backend="ray", workers=2))
+    results = sorted(
+        run_jobs(_die_once, list(range(5)), setup=_offset, setup_args=(str(tmp_path),), backend="ray", workers=2)
+    )
     assert (tmp_path / "attempt-2").exists()  # the first attempt really died
     assert results == [(j, j * 10) for j in range(5)]
 

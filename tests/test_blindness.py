@@ -54,12 +54,20 @@ def snapshots(monkeypatch):
     return taken
 
 
-@pytest.mark.parametrize("feedback, selection", [("language", "random"), ("language", "infogain"),
-                                                 ("comparison", "random"), ("comparison", "infogain")])
+@pytest.mark.parametrize(
+    "feedback, selection",
+    [("language", "random"), ("language", "infogain"), ("comparison", "random"), ("comparison", "infogain")],
+)
 def test_reward_learning_is_blind_to_the_truth(feedback, selection, snapshots, monkeypatch):
     space = toy_latent_space("metaworld", n=30, dim=8, seed=1)
-    cfg = LearnRewardConfig(feedback=feedback, queries=6, query_selection=selection, candidates=8,
-                            posterior_samples=16, human=HumanConfig(phrasing_split="test"))
+    cfg = LearnRewardConfig(
+        feedback=feedback,
+        queries=6,
+        query_selection=selection,
+        candidates=8,
+        posterior_samples=16,
+        human=HumanConfig(phrasing_split="test"),
+    )
     w = human_weights(len(space.feature_names), 0, 0)
     record = []
     run_reward_learning(space, w, cfg, (0, 0, 0), record=record)
@@ -94,6 +102,7 @@ def test_improvement_is_blind_to_the_truth(strategy, monkeypatch):
         def keep(query):
             heard.append(answer(query))
             return heard[-1]
+
         human.answer = keep
         return human
 

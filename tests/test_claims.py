@@ -54,8 +54,9 @@ def test_experiment_reward_prints_what_the_docs_quote(tmp_path, make_synthetic_d
         for h, curves in m["per_human"].items():  # each human's curve is the mean of its own seeds' runs
             own = np.array([runs[f"{name}/{h}/{s}"]["cross_entropy"] for s in range(2)])
             np.testing.assert_allclose(curves["cross_entropy"], own.mean(axis=0))
-        np.testing.assert_allclose(np.mean([c["true_reward_of_best"] for c in m["per_human"].values()], axis=0),
-                                   m["true_reward_of_best"])  # equal seeds per human: the mean of the humans
+        np.testing.assert_allclose(
+            np.mean([c["true_reward_of_best"] for c in m["per_human"].values()], axis=0), m["true_reward_of_best"]
+        )  # equal seeds per human: the mean of the humans
     md = (tmp_path / "r" / "reward.md").read_text()
     assert f"language lower than comparisons at {lower} of 5 query counts" in md
     assert "mean CE 1..Q" in md and "queries to 0.95 (stays)" in md and "| language | " in md
@@ -93,32 +94,89 @@ def test_the_default_scale_and_direction_change_no_number(tmp_path, make_synthet
     explicit = replace(cfg, human=HumanConfig(feature_scale="standardised", direction="reward"))
     for fb in ("language", "comparison"):
         a = learn_reward(space, replace(cfg, feedback=fb), progress=False)
-        b = learn_reward(load_space(data, perfect=True, feature_scale="standardised"),
-                         replace(explicit, feedback=fb), progress=False)
+        b = learn_reward(
+            load_space(data, perfect=True, feature_scale="standardised"), replace(explicit, feedback=fb), progress=False
+        )
         assert a["cross_entropy"] == b["cross_entropy"] and a["true_reward_of_best"] == b["true_reward_of_best"]
-    paper = learn_reward(load_space(data, perfect=True, feature_scale="paper"),
-                         replace(cfg, feedback="comparison", human=HumanConfig(feature_scale="paper")), progress=False)
-    assert paper["cross_entropy"] != learn_reward(space, replace(cfg, feedback="comparison"),
-                                                  progress=False)["cross_entropy"]
+    paper = learn_reward(
+        load_space(data, perfect=True, feature_scale="paper"),
+        replace(cfg, feedback="comparison", human=HumanConfig(feature_scale="paper")),
+        progress=False,
+    )
+    assert (
+        paper["cross_entropy"]
+        != learn_reward(space, replace(cfg, feedback="comparison"), progress=False)["cross_entropy"]
+    )
 
 
-def test_cli_takes_the_scale_and_direction_and_names_the_output(tmp_path, make_synthetic_dataset, capsys,
-                                                                monkeypatch):
+def test_cli_takes_the_scale_and_direction_and_names_the_output(tmp_path, make_synthetic_dataset, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     data = make_synthetic_dataset(tmp_path / "d", n=30)
-    assert main(["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", "comparison", "--queries", "2",
-                 "--humans", "1", "--seeds", "1", "--feature-scale", "paper", "--json"]) == 0
+    assert (
+        main(
+            [
+                "learn-reward",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--feedback",
+                "comparison",
+                "--queries",
+                "2",
+                "--humans",
+                "1",
+                "--seeds",
+                "1",
+                "--feature-scale",
+                "paper",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["config"]["human"]["feature_scale"] == "paper" and "paper scale" in out["space"]
-    assert main(["experiment", "reward", "--env", "metaworld", "--data", str(data), "--perfect-latent", "--queries",
-                 "2", "--humans", "1", "--seeds", "1", "--feature-scale", "paper", "--direction", "toward-best",
-                 "--json"]) == 0
+    assert (
+        main(
+            [
+                "experiment",
+                "reward",
+                "--env",
+                "metaworld",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--queries",
+                "2",
+                "--humans",
+                "1",
+                "--seeds",
+                "1",
+                "--feature-scale",
+                "paper",
+                "--direction",
+                "toward-best",
+                "--json",
+            ]
+        )
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
     assert summary["command"].endswith("--feature-scale paper --direction toward-best")
     assert (tmp_path / "results" / "reward" / "metaworld-perfect-paper-scale-toward-best" / "reward.json").is_file()
     with pytest.raises(SystemExit) as exc:
-        main(["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", "language", "--feature-scale",
-              "raw"])
+        main(
+            [
+                "learn-reward",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--feedback",
+                "language",
+                "--feature-scale",
+                "raw",
+            ]
+        )
     assert exc.value.code == 2
 
 
@@ -134,6 +192,7 @@ def test_both_humans_are_near_noiseless_on_the_paper_scale(tmp_path, make_synthe
         human = ComparisonHuman(w, space.theta)
         p = np.array([human.probability(a, b) for a in range(10) for b in range(10) if a != b])
         return float(np.mean(np.abs(p - 0.5)))
+
     assert certainty(paper) > certainty(std)
 
 
@@ -144,18 +203,24 @@ def test_direction_rules():
     space = toy_latent_space("metaworld", n=20, seed=0)
     w = np.array([1.0, -1.0, 0.5])
     cands = space.split("test")
-    rule = {r: LanguageHuman(w, space.theta, space.table("test"), cands, space.feature_names, seed=0, direction=r)
-            for r in ("reward", "toward-best")}
+    rule = {
+        r: LanguageHuman(w, space.theta, space.table("test"), cands, space.feature_names, seed=0, direction=r)
+        for r in ("reward", "toward-best")
+    }
     best = rule["reward"].best
     for shown in range(len(space.theta)):
         for f in range(3):
             assert rule["reward"].direction(f, shown) == (0 if w[f] >= 0 else 1)
             gap = space.theta[best, f] - space.theta[shown, f]
-            assert rule["toward-best"].direction(f, shown) == ((0 if gap > 0 else 1) if gap else rule["reward"]
-                                                               .direction(f))
+            assert rule["toward-best"].direction(f, shown) == (
+                (0 if gap > 0 else 1) if gap else rule["reward"].direction(f)
+            )
     # some shown trajectory has a feature on the far side of tau*: there the two rules disagree
-    assert any(rule["reward"].direction(f, s) != rule["toward-best"].direction(f, s)
-               for s in range(len(space.theta)) for f in range(3))
+    assert any(
+        rule["reward"].direction(f, s) != rule["toward-best"].direction(f, s)
+        for s in range(len(space.theta))
+        for f in range(3)
+    )
     with pytest.raises(LangprefError, match="direction"):
         LanguageHuman(w, space.theta, space.table("test"), cands, space.feature_names, direction="up")
     with pytest.raises(LangprefError, match="direction"):
@@ -177,6 +242,7 @@ def test_improve_and_learn_reward_hand_the_direction_to_their_human(monkeypatch)
         def spy(*a, real=real, **k):
             seen.append(k.get("direction", "reward"))
             return real(*a, **k)
+
         monkeypatch.setattr(module, "LanguageHuman", spy)
     human = HumanConfig(direction="toward-best")
     improve(space, ImproveConfig(iterations=1, seeds=1, human=human), progress=False)
@@ -198,9 +264,18 @@ def test_the_prior_experiment_speaks_val_phrasings_only(tmp_path, make_synthetic
     def spy(space, w, cfg, run_seed, record=None):
         spoken.append((cfg.human.phrase_source, cfg.eval_split))
         return real(space, w, cfg, run_seed, record)
+
     monkeypatch.setattr(reward_module, "run_reward_learning", spy)
-    res = run_prior_experiment("metaworld", data, None, tmp_path / "p", perfect=True,
-                               config=LearnRewardConfig(queries=2, humans=1, seeds=1), progress=False, grid=(1.0,))
+    res = run_prior_experiment(
+        "metaworld",
+        data,
+        None,
+        tmp_path / "p",
+        perfect=True,
+        config=LearnRewardConfig(queries=2, humans=1, seeds=1),
+        progress=False,
+        grid=(1.0,),
+    )
     assert spoken and set(spoken) == {("val", "val")}
     assert res["phrasings"] == "val" and "speaking val phrasings" in (tmp_path / "p" / "prior.md").read_text()
     assert (tmp_path / "p" / "prior.json").is_file()

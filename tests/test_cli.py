@@ -40,31 +40,32 @@ LEGACY_FLAGS = {  # every flag of the hand-written parser this one replaced: scr
     "evaluate": "--data --device --model --phrasing-split --split --utterances",
     "experiment alignment": "--data --env --force --out",
     "experiment improve": "--backend --data --env --force --iterations --model --out --perfect-latent "
-                          "--phrasing-split --phrasings --ray-address --seeds --workers",
+    "--phrasing-split --phrasings --ray-address --seeds --workers",
     "generate": "--backend --env --force --horizon --num-trajectories --out --ray-address --seed --workers",
     "import": "--action-key --camera --force --out --seed --splits --state-key --task",
     "improve": "--candidates --data --exclude-shown --figure --iterations --loss --model --negatives --num-negatives "
-               "--objective --perfect-latent --phrasing-split --phrasings --reward-model --seed --seeds --strategy "
-               "--temperature --weight-decay",
+    "--objective --perfect-latent --phrasing-split --phrasings --reward-model --seed --seeds --strategy "
+    "--temperature --weight-decay",
     "learn-reward": "--data --eval-split --feedback --figure --humans --loss --model --negatives --num-negatives "
-                    "--perfect-latent --phrasing-split --phrasings --queries --query-split --rationality "
-                    "--reward-model --seed --seeds --temperature --weight-decay",
+    "--perfect-latent --phrasing-split --phrasings --queries --query-split --rationality "
+    "--reward-model --seed --seeds --temperature --weight-decay",
     "render": "--fps --height --index --out --width",
     "study export": "--db --out",
     "study serve": "--admin-token --data --db --host --improve-max-iterations --model --no-prerender --num-negatives "
-                   "--on-show --on-show-timeout --port --pref-queries --rating-every --seed --split --torch-threads "
-                   "--video-format --video-fps --video-height --video-stride --video-width --videos",
+    "--on-show --on-show-timeout --port --pref-queries --rating-every --seed --split --torch-threads "
+    "--video-format --video-fps --video-height --video-stride --video-width --videos",
     "tasks": "--data",
     "train": "--batch-size --data --device --epochs --extend-bank --finetune-batch-size --finetune-epochs --force "
-             "--freeze-language --head-lr --lang-model --latent-dim --lm-lr --lr --max-length --no-mixed-precision "
-             "--no-observation-deltas --norm-a --norm-b --out --patience --phrasings-per-step --seed --tie-fraction "
-             "--time-samples --utterances",
+    "--freeze-language --head-lr --lang-model --latent-dim --lm-lr --lr --max-length --no-mixed-precision "
+    "--no-observation-deltas --norm-a --norm-b --out --patience --phrasings-per-step --seed --tie-fraction "
+    "--time-samples --utterances",
     "utterances": "--env",
     "visualize": "--data --model --out --split",
 }
 for _name in ("reward", "ablation", "prior"):
     LEGACY_FLAGS[f"experiment {_name}"] = LEGACY_FLAGS["experiment improve"].replace(
-        "--iterations", "--humans --queries --reward-model")
+        "--iterations", "--humans --queries --reward-model"
+    )
 
 
 def parsers():
@@ -81,6 +82,7 @@ def parsers():
                 for name, sub in action.choices.items():
                     out[" ".join([*path, name])] = sub
                     walk(sub, [*path, name])
+
     walk(build_parser(), [])
     return out
 
@@ -151,8 +153,10 @@ def test_config_round_trip_through_the_parser():
 
 
 def test_help_imports_nothing_heavy():
-    code = ("import sys; from langpref.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
-            "print(sorted(m for m in ('torch', 'numpy', 'transformers', 'mujoco') if m in sys.modules))")
+    code = (
+        "import sys; from langpref.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('torch', 'numpy', 'transformers', 'mujoco') if m in sys.modules))"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert proc.returncode == 0 and proc.stdout.strip().endswith("[]"), proc.stdout + proc.stderr
 
@@ -171,8 +175,26 @@ def test_improve_and_experiments_write_their_resolved_config(tmp_path, capsys):
 
     data = write_features_dataset(tmp_path / "d")
     figure = tmp_path / "figs" / "curve.png"
-    assert main(["improve", "--data", str(data), "--perfect-latent", "--seeds", "2", "--iterations", "2",
-                 "--temperature", "0.5", "--figure", str(figure), "--json"]) == 0
+    assert (
+        main(
+            [
+                "improve",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--seeds",
+                "2",
+                "--iterations",
+                "2",
+                "--temperature",
+                "0.5",
+                "--figure",
+                str(figure),
+                "--json",
+            ]
+        )
+        == 0
+    )
     printed = json.loads(capsys.readouterr().out)
     saved = json.loads((tmp_path / "figs" / "curve.config.json").read_text())
     assert saved["command"].startswith("langpref improve --data") and saved["langpref_version"]
@@ -180,10 +202,34 @@ def test_improve_and_experiments_write_their_resolved_config(tmp_path, capsys):
     assert saved["config"]["config"]["human"]["temperature"] == 0.5 and saved["config"]["perfect"] is True
 
     out = tmp_path / "res"
-    assert main(["experiment", "reward", "--env", "metaworld", "--data", str(data), "--perfect-latent", "--out",
-                 str(out), "--seeds", "1", "--humans", "1", "--queries", "2", "--json"]) == 0
+    assert (
+        main(
+            [
+                "experiment",
+                "reward",
+                "--env",
+                "metaworld",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--out",
+                str(out),
+                "--seeds",
+                "1",
+                "--humans",
+                "1",
+                "--queries",
+                "2",
+                "--json",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     saved = json.loads((out / "reward.config.json").read_text())
     assert saved["config"]["config"]["queries"] == 2 and saved["config"]["sweep"] == {
-        "backend": "local", "workers": 1, "ray_address": None}
+        "backend": "local",
+        "workers": 1,
+        "ray_address": None,
+    }
     assert saved["config"]["data"] == str(data) and saved["config"]["out"] == str(out)

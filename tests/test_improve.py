@@ -35,8 +35,11 @@ def write_features_dataset(root: Path, env: str = "metaworld", n: int = 40, seed
     rng = np.random.default_rng(seed)
     feats = rng.normal(size=(n, len(get_task(env).features)))
     order = rng.permutation(n).tolist()
-    splits = {"train": sorted(order[: n // 2]), "val": sorted(order[n // 2: 3 * n // 4]),
-              "test": sorted(order[3 * n // 4:])}
+    splits = {
+        "train": sorted(order[: n // 2]),
+        "val": sorted(order[n // 2 : 3 * n // 4]),
+        "test": sorted(order[3 * n // 4 :]),
+    }
     meta = DatasetMeta(env, 10, [{"name": "obs", "start": 0, "stop": 4}], 2, list(get_task(env).features), splits, n)
     write_meta(root, meta, feats)
     return root
@@ -57,8 +60,10 @@ def test_printed_objective_favours_small_embeddings_against_the_feedback():
     # far along it; the cosine of the difference follows the feedback.
     phi = np.array([[0.0, 0.0], [0.1, 0.1], [0.0, 5.0]])
     current, psi = np.array([0.0, -0.2]), np.array([0.0, 1.0])
-    assert np.allclose(printed_objective(phi, current, psi), (phi - current) @ psi / np.maximum(
-        np.linalg.norm(phi, axis=1), 1e-12) / 0.2)
+    assert np.allclose(
+        printed_objective(phi, current, psi),
+        (phi - current) @ psi / np.maximum(np.linalg.norm(phi, axis=1), 1e-12) / 0.2,
+    )
     assert improvement_step(phi[1:], current, psi, "printed") == 0
     assert improvement_step(phi[1:], current, psi, "cosine") == 1
 
@@ -70,8 +75,9 @@ def space():
 
 @pytest.mark.parametrize("strategy,objective", [("paper", "cosine"), ("paper", "printed"), ("history", "cosine")])
 def test_improvement_with_a_perfect_latent_space_raises_the_reward(space, strategy, objective):
-    result = improve(space, ImproveConfig(strategy=strategy, objective=objective, seeds=20, iterations=8),
-                     progress=False)
+    result = improve(
+        space, ImproveConfig(strategy=strategy, objective=objective, seeds=20, iterations=8), progress=False
+    )
     assert len(result["curve"]) == len(result["curve_std"]) == 9
     assert result["optimal"] == 1.0
     assert result["curve"][-1] - result["curve"][0] > 0.25
@@ -79,8 +85,10 @@ def test_improvement_with_a_perfect_latent_space_raises_the_reward(space, strate
 
 
 def test_history_ends_at_least_as_high_as_paper(space):
-    curves = {s: improve(space, ImproveConfig(strategy=s, seeds=20, iterations=8), progress=False)["curve"]
-              for s in ("paper", "history")}
+    curves = {
+        s: improve(space, ImproveConfig(strategy=s, seeds=20, iterations=8), progress=False)["curve"]
+        for s in ("paper", "history")
+    }
     assert curves["history"][-1] >= curves["paper"][-1] - 0.02
 
 
@@ -115,8 +123,26 @@ def test_plot_writes_a_png(space, tmp_path):
 
 def test_cli_improve_json(tmp_path, capsys):
     data = write_features_dataset(tmp_path / "d")
-    assert main(["improve", "--data", str(data), "--perfect-latent", "--seeds", "3", "--iterations", "4",
-                 "--strategy", "history", "--figure", str(tmp_path / "f.png"), "--json"]) == 0
+    assert (
+        main(
+            [
+                "improve",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--seeds",
+                "3",
+                "--iterations",
+                "4",
+                "--strategy",
+                "history",
+                "--figure",
+                str(tmp_path / "f.png"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert len(out["curve"]) == len(out["curve_std"]) == 5 and out["optimal"] == 1.0
     assert Path(out["figure"]).is_file()
@@ -144,11 +170,32 @@ def test_experiment_improve_writes_and_resumes(tmp_path, monkeypatch, capsys):
     again = run_improve_experiment("metaworld", data, None, out, perfect=True, config=cfg, progress=False)
     assert again["strategies"]["paper"]["curve"] == first["strategies"]["paper"]["curve"]
     with pytest.raises(LangprefError, match="another configuration"):
-        run_improve_experiment("metaworld", data, None, out, perfect=True,
-                               config=ImproveConfig(seeds=3, iterations=4), progress=False)
+        run_improve_experiment(
+            "metaworld", data, None, out, perfect=True, config=ImproveConfig(seeds=3, iterations=4), progress=False
+        )
     monkeypatch.undo()
-    assert main(["experiment", "improve", "--env", "metaworld", "--data", str(data), "--perfect-latent",
-                 "--out", str(out), "--seeds", "3", "--iterations", "4", "--force", "--json"]) == 0
+    assert (
+        main(
+            [
+                "experiment",
+                "improve",
+                "--env",
+                "metaworld",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--out",
+                str(out),
+                "--seeds",
+                "3",
+                "--iterations",
+                "4",
+                "--force",
+                "--json",
+            ]
+        )
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
     assert len(summary["strategies"]["history"]["curve"]) == 5
     assert asdict(ImproveConfig())["seeds"] == 100 and ImproveConfig().iterations == 15
@@ -158,8 +205,24 @@ def test_experiment_improve_writes_and_resumes(tmp_path, monkeypatch, capsys):
 def test_experiment_refuses_a_zero_override_and_writes_nothing(tmp_path, capsys, kind, flag):
     data = write_features_dataset(tmp_path / "d")
     out = tmp_path / "res"
-    assert main(["experiment", kind, "--env", "metaworld", "--data", str(data), "--perfect-latent",
-                 "--out", str(out), flag, "0"]) == 2  # 0 is a value, not "use the paper's setting"
+    assert (
+        main(
+            [
+                "experiment",
+                kind,
+                "--env",
+                "metaworld",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--out",
+                str(out),
+                flag,
+                "0",
+            ]
+        )
+        == 2
+    )  # 0 is a value, not "use the paper's setting"
     assert "must" in capsys.readouterr().err and not out.exists()
 
 
@@ -193,8 +256,27 @@ def test_experiment_improve_with_another_phrasing_split(tmp_path, monkeypatch, c
     """--phrasing-split all: its own default output, and the command that reproduces it."""
     data = write_features_dataset(tmp_path / "d")
     monkeypatch.chdir(tmp_path)
-    assert main(["experiment", "improve", "--env", "metaworld", "--data", str(data), "--perfect-latent",
-                 "--seeds", "2", "--iterations", "2", "--phrasing-split", "all", "--json"]) == 0
+    assert (
+        main(
+            [
+                "experiment",
+                "improve",
+                "--env",
+                "metaworld",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--seeds",
+                "2",
+                "--iterations",
+                "2",
+                "--phrasing-split",
+                "all",
+                "--json",
+            ]
+        )
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
     assert Path(summary["figure"]).parent == Path("results/improve/metaworld-perfect-bank-all")
     assert summary["command"].endswith("--phrasing-split all")

@@ -12,15 +12,7 @@ import pytest
 from langpref.feedback.language import LanguageHuman
 from langpref.feedback.space import perfect_latent_space
 from langpref.improve import ImproveConfig, human_weights, run_improvement
-from langpref.propose import (
-    AffineScale,
-    GeneratedStore,
-    Generation,
-    ProposeConfig,
-    Proposer,
-    Surrogate,
-    dataset_units,
-)
+from langpref.propose import AffineScale, GeneratedStore, Generation, ProposeConfig, Proposer, Surrogate, dataset_units
 
 HORIZON = 30
 
@@ -39,8 +31,9 @@ def real_data(tmp_path_factory):
 @pytest.fixture(scope="module")
 def generation(real_data):
     space = perfect_latent_space(real_data)
-    return space, Generation.open(real_data, space, None, ProposeConfig(rollouts=2, search_generations=5,
-                                                                         optimize_rounds=2))
+    return space, Generation.open(
+        real_data, space, None, ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2)
+    )
 
 
 def test_surrogate_fits_a_hand_built_map():
@@ -59,8 +52,14 @@ def test_the_search_finds_a_toy_optimum_with_a_tiny_budget():
     U = rng.random((150, 14))
     target = np.full(14, 0.3)
     target[:3] = [0.8, 0.1, 0.6]
-    proposer = Proposer("metaworld", HORIZON, U, U @ M, embed=lambda t: None,
-                        cfg=ProposeConfig(rollouts=3, search_generations=60, search_sigma=0.3))
+    proposer = Proposer(
+        "metaworld",
+        HORIZON,
+        U,
+        U @ M,
+        embed=lambda t: None,
+        cfg=ProposeConfig(rollouts=3, search_generations=60, search_sigma=0.3),
+    )
     goal = target @ M
     X, scores = proposer.search(lambda P: -np.linalg.norm(P - goal, axis=1), np.full(14, 0.5), seed=3)
     assert len(X) == 3 and scores[0] == max(scores)
@@ -128,8 +127,12 @@ def test_the_proposer_cannot_reach_the_true_reward(generation, monkeypatch, stra
             assert obj is not w and obj is not space.theta
             if isinstance(obj, np.ndarray) and obj.dtype.kind == "f":
                 assert not (obj.shape == w.shape and np.allclose(obj, w)), "the human's weights are reachable"
-                assert not (obj.shape[-1:] == space.theta.shape[-1:] and obj.ndim == 2 and len(obj) >= len(space.theta)
-                            and np.allclose(obj[:len(space.theta)], space.theta)), "the humans' theta is reachable"
+                assert not (
+                    obj.shape[-1:] == space.theta.shape[-1:]
+                    and obj.ndim == 2
+                    and len(obj) >= len(space.theta)
+                    and np.allclose(obj[: len(space.theta)], space.theta)
+                ), "the humans' theta is reachable"
         seen.append(step)
         return real(self, objective, start, step)
 
@@ -145,8 +148,9 @@ def test_generated_improvement_keeps_the_split_scale(generation, tmp_path):
     w = human_weights(len(space.feature_names), 0, 1)
     base = run_improvement(space, w, ImproveConfig(iterations=3, seeds=1), (0, 1))
     store = GeneratedStore(tmp_path / "shown", "metaworld", HORIZON)
-    run = run_improvement(space, w, ImproveConfig(iterations=3, seeds=1, candidate_split="generated"), (0, 1), gen,
-                          store)
+    run = run_improvement(
+        space, w, ImproveConfig(iterations=3, seeds=1, candidate_split="generated"), (0, 1), gen, store
+    )
     assert run.shown[0] == base.shown[0] and run.reward[0] == base.reward[0]  # same start, same normalisation
     assert run.optimal_raw == base.optimal_raw
     n = len(space.phi)

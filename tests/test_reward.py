@@ -47,11 +47,20 @@ def test_cross_entropy_on_hand_built_numbers():
     R3, r3 = np.array([0.0, 1.0, 3.0]), np.array([1.0, 0.0, 0.0])
     sig = lambda z: 1 / (1 + np.exp(-z))  # noqa: E731
     pairs = [(0, 1), (0, 2), (1, 2)]
-    manual = np.mean([-(sig(R3[i] - R3[j]) * np.log(sig(r3[i] - r3[j]))
-                        + (1 - sig(R3[i] - R3[j])) * np.log(1 - sig(r3[i] - r3[j]))) for i, j in pairs])
+    manual = np.mean(
+        [
+            -(
+                sig(R3[i] - R3[j]) * np.log(sig(r3[i] - r3[j]))
+                + (1 - sig(R3[i] - R3[j])) * np.log(1 - sig(r3[i] - r3[j]))
+            )
+            for i, j in pairs
+        ]
+    )
     assert np.isclose(cross_entropy(R3, r3), manual)
-    assert np.isclose(cross_entropy(R3, r3, rationality=0.0), np.mean(
-        [-(0.5 * np.log(sig(r3[i] - r3[j])) + 0.5 * np.log(1 - sig(r3[i] - r3[j]))) for i, j in pairs]))
+    assert np.isclose(
+        cross_entropy(R3, r3, rationality=0.0),
+        np.mean([-(0.5 * np.log(sig(r3[i] - r3[j])) + 0.5 * np.log(1 - sig(r3[i] - r3[j]))) for i, j in pairs]),
+    )
     with pytest.raises(LangprefError):
         cross_entropy(np.zeros(3), np.zeros(2))
 
@@ -146,8 +155,10 @@ def test_comparisons_recover_the_ranking_of_w(space):
 
 
 def test_language_beats_comparisons_on_a_perfect_space(space):
-    res = {fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=15, humans=3, seeds=2), progress=False)
-           for fb in ("language", "comparison")}
+    res = {
+        fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=15, humans=3, seeds=2), progress=False)
+        for fb in ("language", "comparison")
+    }
     lang, comp = (np.array(res[fb]["cross_entropy"]) for fb in ("language", "comparison"))
     assert lang[0] == comp[0] == pytest.approx(np.log(2) - 0.0, abs=0.2)  # same flat start
     assert lang[1:].mean() < comp[1:].mean()
@@ -166,9 +177,12 @@ def test_same_seed_same_curves(space):
 
 
 def test_bad_configs_are_one_line_errors(space):
-    for cfg in (LearnRewardConfig(feedback="gestures"), LearnRewardConfig(queries=0),
-                LearnRewardConfig(reward=RewardConfig(loss="neither")),
-                LearnRewardConfig(human=HumanConfig(temperature=0.0))):
+    for cfg in (
+        LearnRewardConfig(feedback="gestures"),
+        LearnRewardConfig(queries=0),
+        LearnRewardConfig(reward=RewardConfig(loss="neither")),
+        LearnRewardConfig(human=HumanConfig(temperature=0.0)),
+    ):
         with pytest.raises(LangprefError):
             learn_reward(space, cfg, progress=False)
 
@@ -187,27 +201,74 @@ def write_dataset(root: Path, env: str, n: int = 24, horizon: int = 8, seed: int
     feats = []
     for i in range(n):
         obs = (rng.normal(size=spec.obs_dim) + 0.1 * rng.normal(size=(horizon, spec.obs_dim))).astype(np.float32)
-        traj = Trajectory(i, obs, rng.normal(size=(horizon, spec.action_dim)).astype(np.float32),
-                          obs[:, :nf].astype(np.float64), np.zeros((horizon, 2)), np.zeros((horizon, 2)),
-                          bool(i % 2), i, {})
+        traj = Trajectory(
+            i,
+            obs,
+            rng.normal(size=(horizon, spec.action_dim)).astype(np.float32),
+            obs[:, :nf].astype(np.float64),
+            np.zeros((horizon, 2)),
+            np.zeros((horizon, 2)),
+            bool(i % 2),
+            i,
+            {},
+        )
         save_trajectory(root, traj)
         feats.append(traj.features)
     splits = {"train": list(range(n // 2)), "val": list(range(n // 2, 3 * n // 4)), "test": list(range(3 * n // 4, n))}
-    write_meta(root, DatasetMeta(env, horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim,
-                                 list(spec.features), splits, n), np.array(feats))
+    write_meta(
+        root,
+        DatasetMeta(
+            env, horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim, list(spec.features), splits, n
+        ),
+        np.array(feats),
+    )
     return root
 
 
 def test_cli_learn_reward_json(tmp_path, capsys):
     data = write_dataset(tmp_path / "d", "metaworld")
     for fb in ("language", "comparison"):
-        assert main(["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", fb, "--queries", "4",
-                     "--humans", "1", "--seeds", "2", "--json"]) == 0
+        assert (
+            main(
+                [
+                    "learn-reward",
+                    "--data",
+                    str(data),
+                    "--perfect-latent",
+                    "--feedback",
+                    fb,
+                    "--queries",
+                    "4",
+                    "--humans",
+                    "1",
+                    "--seeds",
+                    "2",
+                    "--json",
+                ]
+            )
+            == 0
+        )
         out = json.loads(capsys.readouterr().out)
         assert len(out["cross_entropy"]) == len(out["true_reward_of_best"]) == 5
         assert out["num_runs"] == 2 and out["feedback"] == fb
-    assert main(["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", "language",
-                 "--phrasing-split", "val", "--num-negatives", "0", "--json"]) == 2
+    assert (
+        main(
+            [
+                "learn-reward",
+                "--data",
+                str(data),
+                "--perfect-latent",
+                "--feedback",
+                "language",
+                "--phrasing-split",
+                "val",
+                "--num-negatives",
+                "0",
+                "--json",
+            ]
+        )
+        == 2
+    )
     assert "num_negatives" in capsys.readouterr().err
 
 
@@ -220,10 +281,17 @@ def untrained_model(tmp_path_factory):
     from langpref.tasks import get_task
 
     spec = get_task("metaworld")
-    info = DataInfo(env="metaworld", feature_names=list(spec.features),
-                    obs_layout=[asdict(f) for f in spec.obs_layout], obs_dim=spec.obs_dim,
-                    action_dim=spec.action_dim, horizon=8, schema_version=1,
-                    tie_thresholds=[0.0] * len(spec.features), feature_std=[1.0] * len(spec.features))
+    info = DataInfo(
+        env="metaworld",
+        feature_names=list(spec.features),
+        obs_layout=[asdict(f) for f in spec.obs_layout],
+        obs_dim=spec.obs_dim,
+        action_dim=spec.action_dim,
+        horizon=8,
+        schema_version=1,
+        tie_thresholds=[0.0] * len(spec.features),
+        feature_std=[1.0] * len(spec.features),
+    )
     cfg = ModelConfig(latent_dim=8, max_length=12)
     torch.manual_seed(0)
     model = build_model(cfg, info, None, None)
@@ -232,8 +300,27 @@ def untrained_model(tmp_path_factory):
 
 def test_cli_with_a_real_model_and_mismatched_env(tmp_path, capsys, untrained_model):
     data = write_dataset(tmp_path / "mw", "metaworld")
-    assert main(["learn-reward", "--model", str(untrained_model), "--data", str(data), "--feedback", "language",
-                 "--queries", "2", "--humans", "1", "--seeds", "1", "--json"]) == 0
+    assert (
+        main(
+            [
+                "learn-reward",
+                "--model",
+                str(untrained_model),
+                "--data",
+                str(data),
+                "--feedback",
+                "language",
+                "--queries",
+                "2",
+                "--humans",
+                "1",
+                "--seeds",
+                "1",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert len(out["cross_entropy"]) == 3 and "model" in out["space"]
     other = write_dataset(tmp_path / "rs", "robosuite")
@@ -251,8 +338,10 @@ def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch)
     cfg = LearnRewardConfig(queries=4, humans=2, seeds=1)
     res = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
     assert set(res["methods"]) == {"language", "comparison"} and len(res["targets"]) == 3
-    assert len(res["ce_difference"]["mean"]) == 5 and "paired by human and seed" in (tmp_path / "r" / "reward.md"
-                                                                                      ).read_text()
+    assert (
+        len(res["ce_difference"]["mean"]) == 5
+        and "paired by human and seed" in (tmp_path / "r" / "reward.md").read_text()
+    )
     abl = run_ablation_experiment("metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, progress=False)
     assert set(abl["methods"]) == {"both", "explicit", "implicit"}
     for out, name in ((tmp_path / "r", "reward"), (tmp_path / "a", "ablation")):
@@ -272,8 +361,9 @@ def test_paired_difference_on_hand_built_numbers():
     d = paired_difference(a, b)
     half = 4.302653 / np.sqrt(3)  # t(0.975, 2) * sd 1 / sqrt(3)
     assert d["mean"] == pytest.approx([2.0, 0.5])
-    assert d["low"] == pytest.approx([2.0 - half, 0.5], rel=1e-6) and d["high"] == pytest.approx([2.0 + half, 0.5],
-                                                                                                  rel=1e-6)
+    assert d["low"] == pytest.approx([2.0 - half, 0.5], rel=1e-6) and d["high"] == pytest.approx(
+        [2.0 + half, 0.5], rel=1e-6
+    )
 
 
 def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
@@ -281,8 +371,9 @@ def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
 
     data = write_dataset(tmp_path / "d", "metaworld", n=40)
     cfg = LearnRewardConfig(queries=3, humans=1, seeds=1)
-    res = run_prior_experiment("metaworld", data, None, tmp_path / "p", perfect=True, config=cfg, progress=False,
-                               grid=(0.1, 10.0))
+    res = run_prior_experiment(
+        "metaworld", data, None, tmp_path / "p", perfect=True, config=cfg, progress=False, grid=(0.1, 10.0)
+    )
     assert res["eval_split"] == "val" and res["seed"] != LearnRewardConfig().seed
     assert res["reward_model"] == "linear" and res["default"] == RewardConfig().weight_decay
     assert set(res["picks"]) == set(PRIOR_METHODS)

@@ -23,8 +23,17 @@ def checkpoint(tmp_path_factory):
     task = get_task("metaworld")
     torch.manual_seed(0)
     cfg = ModelConfig(latent_dim=8, traj_hidden=(16, 16), max_length=12)
-    info = DataInfo("metaworld", list(task.features), [asdict(f) for f in task.obs_layout], task.obs_dim,
-                    task.action_dim, HORIZON, 2, [0.1, 0.1, 0.1], [1.0, 1.0, 1.0])
+    info = DataInfo(
+        "metaworld",
+        list(task.features),
+        [asdict(f) for f in task.obs_layout],
+        task.obs_dim,
+        task.action_dim,
+        HORIZON,
+        2,
+        [0.1, 0.1, 0.1],
+        [1.0, 1.0, 1.0],
+    )
     dim = step_input_dim(task.obs_dim, task.action_dim, True)
     rng = np.random.default_rng(0)
     model = build_model(cfg, info, rng.normal(size=dim) * 0.1, 0.5 + rng.random(dim))
@@ -101,8 +110,9 @@ def test_a_reward_of_another_task_is_refused(checkpoint, tmp_path):
 
 
 def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp_path):
-    sb3 = pytest.importorskip("stable_baselines3", reason="stable-baselines3 is not installed (pip install "
-                              "'langpref[test]')")
+    sb3 = pytest.importorskip(
+        "stable_baselines3", reason="stable-baselines3 is not installed (pip install 'langpref[test]')"
+    )
     import gymnasium as gym
 
     from langpref.rewards import LearnedReward, save_learned_reward

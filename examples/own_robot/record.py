@@ -48,8 +48,8 @@ class Plan:
 
     The hand waits, travels to a point `clearance` above the handle (shifted `offset` along it), drops onto the handle
     with the fingers open, pulls the drawer out by `pull`, holds still for `hold` steps, then lifts off and backs away
-    (leaving the drawer where it is). Outside the drop and the lift the gripper is servoed to the opening `grip` (1 = wide open, about 0.3 = shut). Recording stops
-    after `length` steps, wherever the script is by then.
+    (leaving the drawer where it is). Outside the drop and the lift the gripper is servoed to the opening `grip`
+    (1 = wide open, about 0.3 = shut). Recording stops after `length` steps, wherever the script is by then.
     """
 
     handle_x: float  # where Meta-World places the drawer (its only random reset variable)
@@ -234,8 +234,14 @@ def write_video(frames: list[np.ndarray], path: Path) -> None:
     import imageio.v2 as imageio
 
     tmp = path.with_name(f".{path.stem}.tmp.mp4")  # hidden: no reader's episode_* pattern picks it up
-    writer = imageio.get_writer(tmp, fps=SIM_HZ // FRAME_STRIDE, codec="libx264", pixelformat="yuv420p",
-                                macro_block_size=8, ffmpeg_log_level="error")
+    writer = imageio.get_writer(
+        tmp,
+        fps=SIM_HZ // FRAME_STRIDE,
+        codec="libx264",
+        pixelformat="yuv420p",
+        macro_block_size=8,
+        ffmpeg_log_level="error",
+    )
     for frame in frames:
         writer.append_data(frame)
     writer.close()
@@ -289,8 +295,10 @@ def main(argv: list[str] | None = None) -> None:
         # (leaving the block terminates the workers, renderers and all; nothing is left to flush)
     lengths = np.array([n for _, n, _ in results])
     successes = np.array([s for _, _, s in results])
-    print(f"recorded {len(results)} episodes into {args.out} in {time.time() - start:.1f}s: "
-          f"lengths {lengths.min()}-{lengths.max()} (mean {lengths.mean():.0f}), success {successes.mean():.0%}")
+    print(
+        f"recorded {len(results)} episodes into {args.out} in {time.time() - start:.1f}s: "
+        f"lengths {lengths.min()}-{lengths.max()} (mean {lengths.mean():.0f}), success {successes.mean():.0%}"
+    )
 
 
 if __name__ == "__main__":

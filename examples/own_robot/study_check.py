@@ -27,9 +27,29 @@ VIDEO = re.compile(r"/videos/traj(\d{6})-")
 
 
 def start(model: Path, data: Path, db: Path) -> tuple[subprocess.Popen, str]:
-    cmd = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data),
-           "--db", str(db), "--port", "0", "--video-format", "mp4", "--pref-queries", "4", "--rating-every", "2",
-           "--improve-max-iterations", "3"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "langpref",
+        "study",
+        "serve",
+        "--model",
+        str(model),
+        "--data",
+        str(data),
+        "--db",
+        str(db),
+        "--port",
+        "0",
+        "--video-format",
+        "mp4",
+        "--pref-queries",
+        "4",
+        "--rating-every",
+        "2",
+        "--improve-max-iterations",
+        "3",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     for line in proc.stdout:
         m = re.search(r"participants: (http://\S+?)/?$", line.strip())
@@ -44,12 +64,19 @@ def answer(step: dict) -> dict:
     if kind == "survey":
         out = {}
         for q in step["questions"]:
-            out[q["id"]] = {"likert": q.get("max", 5), "text": "Fine.", "choice": (q.get("options") or [""])[0],
-                            "multi": (q.get("options") or [""])[:1]}[q["type"]]
+            out[q["id"]] = {
+                "likert": q.get("max", 5),
+                "text": "Fine.",
+                "choice": (q.get("options") or [""])[0],
+                "multi": (q.get("options") or [""])[:1],
+            }[q["type"]]
         return {"answers": out}
-    return {"language": {"feedback": FEEDBACK[n % len(FEEDBACK)], "client_ms": 4000},
-            "comparison": {"choice": n % 2, "client_ms": 3000},
-            "satisfaction": {"satisfied": False}, "rating": {"rating": 3}}[kind]
+    return {
+        "language": {"feedback": FEEDBACK[n % len(FEEDBACK)], "client_ms": 4000},
+        "comparison": {"choice": n % 2, "client_ms": 3000},
+        "satisfaction": {"satisfied": False},
+        "rating": {"rating": 3},
+    }[kind]
 
 
 def main() -> None:
@@ -91,9 +118,17 @@ def main() -> None:
         finally:
             proc.terminate()
             proc.wait(timeout=30)
-    print(json.dumps({"answers": len(kinds), "done": step["kind"] == "done",
-                      "kinds": {k: kinds.count(k) for k in sorted(set(kinds))}, "videos_served": videos,
-                      "videos_identical_to_recording": same}))
+    print(
+        json.dumps(
+            {
+                "answers": len(kinds),
+                "done": step["kind"] == "done",
+                "kinds": {k: kinds.count(k) for k in sorted(set(kinds))},
+                "videos_served": videos,
+                "videos_identical_to_recording": same,
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -50,8 +50,9 @@ def raw_steps_per_s(env_name: str, episodes: int, horizon: int) -> float:
     return env_steps_per_s(env_name, [(e, rng.uniform(-1, 1, (horizon, dim))) for e in range(episodes)])
 
 
-def generator_steps_per_s(env_name: str, n: int, horizon: int, workers: int, backend: str = "local",
-                          replay: bool = False) -> tuple[float, float | None]:
+def generator_steps_per_s(
+    env_name: str, n: int, horizon: int, workers: int, backend: str = "local", replay: bool = False
+) -> tuple[float, float | None]:
     """The generator's rate; with `replay`, also `env.step` alone replaying the generated actions.
 
     The replay runs the same physics as the generator (the same contacts: a pressed button costs Meta-World about
@@ -61,8 +62,11 @@ def generator_steps_per_s(env_name: str, n: int, horizon: int, workers: int, bac
     from langpref.dataset.storage import load_dataset
 
     with tempfile.TemporaryDirectory() as tmp:
-        s = generate(GenerateConfig(env=env_name, out=Path(tmp) / "d", num_trajectories=n, horizon=horizon,
-                                    workers=workers, backend=backend))
+        s = generate(
+            GenerateConfig(
+                env=env_name, out=Path(tmp) / "d", num_trajectories=n, horizon=horizon, workers=workers, backend=backend
+            )
+        )
         if not replay:
             return s["steps_per_s"], None
         episodes = [(t.seed, t.actions) for t in load_dataset(Path(tmp) / "d").trajectories()]
@@ -101,17 +105,27 @@ def sweep_timings(env_name: str, workers: int) -> dict:
     warm_load_s = time.perf_counter() - start
     startup_s = worker_startup_seconds(worker_space, space_args, workers)
     walls = {}
-    for name, sweep in (("1 worker", SweepConfig(workers=1)), ("local", SweepConfig(workers=workers)),
-                        ("ray", SweepConfig(backend="ray", workers=workers))):
+    for name, sweep in (
+        ("1 worker", SweepConfig(workers=1)),
+        ("local", SweepConfig(workers=workers)),
+        ("ray", SweepConfig(backend="ray", workers=workers)),
+    ):
         with tempfile.TemporaryDirectory() as tmp:
             start = time.perf_counter()
             run_reward_experiment(env_name, data, model, Path(tmp), perfect=perfect, progress=False, sweep=sweep)
             walls[name] = time.perf_counter() - start
     tasks = 18
     per_task = (walls["1 worker"] - warm_load_s) / tasks
-    return {"env": env_name, "space": "oracle" if perfect else str(model), "tasks": tasks, "per_task_s": per_task,
-            "startup_s": startup_s, "walls": walls, "workers": workers,
-            "projected_s": startup_s + per_task * -(-tasks // workers)}
+    return {
+        "env": env_name,
+        "space": "oracle" if perfect else str(model),
+        "tasks": tasks,
+        "per_task_s": per_task,
+        "startup_s": startup_s,
+        "walls": walls,
+        "workers": workers,
+        "projected_s": startup_s + per_task * -(-tasks // workers),
+    }
 
 
 def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
@@ -128,8 +142,12 @@ def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
 
     space = load_space(Path("data") / env_name, default_model(env_name), env=env_name)
     pool, cands = space.split("train"), space.split("test")
-    times: dict[str, list[float]] = {"language update": [], "comparison update": [], "improvement step": [],
-                                     "embed a new sentence": []}
+    times: dict[str, list[float]] = {
+        "language update": [],
+        "comparison update": [],
+        "improvement step": [],
+        "embed a new sentence": [],
+    }
     for trial in range(trials):
         rng = np.random.default_rng([trial, 99])
         w = sample_weights(len(space.feature_names), rng)
@@ -162,11 +180,14 @@ def uses_timings(env_name: str, trials: int = 30, queries: int = 40) -> dict:
 def uses_table(envs: list[str], today: str) -> str:
     from langpref.experiments.alignment import default_model
 
-    lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`) on the default dataset and the "
-             "co-finetuned model, 2 CPU cores, 30 trials: the work a live session waits for. Reward update: "
-             "add the 40th query and refit r_xi on all 40 (L-BFGS, warm start). Targets: update median < 50 ms "
-             "and p95 < 100 ms; improvement step < 10 ms.\n",
-             "| env | what | median (ms) | p95 (ms) |", "|---|---|---|---|"]
+    lines = [
+        f"Measured {today} with `make bench` (`python -m langpref.bench`) on the default dataset and the "
+        "co-finetuned model, 2 CPU cores, 30 trials: the work a live session waits for. Reward update: "
+        "add the 40th query and refit r_xi on all 40 (L-BFGS, warm start). Targets: update median < 50 ms "
+        "and p95 < 100 ms; improvement step < 10 ms.\n",
+        "| env | what | median (ms) | p95 (ms) |",
+        "|---|---|---|---|",
+    ]
     for env_name in envs:
         if not (default_model(env_name) / "config.json").exists():
             print(f"uses bench: no model {default_model(env_name)}; skipped", file=sys.stderr)
@@ -183,12 +204,15 @@ def gate_table(envs: list[str], today: str) -> str:
     from langpref.language.relevance import RELEVANCE_FLOOR, UNKNOWN_WORDS_FLOOR, FeedbackGate
 
     nonsense = json.loads(Path("heldout/not_feedback.json").read_text())["texts"]
-    lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref.language.relevance` "
-             f"(highest cosine to a bank phrasing in the pretrained MiniLM space; refused below {RELEVANCE_FLOOR}, "
-             f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary) on the 12 x features x 2 "
-             "held-out phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
-             "| env | held-out phrasings let through | lowest held-out score | not-feedback texts refused "
-             "| highest score among those let through | check, median (ms) |", "|---|---|---|---|---|---|"]
+    lines = [
+        f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref.language.relevance` "
+        f"(highest cosine to a bank phrasing in the pretrained MiniLM space; refused below {RELEVANCE_FLOOR}, "
+        f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary) on the 12 x features x 2 "
+        "held-out phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
+        "| env | held-out phrasings let through | lowest held-out score | not-feedback texts refused "
+        "| highest score among those let through | check, median (ms) |",
+        "|---|---|---|---|---|---|",
+    ]
     for env_name in envs:
         gate = FeedbackGate(env_name)
         mapping = load_user_utterances(Path("heldout/utterances.json"), env_name)
@@ -199,29 +223,35 @@ def gate_table(envs: list[str], today: str) -> str:
             junk.append(gate.score(text))
             ms.append(1e3 * (time.perf_counter() - start))
         passed = [r.score for r in junk if r.ok]
-        lines.append(f"| {env_name} | {sum(r.ok for r in held)} / {len(held)} | {min(r.score for r in held):.3f} "
-                     f"| {len(junk) - len(passed)} / {len(junk)} | {max(passed, default=float('nan')):.3f} "
-                     f"| {np.median(ms):.1f} |")
+        lines.append(
+            f"| {env_name} | {sum(r.ok for r in held)} / {len(held)} | {min(r.score for r in held):.3f} "
+            f"| {len(junk) - len(passed)} / {len(junk)} | {max(passed, default=float('nan')):.3f} "
+            f"| {np.median(ms):.1f} |"
+        )
     return "\n".join(lines)
 
 
 def sweep_table(envs: list[str], today: str) -> str:
-    lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref experiment reward` "
-             "(language vs comparisons, 3 humans x 3 seeds, Q = 40: one task per run) on the default dataset. "
-             "Projected wall time on k workers: their start-up (processes spawned, torch and the model loaded, "
-             "the bank encoded; timed apart) plus ceil(tasks / k) tasks at the 1-worker per-task time.\n",
-             "| env | latent space | tasks | per-task time, 1 worker | 1 worker wall | workers | worker start-up "
-             "| projected wall | measured, local processes | measured, Ray tasks | speed-up (local) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref experiment reward` "
+        "(language vs comparisons, 3 humans x 3 seeds, Q = 40: one task per run) on the default dataset. "
+        "Projected wall time on k workers: their start-up (processes spawned, torch and the model loaded, "
+        "the bank encoded; timed apart) plus ceil(tasks / k) tasks at the 1-worker per-task time.\n",
+        "| env | latent space | tasks | per-task time, 1 worker | 1 worker wall | workers | worker start-up "
+        "| projected wall | measured, local processes | measured, Ray tasks | speed-up (local) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for env_name in envs:
         if not (Path("data") / env_name / "meta.json").exists():
             print(f"sweep bench: no default dataset data/{env_name}; skipped", file=sys.stderr)
             continue
         t = sweep_timings(env_name, 2)
         w = t["walls"]
-        lines.append(f"| {env_name} | {t['space']} | {t['tasks']} | {t['per_task_s']:.2f} s | {w['1 worker']:.1f} s "
-                     f"| {t['workers']} | {t['startup_s']:.1f} s | {t['projected_s']:.1f} s | {w['local']:.1f} s "
-                     f"| {w['ray']:.1f} s | {w['1 worker'] / w['local']:.2f}x |")
+        lines.append(
+            f"| {env_name} | {t['space']} | {t['tasks']} | {t['per_task_s']:.2f} s | {w['1 worker']:.1f} s "
+            f"| {t['workers']} | {t['startup_s']:.1f} s | {t['projected_s']:.1f} s | {w['local']:.1f} s "
+            f"| {w['ray']:.1f} s | {w['1 worker'] / w['local']:.2f}x |"
+        )
     return "\n".join(lines)
 
 
@@ -233,17 +263,24 @@ def training_table(today: str) -> str | None:
     for path in sorted(RESULTS_ROOT.glob("*/alignment.json")):
         t = json.loads(path.read_text())["train"]
         st, sps = t["stage_seconds"], t["stage_samples_per_s"]
-        lines.append(f"| {path.parent.name} | {t['device']} ({t['torch_threads']} threads) "
-                     f"| {t['wall_s'] / 60:.1f} min | {st['1']:.0f} s, {sps['1']:,.0f} samples/s "
-                     f"| {st.get('2', 0):.0f} s, {sps.get('2', 0):,.0f} samples/s | {t['train_pairs']:,} |")
+        lines.append(
+            f"| {path.parent.name} | {t['device']} ({t['torch_threads']} threads) "
+            f"| {t['wall_s'] / 60:.1f} min | {st['1']:.0f} s, {sps['1']:,.0f} samples/s "
+            f"| {st.get('2', 0):.0f} s, {sps.get('2', 0):,.0f} samples/s | {t['train_pairs']:,} |"
+        )
     if not lines:
         return None
-    return "\n".join([
-        f"Collected {today} by `make bench` from `results/alignment/ENV/alignment.json`, written by "
-        "`langpref experiment alignment --env ENV` (the default two-stage training on the default dataset; wall "
-        "time includes loading the data and the language model). Target: Meta-World under 10 min on 2 CPU cores.\n",
-        "| env | device | both stages, wall | stage 1 (frozen language model) | stage 2 (co-finetuning) "
-        "| train pairs |", "|---|---|---|---|---|---|", *lines])
+    return "\n".join(
+        [
+            f"Collected {today} by `make bench` from `results/alignment/ENV/alignment.json`, written by "
+            "`langpref experiment alignment --env ENV` (the default two-stage training on the default dataset; wall "
+            "time includes loading the data and the language model). Target: Meta-World under 10 min on 2 CPU cores.\n",
+            "| env | device | both stages, wall | stage 1 (frozen language model) | stage 2 (co-finetuning) "
+            "| train pairs |",
+            "|---|---|---|---|---|---|",
+            *lines,
+        ]
+    )
 
 
 def ray_init_seconds(workers: int) -> float:
@@ -290,9 +327,16 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
             one, replayed = generator_steps_per_s(env_name, n, horizon, 1, replay=True)
             two, _ = generator_steps_per_s(env_name, n, horizon, 2)
             ray_two = generator_steps_per_s(env_name, n, horizon, 2, backend="ray")[0] if ray else None
-            rounds.append({"raw": raw_steps_per_s(env_name, 8 if env_name == "metaworld" else 2, horizon),
-                           "one": one, "replay": replayed, "two": two, "ray_two": ray_two,
-                           "startup": worker_startup_seconds(make_worker_env, (env_name, horizon), 2)})
+            rounds.append(
+                {
+                    "raw": raw_steps_per_s(env_name, 8 if env_name == "metaworld" else 2, horizon),
+                    "one": one,
+                    "replay": replayed,
+                    "two": two,
+                    "ray_two": ray_two,
+                    "startup": worker_startup_seconds(make_worker_env, (env_name, horizon), 2),
+                }
+            )
         best = {k: max(r[k] for r in rounds) for k in ("raw", "one", "replay", "two")}
         startup = min(r["startup"] for r in rounds)
         raw, one, replayed, two = best["raw"], best["one"], best["replay"], best["two"]
@@ -319,15 +363,19 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for env_name, raw, one, ratio, replayed, ratio_replay, two, speedup, startup, steady in rows:
-        table.append(f"| {env_name} | {raw:.0f} | {one:.0f} | {ratio:.2f} | {replayed:.0f} | {ratio_replay:.2f} "
-                     f"| {two:.0f} | {speedup:.2f}x | {startup:.1f} | {steady:.2f}x |")
+        table.append(
+            f"| {env_name} | {raw:.0f} | {one:.0f} | {ratio:.2f} | {replayed:.0f} | {ratio_replay:.2f} "
+            f"| {two:.0f} | {speedup:.2f}x | {startup:.1f} | {steady:.2f}x |"
+        )
     write_section("generator-throughput", "\n".join(table))
     if ray:
-        lines = [f"Measured {today} with `make bench` (`python -m langpref.bench`), 2 workers, horizon 500. Ray was "
-                 f"started once before timing (a local instance took {ray_init:.1f} s to start; that one-off cost "
-                 "is not in the rates).\n",
-                 "| env | local processes (steps/s) | Ray tasks (steps/s) | Ray overhead (target < 15%) |",
-                 "|---|---|---|---|"]
+        lines = [
+            f"Measured {today} with `make bench` (`python -m langpref.bench`), 2 workers, horizon 500. Ray was "
+            f"started once before timing (a local instance took {ray_init:.1f} s to start; that one-off cost "
+            "is not in the rates).\n",
+            "| env | local processes (steps/s) | Ray tasks (steps/s) | Ray overhead (target < 15%) |",
+            "|---|---|---|---|",
+        ]
         lines += [f"| {e} | {loc:.0f} | {r:.0f} | {ovh:.1%} |" for e, loc, r, ovh in ray_rows]
         write_section("ray-overhead", "\n".join(lines))
 
@@ -345,27 +393,37 @@ def import_table(today: str, repeats: int) -> str:
         rec.mkdir()
         rng = np.random.default_rng(0)
         for i in range(300):
-            np.savez_compressed(rec / f"ep{i:04d}.npz", observations=rng.normal(size=(200, 39)).astype(np.float32),
-                                actions=rng.normal(size=(200, 4)).astype(np.float32), success=np.array(True))
-        (root / "features.py").write_text("import numpy as np\n\ndef f(o, a):\n    return np.stack([o[:, 0], "
-                                          "np.linalg.norm(a, axis=1)], axis=1)\n")
+            np.savez_compressed(
+                rec / f"ep{i:04d}.npz",
+                observations=rng.normal(size=(200, 39)).astype(np.float32),
+                actions=rng.normal(size=(200, 4)).astype(np.float32),
+                success=np.array(True),
+            )
+        (root / "features.py").write_text(
+            "import numpy as np\n\ndef f(o, a):\n    return np.stack([o[:, 0], np.linalg.norm(a, axis=1)], axis=1)\n"
+        )
         words = {f: {d: [f"{d} the {f} {k}." for k in range(5)] for d in ("increase", "decrease")} for f in "ab"}
         (root / "bank.json").write_text(json.dumps(words))
-        (root / "task.toml").write_text('name = "bench"\ndescription = "x"\nfeatures = ["a", "b"]\n'
-                                        'features_from = "features.py:f"\nutterances = "bank.json"\n')
+        (root / "task.toml").write_text(
+            'name = "bench"\ndescription = "x"\nfeatures = ["a", "b"]\n'
+            'features_from = "features.py:f"\nutterances = "bank.json"\n'
+        )
         task = read_task_file(root / "task.toml")
         bank = split_bank(task.utterances, task.features)
         rates = []
         for r in range(repeats):
             cfg = ImportConfig(src=rec, task=root / "task.toml", out=root / f"ds{r}")
             rates.append(import_recording(cfg, task, bank, progress=False)["episodes_per_s"])
-    return (f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref import` of a plain recording "
-            "(300 episodes x 200 steps, 39-dim observations, 4-dim actions, features from the task file's function, no "
-            f"videos), best of {repeats}, one process.\n\n| episodes/s (target >= 50) |\n|---|\n| {max(rates):.0f} |")
+    return (
+        f"Measured {today} with `make bench` (`python -m langpref.bench`): `langpref import` of a plain recording "
+        "(300 episodes x 200 steps, 39-dim observations, 4-dim actions, features from the task file's function, no "
+        f"videos), best of {repeats}, one process.\n\n| episodes/s (target >= 50) |\n|---|\n| {max(rates):.0f} |"
+    )
 
 
-def selection_timings(env_name: str, answers: int = 40, candidates: int = 300, trials: int = 30,
-                      dim: int = 128) -> dict:
+def selection_timings(
+    env_name: str, answers: int = 40, candidates: int = 300, trials: int = 30, dim: int = 128
+) -> dict:
     """Active query selection with `answers` answers so far and `candidates` candidate trajectories (comparisons:
     every pair of them), in a toy latent space of D = `dim` (no dataset or model needed: the cost depends only on
     the sizes): the Laplace posterior at the fit, its draws and the scores. Milliseconds per trial, (median, p95)."""
@@ -378,8 +436,10 @@ def selection_timings(env_name: str, answers: int = 40, candidates: int = 300, t
     pool = space.split("train")[:candidates]
     cfg = RewardConfig()
     times: dict[str, list[float]] = {}
-    for kind_name, strategies in (("language", ("infogain", "lal-infogain")),
-                                  ("comparison", ("infogain", "volume-removal"))):
+    for kind_name, strategies in (
+        ("language", ("infogain", "lal-infogain")),
+        ("comparison", ("infogain", "volume-removal")),
+    ):
         kind = get_kind(kind_name)
         rng = np.random.default_rng([7, len(kind_name)])
         human = kind.make_human(sample_weights(len(space.feature_names), rng), space, pool, HumanConfig(), rng)
@@ -403,12 +463,15 @@ def selection_timings(env_name: str, answers: int = 40, candidates: int = 300, t
 
 def selection_table(envs: list[str], today: str, answers: int = 40, candidates: int = 300) -> str:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    lines = [f"Measured {today} with `python -m langpref.bench` (`selection_timings`), {cores} CPU cores, 30 trials: "
-             f"choosing the next query with {answers} answers so far and {candidates} candidate trajectories "
-             f"(comparisons: all {candidates * (candidates - 1) // 2} pairs), D = 128, 64 posterior draws "
-             "(lal-infogain: its own 10 x 100). Includes the Laplace posterior at the fit; not the refit itself (see "
-             "the reward update above). Target: p95 < 100 ms.\n",
-             "| env | strategy | median (ms) | p95 (ms) |", "|---|---|---|---|"]
+    lines = [
+        f"Measured {today} with `python -m langpref.bench` (`selection_timings`), {cores} CPU cores, 30 trials: "
+        f"choosing the next query with {answers} answers so far and {candidates} candidate trajectories "
+        f"(comparisons: all {candidates * (candidates - 1) // 2} pairs), D = 128, 64 posterior draws "
+        "(lal-infogain: its own 10 x 100). Includes the Laplace posterior at the fit; not the refit itself (see "
+        "the reward update above). Target: p95 < 100 ms.\n",
+        "| env | strategy | median (ms) | p95 (ms) |",
+        "|---|---|---|---|",
+    ]
     for env_name in envs:
         for what, (med, p95) in selection_timings(env_name, answers, candidates).items():
             lines.append(f"| {env_name} | {what} | {med:.1f} | {p95:.1f} |")
@@ -418,20 +481,37 @@ def selection_table(envs: list[str], today: str, answers: int = 40, candidates: 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--envs", nargs="+", default=["metaworld", "robosuite"])
-    p.add_argument("--default-datasets", action="store_true",
-                   help="also time a full default dataset per env (writes data/ENV; robosuite takes ~20-40 min)")
-    p.add_argument("--no-generator", dest="generator", action="store_false",
-                   help="skip the generator and Ray throughput tables")
+    p.add_argument(
+        "--default-datasets",
+        action="store_true",
+        help="also time a full default dataset per env (writes data/ENV; robosuite takes ~20-40 min)",
+    )
+    p.add_argument(
+        "--no-generator", dest="generator", action="store_false", help="skip the generator and Ray throughput tables"
+    )
     p.add_argument("--no-ray", dest="ray", action="store_false", help="skip the Ray backend comparison")
-    p.add_argument("--no-uses", dest="uses", action="store_false",
-                   help="skip the reward-update and improvement-step latencies (need the default model)")
-    p.add_argument("--no-sweep", dest="sweep", action="store_false",
-                   help="skip the experiment-sweep projection (needs the default dataset data/ENV)")
-    p.add_argument("--no-gate", dest="gate", action="store_false",
-                   help="skip the feedback-gate table (held-out phrasings let through, nonsense refused)")
+    p.add_argument(
+        "--no-uses",
+        dest="uses",
+        action="store_false",
+        help="skip the reward-update and improvement-step latencies (need the default model)",
+    )
+    p.add_argument(
+        "--no-sweep",
+        dest="sweep",
+        action="store_false",
+        help="skip the experiment-sweep projection (needs the default dataset data/ENV)",
+    )
+    p.add_argument(
+        "--no-gate",
+        dest="gate",
+        action="store_false",
+        help="skip the feedback-gate table (held-out phrasings let through, nonsense refused)",
+    )
     p.add_argument("--no-import", dest="import_", action="store_false", help="skip the `langpref import` rate")
-    p.add_argument("--no-selection", dest="selection", action="store_false",
-                   help="skip the active query selection latency")
+    p.add_argument(
+        "--no-selection", dest="selection", action="store_false", help="skip the active query selection latency"
+    )
     p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
     args = p.parse_args(argv)
     today = dt.date.today().isoformat()
@@ -451,14 +531,18 @@ def main(argv: list[str] | None = None) -> None:
     if args.sweep:
         write_section("sweep-projection", sweep_table(args.envs, today))
     if args.default_datasets:
-        lines = [f"Measured {today} with `python -m langpref.bench --default-datasets` (all cores).\n",
-                 "| env | trajectories | wall time | task success | largest abs off-diagonal feature correlation |",
-                 "|---|---|---|---|---|"]
+        lines = [
+            f"Measured {today} with `python -m langpref.bench --default-datasets` (all cores).\n",
+            "| env | trajectories | wall time | task success | largest abs off-diagonal feature correlation |",
+            "|---|---|---|---|---|",
+        ]
         for env_name in args.envs:
             r = default_dataset_wall(env_name, Path("data") / env_name)
             d = r["inspect"]
-            lines.append(f"| {env_name} | {d['num_trajectories']} | {r['wall_s'] / 60:.1f} min ({r['workers']} workers)"
-                         f" | {d['success_rate']:.1%} | {d['max_abs_off_diagonal_correlation']:.2f} |")
+            lines.append(
+                f"| {env_name} | {d['num_trajectories']} | {r['wall_s'] / 60:.1f} min ({r['workers']} workers)"
+                f" | {d['success_rate']:.1%} | {d['max_abs_off_diagonal_correlation']:.2f} |"
+            )
         write_section("default-datasets", "\n".join(lines))
     print(f"wrote {RESULTS}")
 

@@ -41,14 +41,21 @@ def field_docs(cls: type) -> dict[str, str]:
         body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
     except (OSError, TypeError):
         return {}
-    return {a.target.id: " ".join(b.value.value.split()) for a, b in itertools.pairwise(body)
-            if isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name) and isinstance(b, ast.Expr)
-            and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str)}
+    return {
+        a.target.id: " ".join(b.value.value.split())
+        for a, b in itertools.pairwise(body)
+        if isinstance(a, ast.AnnAssign)
+        and isinstance(a.target, ast.Name)
+        and isinstance(b, ast.Expr)
+        and isinstance(b.value, ast.Constant)
+        and isinstance(b.value.value, str)
+    }
 
 
 def _comma_tuple(item: type):
     def parse(text: str) -> tuple:
         return tuple(item(x) for x in text.split(","))
+
     parse.__name__ = f"comma-separated {item.__name__}s"
     return parse
 
@@ -69,8 +76,16 @@ def _default(f: dataclasses.Field) -> Any:
     return f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING
 
 
-def add_config(p: argparse.ArgumentParser, cls: type, opts: dict[str, Any] | None = None, *, prefix: str = "",
-               flag_prefix: str = "", only: tuple[str, ...] | None = None, unset: bool = False) -> None:
+def add_config(
+    p: argparse.ArgumentParser,
+    cls: type,
+    opts: dict[str, Any] | None = None,
+    *,
+    prefix: str = "",
+    flag_prefix: str = "",
+    only: tuple[str, ...] | None = None,
+    unset: bool = False,
+) -> None:
     """Add an option for each field of `cls` (see the module docstring); `only` keeps the named (dotted) fields;
     `unset`: options default to None ("not given") and say the field's default in their help."""
     opts, hints, docs = opts or {}, typing.get_type_hints(cls), field_docs(cls)
@@ -105,7 +120,7 @@ def add_config(p: argparse.ArgumentParser, cls: type, opts: dict[str, Any] | Non
 
 def args_of(args: argparse.Namespace, prefix: str = "") -> dict[str, Any]:
     """The parsed values whose destination starts with `prefix`, keyed by the rest of it."""
-    return {k[len(prefix):]: v for k, v in vars(args).items() if k.startswith(prefix)}
+    return {k[len(prefix) :]: v for k, v in vars(args).items() if k.startswith(prefix)}
 
 
 def from_args(cls: type, args: argparse.Namespace, prefix: str = "", **given: Any) -> Any:
@@ -127,9 +142,11 @@ def from_args(cls: type, args: argparse.Namespace, prefix: str = "", **given: An
 
 def command(name: str, help: str, options: list[Options], description: str | None = None):
     """Register the decorated function as `langpref NAME`; each of `options` adds options to its parser."""
+
     def register(run: Callable[[argparse.Namespace], None]) -> Callable[[argparse.Namespace], None]:
         COMMANDS[name] = (help, description, options, run)
         return run
+
     return register
 
 
@@ -143,9 +160,11 @@ def path(*flags: str, **kw: Any) -> Options:
 
 def config(where: str, opts: dict | Callable[[], dict] | None = None, **kw: Any) -> Options:
     """The options of the config dataclass `module:Class` (imported only when the command's options are built)."""
+
     def add(p: argparse.ArgumentParser) -> None:
         module, name = where.split(":")
         add_config(p, getattr(importlib.import_module(module), name), opts() if callable(opts) else opts, **kw)
+
     return add
 
 
@@ -159,21 +178,30 @@ def record(args: argparse.Namespace, where: str | Path, config: Any = None, **in
     from langpref import __version__
 
     if config is None:
-        config = {k: v for k, v in vars(args).items()
-                  if k not in ("func", "argv", "json", "command", "experiment", "study_command")}
-    out = {"langpref_version": __version__, "command": shlex.join(["langpref", *args.argv]),
-           "config": {**inputs, "config": config} if inputs else config}
+        config = {
+            k: v
+            for k, v in vars(args).items()
+            if k not in ("func", "argv", "json", "command", "experiment", "study_command")
+        }
+    out = {
+        "langpref_version": __version__,
+        "command": shlex.join(["langpref", *args.argv]),
+        "config": {**inputs, "config": config} if inputs else config,
+    }
     Path(where).parent.mkdir(parents=True, exist_ok=True)
-    Path(where).write_text(json.dumps(out, indent=2, default=lambda o: dataclasses.asdict(o)
-                                      if dataclasses.is_dataclass(o) else str(o)) + "\n")
+    Path(where).write_text(
+        json.dumps(out, indent=2, default=lambda o: dataclasses.asdict(o) if dataclasses.is_dataclass(o) else str(o))
+        + "\n"
+    )
 
 
 def beside(file: str | Path) -> Path:
     return Path(file).with_suffix(".config.json")
 
 
-def make_parser(prog: str, description: str, groups_help: dict[str, tuple[str, str, str]],
-                argv: list[str] | None = None) -> argparse.ArgumentParser:
+def make_parser(
+    prog: str, description: str, groups_help: dict[str, tuple[str, str, str]], argv: list[str] | None = None
+) -> argparse.ArgumentParser:
     """Every registered command with its help (`groups_help`: help, dest and metavar of each group of commands); a
     command's options only when `argv` names it (all of them without `argv`), so the others import nothing."""
     parser = argparse.ArgumentParser(prog=prog, description=description)
@@ -185,10 +213,11 @@ def make_parser(prog: str, description: str, groups_help: dict[str, tuple[str, s
             about, dest, metavar = groups_help[group[0]]
             g = top.add_parser(group[0], help=about, description=about[0].upper() + about[1:] + ".")
             groups[group[0]] = g.add_subparsers(dest=dest, required=True, metavar=metavar)
-        p = (groups[group[0]] if group else top).add_parser(leaf, help=text,
-                                                            description=about_cmd or text[0].upper() + text[1:] + ".")
+        p = (groups[group[0]] if group else top).add_parser(
+            leaf, help=text, description=about_cmd or text[0].upper() + text[1:] + "."
+        )
         p.set_defaults(func=run)
-        if argv is None or argv[:len(group) + 1] == [*group, leaf]:
+        if argv is None or argv[: len(group) + 1] == [*group, leaf]:
             for add in options:
                 add(p)
     return parser

@@ -28,8 +28,9 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     if (data / "meta.json").exists():
         print(f"   reusing {data} (delete it to regenerate)")
     else:
-        generate(GenerateConfig(env="metaworld", out=data, num_trajectories=num_trajectories, workers=workers,
-                                force=True))
+        generate(
+            GenerateConfig(env="metaworld", out=data, num_trajectories=num_trajectories, workers=workers, force=True)
+        )
     made["dataset"] = str(data)
 
     _banner("2. Inspecting the dataset: feature ranges and how independent the features are")
@@ -61,13 +62,11 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     if (model_dir / "config.json").exists():
         print(f"   reusing {model_dir} (delete it to retrain)")
     else:
-        cfg = replace(TrainConfig(), data=str(data), out=str(model_dir), stage1_epochs=12, stage2_epochs=6,
-                      force=True)
+        cfg = replace(TrainConfig(), data=str(data), out=str(model_dir), stage1_epochs=12, stage2_epochs=6, force=True)
         train(cfg)
     made["model"] = str(model_dir)
     model = load_model(model_dir, dataset=ds)
-    accuracy = evaluate_split(model, ds, "test", phrasings_from_bank(load_bank("metaworld"), "test",
-                                                                     ds.feature_names))
+    accuracy = evaluate_split(model, ds, "test", phrasings_from_bank(load_bank("metaworld"), "test", ds.feature_names))
     made["test_accuracy"] = f"{accuracy['accuracy']:.3f} on {accuracy['num_samples']} (pair, unseen phrasing) samples"
     print(f"   test accuracy with unseen phrasings: {made['test_accuracy']} (paper, full data: 0.829)")
     for name, acc in accuracy["per_feature"].items():
@@ -89,17 +88,29 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
         print(f"   {s:<8} normalised true reward: iteration 0 {r['curve'][0]:.2f} -> iteration 15 {r['curve'][-1]:.2f}")
 
     _banner("6. Reward learning: comparative language vs pairwise comparisons (2 humans x 2 seeds, 20 queries)")
-    rewards = {fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=20, humans=2, seeds=2))
-               for fb in ("language", "comparison")}
+    rewards = {
+        fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=20, humans=2, seeds=2))
+        for fb in ("language", "comparison")
+    }
     made["reward_figure"] = str(plot_reward_curves(rewards, out / "reward_learning.png", "Reward learning"))
     for fb, r in rewards.items():
-        print(f"   {fb:<10} cross-entropy after 20 queries {r['cross_entropy'][-1]:.3f}, "
-              f"true reward of the learned best {r['true_reward_of_best'][-1]:.2f}")
-    (out / "summary.json").write_text(json.dumps({"made": made, "accuracy": accuracy,
-                                                   "improvement": {s: r["curve"] for s, r in results.items()},
-                                                   "reward": {fb: {k: r[k] for k in ("cross_entropy",
-                                                                                     "true_reward_of_best")}
-                                                              for fb, r in rewards.items()}}, indent=2))
+        print(
+            f"   {fb:<10} cross-entropy after 20 queries {r['cross_entropy'][-1]:.3f}, "
+            f"true reward of the learned best {r['true_reward_of_best'][-1]:.2f}"
+        )
+    (out / "summary.json").write_text(
+        json.dumps(
+            {
+                "made": made,
+                "accuracy": accuracy,
+                "improvement": {s: r["curve"] for s, r in results.items()},
+                "reward": {
+                    fb: {k: r[k] for k in ("cross_entropy", "true_reward_of_best")} for fb, r in rewards.items()
+                },
+            },
+            indent=2,
+        )
+    )
 
     _banner(f"Done in {time.time() - start:.0f} s. What the demo made:")
     for key, value in made.items():
@@ -109,7 +120,7 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
         "\nGo further:\n"
         "   langpref generate --env metaworld --out data/metaworld       # the paper's 324 trajectories (~2 min)\n"
         "   langpref train --data data/metaworld --out models/metaworld  # the full two-stage training\n"
-        "   langpref embed --model models/metaworld \"stay further from the button\" --json\n"
+        '   langpref embed --model models/metaworld "stay further from the button" --json\n'
         "   langpref experiment reward --env metaworld --model models/metaworld\n"
         "   make reproduce                                               # every experiment, both envs (hours)\n"
         "   langpref study serve --model models/metaworld --data data/metaworld   # a user study in the browser\n"

@@ -112,8 +112,9 @@ def printed_objective(phi_candidates: np.ndarray, phi_current: np.ndarray, psi: 
     return num / den
 
 
-def improvement_step(phi_candidates: np.ndarray, phi_current: np.ndarray, psi: np.ndarray,
-                     objective: str = "cosine") -> int:
+def improvement_step(
+    phi_candidates: np.ndarray, phi_current: np.ndarray, psi: np.ndarray, objective: str = "cosine"
+) -> int:
     """Row of `phi_candidates` maximising Eq. 4 (`objective`: `cosine` or `printed`; the first one on ties)."""
     score = cosine_objective if objective == "cosine" else printed_objective
     return int(np.argmax(score(phi_candidates, phi_current, psi)))
@@ -140,8 +141,9 @@ class ImprovementRun:
     """Wall time of each generation step (candidates `generated`)."""
 
 
-def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_seed: tuple[int, ...],
-                    generation=None, store=None) -> ImprovementRun:
+def run_improvement(
+    space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_seed: tuple[int, ...], generation=None, store=None
+) -> ImprovementRun:
     """One improvement run with the synthetic human of weights `w`. Candidates `generated` need a
     `langpref.propose.Generation` (and store the generated trajectories shown in `store`, a `GeneratedStore`)."""
     cfg.validate()
@@ -150,16 +152,26 @@ def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_s
     rng_start, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
     n, extra = len(space.phi), (cfg.iterations if cfg.generated else 0)
     if cfg.generated and generation is None:
-        raise LangprefError("candidates `generated` need the simulator and the dataset's controller parameters "
-                            "(langpref.propose.Generation)")
+        raise LangprefError(
+            "candidates `generated` need the simulator and the dataset's controller parameters "
+            "(langpref.propose.Generation)"
+        )
     # Rows n.. hold the trajectories generated in this run, filled as they are shown: phi for the method, theta for
     # the human (and the score). The proposer sees only phi, through the objective.
     phi = np.concatenate([space.phi, np.zeros((extra, space.dim))]) if extra else space.phi
     theta = np.concatenate([space.theta, np.zeros((extra, space.theta.shape[1]))]) if extra else space.theta
     units = np.concatenate([generation.units, np.zeros((extra, generation.units.shape[1]))]) if extra else None
     view = replace(space, phi=phi, theta=theta) if extra else space
-    human = LanguageHuman(w, theta, space.table(cfg.human.phrase_source), cands, space.feature_names,
-                          cfg.human.temperature, rng_human, direction=cfg.human.direction)
+    human = LanguageHuman(
+        w,
+        theta,
+        space.table(cfg.human.phrase_source),
+        cands,
+        space.feature_names,
+        cfg.human.temperature,
+        rng_human,
+        direction=cfg.human.direction,
+    )
     learner = RewardLearner(space.dim, cfg.reward, seed=int(run_seed[-1])) if cfg.strategy == "history" else None
     proposer = generation.proposer(key=(*run_seed, 52711)) if cfg.generated else None
     pool = list(cands)
@@ -193,8 +205,15 @@ def run_improvement(space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_s
                     store.add(traj, run=[int(x) for x in run_seed], iteration=it + 1, strategy=cfg.strategy)
         shown.append(cur)
     raw = true_reward(w, theta[shown])
-    return ImprovementRun(shown, normalised_reward(raw, R_split).tolist(), raw.tolist(), float(R_split.max()),
-                          said, [s >= n for s in shown] if extra else [], step_s)
+    return ImprovementRun(
+        shown,
+        normalised_reward(raw, R_split).tolist(),
+        raw.tolist(),
+        float(R_split.max()),
+        said,
+        [s >= n for s in shown] if extra else [],
+        step_s,
+    )
 
 
 def summarise(runs: list[ImprovementRun]) -> dict:
@@ -224,11 +243,18 @@ def improve(space: LatentSpace, cfg: ImproveConfig, progress: bool = True, gener
     if cfg.generated and cfg.generated_out:
         from langpref.propose import GeneratedStore
 
-        store = GeneratedStore(cfg.generated_out, space.env, generation.horizon,
-                               {"source": generation.source, "command": "improve", "config": asdict(cfg)})
-    runs = [run_improvement(space, human_weights(len(space.feature_names), cfg.seed, s), cfg, (cfg.seed, s),
-                            generation, store)
-            for s in tqdm(range(cfg.seeds), desc=f"improve {cfg.strategy}", disable=not progress, file=sys.stderr)]
+        store = GeneratedStore(
+            cfg.generated_out,
+            space.env,
+            generation.horizon,
+            {"source": generation.source, "command": "improve", "config": asdict(cfg)},
+        )
+    runs = [
+        run_improvement(
+            space, human_weights(len(space.feature_names), cfg.seed, s), cfg, (cfg.seed, s), generation, store
+        )
+        for s in tqdm(range(cfg.seeds), desc=f"improve {cfg.strategy}", disable=not progress, file=sys.stderr)
+    ]
     out = {**summarise(runs), "strategy": cfg.strategy, "config": asdict(cfg), "space": space.description}
     if cfg.generated:
         out.update(generation_stats(runs), generated_out=cfg.generated_out, propose=asdict(generation.cfg))
@@ -239,10 +265,12 @@ def generation_stats(runs: list[ImprovementRun]) -> dict:
     """Latency of the generation steps (p50, p95, max, in seconds) and the share of shown trajectories generated."""
     steps = np.concatenate([r.step_s for r in runs]) if runs else np.zeros(0)
     shown = np.array([g for r in runs for g in r.generated[1:]], dtype=bool)
-    return {"step_s_p50": float(np.percentile(steps, 50)) if len(steps) else None,
-            "step_s_p95": float(np.percentile(steps, 95)) if len(steps) else None,
-            "step_s_max": float(steps.max()) if len(steps) else None,
-            "generated_share": float(shown.mean()) if len(shown) else 0.0}
+    return {
+        "step_s_p50": float(np.percentile(steps, 50)) if len(steps) else None,
+        "step_s_p95": float(np.percentile(steps, 95)) if len(steps) else None,
+        "step_s_max": float(steps.max()) if len(steps) else None,
+        "generated_share": float(shown.mean()) if len(shown) else 0.0,
+    }
 
 
 def plot_improvement(results: dict[str, dict], out: str | Path, title: str = "") -> Path:

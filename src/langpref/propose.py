@@ -144,8 +144,10 @@ class AffineScale:
         for f in range(features.shape[1]):
             a[f], b[f] = np.polyfit(features[:, f], target[:, f], 1)
         if not np.allclose(features * a + b, target, rtol=1e-6, atol=1e-6 * (1 + np.abs(target).max())):
-            raise LangprefError("the space's theta is not a per-feature affine map of the dataset's features (one "
-                                "horizon); generated trajectories cannot be scored on its scale")
+            raise LangprefError(
+                "the space's theta is not a per-feature affine map of the dataset's features (one "
+                "horizon); generated trajectories cannot be scored on its scale"
+            )
         return cls(a, b)
 
     def __call__(self, features: np.ndarray) -> np.ndarray:
@@ -169,14 +171,18 @@ def dataset_units(dataset) -> np.ndarray:
         return np.array([t.controller_params["unit"] for t in trajs], dtype=np.float64)
     seed = dataset.meta.config.get("seed")
     if seed is None or any(t.seed is None for t in trajs):
-        raise LangprefError(f"dataset {dataset.root} does not say how its controllers were drawn (no seed); "
-                            "generate it with `langpref generate`")
+        raise LangprefError(
+            f"dataset {dataset.root} does not say how its controllers were drawn (no seed); "
+            "generate it with `langpref generate`"
+        )
     units = controller_units(dataset.env, len(dataset), int(seed))
     for i, t in enumerate(trajs):
         params = _json.loads(_json.dumps(sim.make_controller(units[i], np.random.default_rng(t.seed)).params))
         if params != {k: v for k, v in t.controller_params.items() if k != "unit"}:
-            raise LangprefError(f"trajectory {i} of {dataset.root} was not made by the controller parameters "
-                                "`langpref generate` draws; regenerate the dataset")
+            raise LangprefError(
+                f"trajectory {i} of {dataset.root} was not made by the controller parameters "
+                "`langpref generate` draws; regenerate the dataset"
+            )
     return units
 
 
@@ -219,8 +225,16 @@ class Proposer:
     """Searches the controller parameters of task `env` (see the module docstring). `units` and `phi` are the
     (parameters, embedding) pairs the surrogate starts from; `key` makes its rollout seeds its own."""
 
-    def __init__(self, env: str, horizon: int, units: np.ndarray, phi: np.ndarray, embed: Embedder,
-                 cfg: ProposeConfig | None = None, key: tuple[int, ...] = (0,)):
+    def __init__(
+        self,
+        env: str,
+        horizon: int,
+        units: np.ndarray,
+        phi: np.ndarray,
+        embed: Embedder,
+        cfg: ProposeConfig | None = None,
+        key: tuple[int, ...] = (0,),
+    ):
         from langpref.tasks import get_simulator, get_task
 
         self.cfg = cfg or ProposeConfig()
@@ -241,8 +255,14 @@ class Proposer:
 
         top = 1.0 - 1e-9
         x0 = np.clip(np.asarray(start, dtype=np.float64), 0.02, 0.98)
-        opts = {"bounds": [0.0, top], "seed": seed % (2**31 - 2) + 1, "verbose": -9,
-                "maxiter": self.cfg.search_generations, "tolfun": 1e-9, "tolx": 1e-5}
+        opts = {
+            "bounds": [0.0, top],
+            "seed": seed % (2**31 - 2) + 1,
+            "verbose": -9,
+            "maxiter": self.cfg.search_generations,
+            "tolfun": 1e-9,
+            "tolx": 1e-5,
+        }
         es = cma.CMAEvolutionStrategy(x0, self.cfg.search_sigma, opts)
         seen, scores = [], []
         while not es.stop():
@@ -280,8 +300,14 @@ class Proposer:
         self.surrogate.add(units, phi)
         scores = np.asarray(objective(phi), dtype=np.float64)
         order = np.argsort(-scores, kind="stable")
-        return Proposal([trajs[i] for i in order], units[order], phi[order], scores[order], predicted[order],
-                        time.perf_counter() - t0)
+        return Proposal(
+            [trajs[i] for i in order],
+            units[order],
+            phi[order],
+            scores[order],
+            predicted[order],
+            time.perf_counter() - t0,
+        )
 
     def optimise(self, objective: Objective, start: np.ndarray, step: tuple[int, ...] = ()) -> Proposal:
         """`optimize_rounds` generation steps, each starting from the best real rollout so far; all their rollouts,
@@ -295,8 +321,14 @@ class Proposer:
         scores = np.concatenate([p.scores for p in parts])
         predicted = np.concatenate([p.surrogate_scores for p in parts])
         order = np.argsort(-scores, kind="stable")
-        return Proposal([trajs[i] for i in order], units[order], phi[order], scores[order], predicted[order],
-                        sum(p.wall_s for p in parts))
+        return Proposal(
+            [trajs[i] for i in order],
+            units[order],
+            phi[order],
+            scores[order],
+            predicted[order],
+            sum(p.wall_s for p in parts),
+        )
 
 
 # ---- what a command needs: the dataset's parameters and embeddings, the encoder -----------------------------------
@@ -324,20 +356,34 @@ class Generation:
         from langpref.tasks import get_task
 
         if get_task(dataset.env).simulator is None:
-            raise LangprefError(f"task {dataset.env!r} has no simulator: new trajectories can only be generated for "
-                                "simulated tasks (metaworld, robosuite, plugins)")
+            raise LangprefError(
+                f"task {dataset.env!r} has no simulator: new trajectories can only be generated for "
+                "simulated tasks (metaworld, robosuite, plugins)"
+            )
         if dataset.meta.lengths is not None:
-            raise LangprefError(f"dataset {dataset.root} has episodes of different lengths; generation needs one "
-                                "horizon")
+            raise LangprefError(
+                f"dataset {dataset.root} has episodes of different lengths; generation needs one horizon"
+            )
         feats = np.asarray(dataset.features, dtype=np.float64)
         scale = AffineScale.fit(feats, space.theta)  # the humans' theta, whatever its scale (standardised, paper)
-        embed = (oracle_embedder(AffineScale.fit(feats, space.phi[:, :-1]), float(space.phi[0, -1]))
-                 if model is None else model_embedder(model))
+        embed = (
+            oracle_embedder(AffineScale.fit(feats, space.phi[:, :-1]), float(space.phi[0, -1]))
+            if model is None
+            else model_embedder(model)
+        )
         cfg = cfg or ProposeConfig()
         cfg.validate()
         _env(dataset.env, dataset.meta.horizon)  # start the simulator now, not in the first generation step
-        return cls(dataset.env, dataset.meta.horizon, dataset_units(dataset), np.asarray(space.phi), embed, scale,
-                   cfg, str(dataset.root))
+        return cls(
+            dataset.env,
+            dataset.meta.horizon,
+            dataset_units(dataset),
+            np.asarray(space.phi),
+            embed,
+            scale,
+            cfg,
+            str(dataset.root),
+        )
 
     def proposer(self, key: tuple[int, ...] = (0,)) -> Proposer:
         return Proposer(self.env, self.horizon, self.units, self.phi, self.embed, self.cfg, key)
@@ -348,8 +394,7 @@ class Generation:
         return self.scale(traj.features)
 
 
-def open_generation(data: str | Path, model: str | Path | None, space, cfg: ProposeConfig | None = None
-                    ) -> Generation:
+def open_generation(data: str | Path, model: str | Path | None, space, cfg: ProposeConfig | None = None) -> Generation:
     """`Generation.open` from a dataset directory and a checkpoint directory (None: the oracle space)."""
     from langpref.dataset.storage import load_dataset
 
@@ -376,8 +421,10 @@ class GeneratedStore:
         if (self.root / "meta.json").exists():
             old = load_dataset(self.root, env=env)
             if old.meta.horizon != self.horizon:
-                raise LangprefError(f"{self.root} holds generated trajectories of horizon {old.meta.horizon}, "
-                                    f"not {horizon}; choose another directory")
+                raise LangprefError(
+                    f"{self.root} holds generated trajectories of horizon {old.meta.horizon}, "
+                    f"not {horizon}; choose another directory"
+                )
             self.features = list(np.asarray(old.features))
 
     def __len__(self) -> int:
@@ -394,10 +441,16 @@ class GeneratedStore:
         save_trajectory(self.root, traj)
         self.features.append(traj.features)
         n = len(self.features)
-        meta = DatasetMeta(self.env, self.horizon, [asdict(f) for f in task.obs_layout], task.action_dim,
-                           list(task.features), {GENERATED: list(range(n))}, n,
-                           config={"generator": "langpref.propose (CMA-ES on a surrogate, decided by real rollouts)",
-                                   **self.info})
+        meta = DatasetMeta(
+            self.env,
+            self.horizon,
+            [asdict(f) for f in task.obs_layout],
+            task.action_dim,
+            list(task.features),
+            {GENERATED: list(range(n))},
+            n,
+            config={"generator": "langpref.propose (CMA-ES on a surrogate, decided by real rollouts)", **self.info},
+        )
         write_meta(self.root, meta, np.array(self.features))
         (self.root / "generated.json").write_text(json.dumps(self.info, indent=2, default=str) + "\n")
         return traj.index

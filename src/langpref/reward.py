@@ -112,9 +112,11 @@ class RewardLearner:
             self.params = [torch.zeros(dim, dtype=torch.float64, requires_grad=True)]
         else:
             h = self.cfg.hidden
-            self.params = [(torch.randn(dim, h, generator=gen, dtype=torch.float64) / dim ** 0.5).requires_grad_(),
-                           torch.zeros(h, dtype=torch.float64, requires_grad=True),
-                           (torch.randn(h, generator=gen, dtype=torch.float64) / h ** 0.5).requires_grad_()]
+            self.params = [
+                (torch.randn(dim, h, generator=gen, dtype=torch.float64) / dim**0.5).requires_grad_(),
+                torch.zeros(h, dtype=torch.float64, requires_grad=True),
+                (torch.randn(h, generator=gen, dtype=torch.float64) / h**0.5).requires_grad_(),
+            ]
         self.batches: list[PairBatch] = []
         self._data: tuple | None = None
 
@@ -138,9 +140,14 @@ class RewardLearner:
         if self._data is None:
             w = np.concatenate([b.weights for b in self.batches])
             w = w / w.sum()
-            self._data = tuple(torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)) for a in (
-                np.concatenate([b.winners for b in self.batches]),
-                np.concatenate([b.losers for b in self.batches]), w))
+            self._data = tuple(
+                torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))
+                for a in (
+                    np.concatenate([b.winners for b in self.batches]),
+                    np.concatenate([b.losers for b in self.batches]),
+                    w,
+                )
+            )
         win, lose, weight = self._data
         margin = self._reward(win) - self._reward(lose)
         reg = sum((p * p).sum() for p in self.params)
@@ -152,8 +159,15 @@ class RewardLearner:
         if not self.batches:
             return
         torch = self._torch
-        opt = torch.optim.LBFGS(self.params, lr=1.0, max_iter=self.cfg.max_iter, tolerance_grad=1e-9,
-                                tolerance_change=1e-12, history_size=20, line_search_fn="strong_wolfe")
+        opt = torch.optim.LBFGS(
+            self.params,
+            lr=1.0,
+            max_iter=self.cfg.max_iter,
+            tolerance_grad=1e-9,
+            tolerance_change=1e-12,
+            history_size=20,
+            line_search_fn="strong_wolfe",
+        )
 
         def closure():
             opt.zero_grad()
@@ -219,14 +233,16 @@ class Curves:
     optimized_true_reward: float | None = None
     """With generation: the normalised true reward of r_xi's generated optimum after the last query."""
 
-    def record(self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray,
-               rationality: float) -> None:
+    def record(
+        self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray, rationality: float
+    ) -> None:
         r = learner.predict(space.phi[eval_rows])
         self.cross_entropy.append(cross_entropy(R_eval, r, rationality))
         self.true_reward_of_best.append(reward_of_best(R_eval, r))
 
 
 # ---- simulated sessions (`langpref learn-reward`) -----------------------------------------------------------------
+
 
 @dataclass
 class LearnRewardConfig:
@@ -270,8 +286,10 @@ class LearnRewardConfig:
         get_kind(self.feedback)
         check_strategy(self.selection, self.feedback)
         if self.selection != "random" and self.reward.model != "linear":
-            raise LangprefError(f"query selection {self.selection!r} needs the linear reward model; the "
-                                f"{self.reward.model} reward only works with random queries")
+            raise LangprefError(
+                f"query selection {self.selection!r} needs the linear reward model; the "
+                f"{self.reward.model} reward only works with random queries"
+            )
         if self.candidates is not None and self.candidates < 2:
             raise LangprefError(f"candidates must be >= 2, got {self.candidates}")
         if self.posterior_samples is not None and self.posterior_samples < 2:
@@ -287,8 +305,15 @@ def human_weights(num_features: int, seed: int, human: int) -> np.ndarray:
     return sample_weights(num_features, np.random.default_rng([seed, 7919, human]))
 
 
-def run_reward_learning(space: LatentSpace, w: np.ndarray, cfg: LearnRewardConfig, run_seed: tuple[int, ...],
-                        record: list | None = None, generation=None, learners: list | None = None) -> Curves:
+def run_reward_learning(
+    space: LatentSpace,
+    w: np.ndarray,
+    cfg: LearnRewardConfig,
+    run_seed: tuple[int, ...],
+    record: list | None = None,
+    generation=None,
+    learners: list | None = None,
+) -> Curves:
     """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each. Queries
     are drawn uniformly (`random`, from their own stream) or chosen by `cfg.query_selection` (from another stream,
     so the human's answers and the negatives use the same streams whatever the strategy). With `record`, appends
@@ -365,13 +390,22 @@ def optimized_summary(runs: list[Curves]) -> dict:
         return {}
     opt = np.array([c.optimized_true_reward for c in runs])
     picked = np.array([c.true_reward_of_best[-1] for c in runs])
-    return {"optimized_true_reward": opt.tolist(), "optimized_true_reward_mean": float(opt.mean()),
-            "optimized_beats_best_of_split": float((opt > 1.0).mean()),
-            "optimized_beats_true_reward_of_best": float((opt > picked).mean())}
+    return {
+        "optimized_true_reward": opt.tolist(),
+        "optimized_true_reward_mean": float(opt.mean()),
+        "optimized_beats_best_of_split": float((opt > 1.0).mean()),
+        "optimized_beats_true_reward_of_best": float((opt > picked).mean()),
+    }
 
 
-def learn_reward(space: LatentSpace, cfg: LearnRewardConfig, progress: bool = True, generation=None,
-                 save_reward: str | None = None, model: str | None = None) -> dict:
+def learn_reward(
+    space: LatentSpace,
+    cfg: LearnRewardConfig,
+    progress: bool = True,
+    generation=None,
+    save_reward: str | None = None,
+    model: str | None = None,
+) -> dict:
     """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config. With `generation`
     (`langpref.propose.Generation`), each run also generates r_xi's optimum (`optimized_true_reward`, one per run);
     with `save_reward` (a directory), each run's r_xi is written there for `langpref.rewards.LearnedReward`, beside
@@ -380,22 +414,44 @@ def learn_reward(space: LatentSpace, cfg: LearnRewardConfig, progress: bool = Tr
 
     cfg.validate()
     runs, saved = [], []
-    with tqdm(total=cfg.humans * cfg.seeds, desc=f"learn-reward {cfg.feedback} {cfg.selection}", disable=not progress,
-              file=sys.stderr) as bar:
+    with tqdm(
+        total=cfg.humans * cfg.seeds,
+        desc=f"learn-reward {cfg.feedback} {cfg.selection}",
+        disable=not progress,
+        file=sys.stderr,
+    ) as bar:
         for h in range(cfg.humans):
             w = human_weights(len(space.feature_names), cfg.seed, h)
             for s in range(cfg.seeds):
                 learners = [] if save_reward else None
-                runs.append(run_reward_learning(space, w, cfg, (cfg.seed, h, s), generation=generation,
-                                                learners=learners))
+                runs.append(
+                    run_reward_learning(space, w, cfg, (cfg.seed, h, s), generation=generation, learners=learners)
+                )
                 if save_reward:
                     from langpref.rewards import save_learned_reward
 
-                    saved.append(str(save_learned_reward(learners[0], save_reward, env=space.env, model=model,
-                                                         name=f"h{h}-s{s}", default=not saved)))
+                    saved.append(
+                        str(
+                            save_learned_reward(
+                                learners[0],
+                                save_reward,
+                                env=space.env,
+                                model=model,
+                                name=f"h{h}-s{s}",
+                                default=not saved,
+                            )
+                        )
+                    )
                 bar.update()
     extra = {"saved_rewards": saved} if saved else {}
     if generation is not None:
         extra["propose"] = asdict(generation.cfg)
-    return {**summarise(runs), "feedback": cfg.feedback, "loss": cfg.reward.loss, "query_selection": cfg.selection,
-            "config": asdict(cfg), "space": space.description, **extra}
+    return {
+        **summarise(runs),
+        "feedback": cfg.feedback,
+        "loss": cfg.reward.loss,
+        "query_selection": cfg.selection,
+        "config": asdict(cfg),
+        "space": space.description,
+        **extra,
+    }

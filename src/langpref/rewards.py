@@ -35,25 +35,33 @@ FORMAT_VERSION = 1
 DEFAULT_NAME = "reward.json"
 
 
-def save_learned_reward(learner, out: str | Path, *, env: str, model: str | Path | None, name: str = "reward",
-                        default: bool = False) -> Path:
+def save_learned_reward(
+    learner, out: str | Path, *, env: str, model: str | Path | None, name: str = "reward", default: bool = False
+) -> Path:
     """Write a `RewardLearner`'s r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`)."""
     from langpref.model.checkpoint import WEIGHTS, read_config
 
     if model is None:
-        raise LangprefError("--save-reward needs --model: a saved reward reads phi from a trained trajectory encoder "
-                            "(the oracle --perfect-latent space has none)")
+        raise LangprefError(
+            "--save-reward needs --model: a saved reward reads phi from a trained trajectory encoder "
+            "(the oracle --perfect-latent space has none)"
+        )
     model = Path(model).resolve()
     cfg = read_config(model)
     params = [p.detach().cpu().numpy().astype(np.float64).tolist() for p in learner.params]
     doc = {
-        "format": FORMAT, "format_version": FORMAT_VERSION, "task": env, "kind": learner.cfg.model,
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "task": env,
+        "kind": learner.cfg.model,
         "params": dict(zip(("xi",) if learner.cfg.model == "linear" else ("w1", "b1", "w2"), params)),
         "model": {"path": str(model), "sha256": cfg["files"][WEIGHTS]["sha256"]},
         "normalisation": cfg.get("normalisation", {}),
         "observation_deltas": bool(cfg["model"].get("observation_deltas", False)),
-        "obs_dim": cfg["data"]["obs_dim"], "action_dim": cfg["data"]["action_dim"],
-        "dataset_horizon": cfg["data"]["horizon"], "queries": learner.num_queries,
+        "obs_dim": cfg["data"]["obs_dim"],
+        "action_dim": cfg["data"]["action_dim"],
+        "dataset_horizon": cfg["data"]["horizon"],
+        "queries": learner.num_queries,
         "reward_config": {k: v for k, v in vars(learner.cfg).items()},
     }
     out = Path(out)
@@ -79,8 +87,9 @@ class SavedReward:
         try:
             doc = json.loads(path.read_text())
         except FileNotFoundError:
-            raise LangprefError(f"no saved reward at {path}: write one with `langpref learn-reward ... "
-                                "--save-reward DIR`") from None
+            raise LangprefError(
+                f"no saved reward at {path}: write one with `langpref learn-reward ... --save-reward DIR`"
+            ) from None
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise LangprefError(f"{path} is not a saved reward (not JSON)") from None
         if doc.get("format") != FORMAT or doc.get("format_version") != FORMAT_VERSION:
@@ -95,8 +104,10 @@ class SavedReward:
         self.obs_dim, self.action_dim = int(doc["obs_dim"]), int(doc["action_dim"])
         self.mean, self.std = state["traj.mean"].astype(np.float64), state["traj.std"].astype(np.float64)
         layers = sorted({int(k.split(".")[2]) for k in state if k.startswith("traj.body.")})
-        self.body = [(state[f"traj.body.{i}.weight"].astype(np.float64),
-                      state[f"traj.body.{i}.bias"].astype(np.float64)) for i in layers]
+        self.body = [
+            (state[f"traj.body.{i}.weight"].astype(np.float64), state[f"traj.body.{i}.bias"].astype(np.float64))
+            for i in layers
+        ]
         self.out = (state["traj.out.weight"].astype(np.float64), state["traj.out.bias"].astype(np.float64))
         self.params = {k: np.asarray(v, dtype=np.float64) for k, v in doc["params"].items()}
 
@@ -134,9 +145,11 @@ class LearnedReward(_import_gym().Wrapper):
         self.reward = reward if isinstance(reward, SavedReward) else SavedReward(reward)
         shape = getattr(env.observation_space, "shape", None)
         if shape != (self.reward.obs_dim,) or env.action_space.shape != (self.reward.action_dim,):
-            raise LangprefError(f"the reward was learned on observations of {self.reward.obs_dim} and actions of "
-                                f"{self.reward.action_dim} numbers; this env has {shape} and "
-                                f"{env.action_space.shape}: use langpref/{self.reward.task}")
+            raise LangprefError(
+                f"the reward was learned on observations of {self.reward.obs_dim} and actions of "
+                f"{self.reward.action_dim} numbers; this env has {shape} and "
+                f"{env.action_space.shape}: use langpref/{self.reward.task}"
+            )
         self._obs = self._prev = None
         self._sum = np.zeros(0)
         self._t = 0

@@ -56,8 +56,9 @@ def test_refuses_to_overwrite(tiny):
         generate(GenerateConfig(env="metaworld", out=tiny / "one", num_trajectories=6, horizon=60, seed=5))
 
 
-@pytest.mark.parametrize("field, message", [("num_trajectories", "at least 3"), ("horizon", "at least 2"),
-                                            ("workers", "at least 1")])
+@pytest.mark.parametrize(
+    "field, message", [("num_trajectories", "at least 3"), ("horizon", "at least 2"), ("workers", "at least 1")]
+)
 def test_a_zero_option_is_refused_not_taken_for_the_default(tmp_path, field, message):
     with pytest.raises(LangprefError, match=message):
         GenerateConfig(env="metaworld", out=tmp_path / "d", **{field: 0}).resolved()

@@ -20,12 +20,20 @@ from langpref.tasks.taskfile import read_task_file
 
 LEROBOT_FIXTURE = Path(__file__).parents[1] / "fixtures" / "lerobot" / "tiny"
 BANK = {
-    "reach": {"increase": ["Reach further.", "Stretch out more.", "Extend your arm more.", "Go further out.",
-                           "Reach out farther."],
-              "decrease": ["Reach less.", "Stay closer in.", "Keep your arm in.", "Don't reach so far.",
-                           "Pull back more."]},
-    "effort": {"increase": ["Push harder.", "Use more force.", "Put more effort in.", "Be more forceful."],
-               "decrease": ["Push softer.", "Use less force.", "Be gentler.", "Go easy."]},
+    "reach": {
+        "increase": [
+            "Reach further.",
+            "Stretch out more.",
+            "Extend your arm more.",
+            "Go further out.",
+            "Reach out farther.",
+        ],
+        "decrease": ["Reach less.", "Stay closer in.", "Keep your arm in.", "Don't reach so far.", "Pull back more."],
+    },
+    "effort": {
+        "increase": ["Push harder.", "Use more force.", "Put more effort in.", "Be more forceful."],
+        "decrease": ["Push softer.", "Use less force.", "Be gentler.", "Go easy."],
+    },
 }
 FEATURES_PY = """import numpy as np
 
@@ -43,8 +51,12 @@ def broken(observations, actions):
 """
 
 
-def write_task(root: Path, features_from: str | None = "features.py:step_features", bank: dict | None = None,
-               name: str = "toy-reach") -> Path:
+def write_task(
+    root: Path,
+    features_from: str | None = "features.py:step_features",
+    bank: dict | None = None,
+    name: str = "toy-reach",
+) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     (root / "features.py").write_text(FEATURES_PY)
     (root / "bank.json").write_text(json.dumps(bank or BANK))
@@ -63,8 +75,13 @@ def write_plain(root: Path, n: int = 8, with_features: bool = False, seed: int =
     for i in range(n):
         steps = 10 + 3 * i  # every episode a different length
         extra = {"features": rng.normal(size=2)} if with_features else {}
-        np.savez(root / f"ep{i:02d}.npz", observations=rng.normal(size=(steps, 5)).astype(np.float32),
-                 actions=rng.normal(size=(steps, 2)).astype(np.float32), success=np.array(i % 2 == 0), **extra)
+        np.savez(
+            root / f"ep{i:02d}.npz",
+            observations=rng.normal(size=(steps, 5)).astype(np.float32),
+            actions=rng.normal(size=(steps, 2)).astype(np.float32),
+            success=np.array(i % 2 == 0),
+            **extra,
+        )
     (root / "notes.txt").write_text("other files are ignored")
     return root
 
@@ -100,18 +117,23 @@ def test_plain_folder_with_feature_function(tmp_path):
 
 
 def test_plain_folder_with_features_in_the_files(tmp_path):
-    run_import(write_plain(tmp_path / "rec", with_features=True), write_task(tmp_path / "task", None),
-               tmp_path / "ds")
+    run_import(write_plain(tmp_path / "rec", with_features=True), write_task(tmp_path / "task", None), tmp_path / "ds")
     ds = load_dataset(tmp_path / "ds")
     with np.load(tmp_path / "rec" / "ep02.npz") as npz:
         np.testing.assert_allclose(ds.features[2], npz["features"], rtol=1e-6)
 
 
 def test_a_split_bank_is_used_as_given(tmp_path):
-    split = {s: {f: {d: [f"{s} {f} {d} {k}." for k in range(2)] for d in ("increase", "decrease")}
-                 for f in ("reach", "effort")} for s in ("train", "val", "test")}
-    run_import(write_plain(tmp_path / "rec"), write_task(tmp_path / "task", bank=split, name="split-bank"),
-               tmp_path / "ds")
+    split = {
+        s: {
+            f: {d: [f"{s} {f} {d} {k}." for k in range(2)] for d in ("increase", "decrease")}
+            for f in ("reach", "effort")
+        }
+        for s in ("train", "val", "test")
+    }
+    run_import(
+        write_plain(tmp_path / "rec"), write_task(tmp_path / "task", bank=split, name="split-bank"), tmp_path / "ds"
+    )
     load_dataset(tmp_path / "ds")
     assert load_bank("split-bank").get("val", "reach", "increase") == ("val reach increase 0.", "val reach increase 1.")
 
@@ -133,8 +155,9 @@ def test_lerobot_fixture_written_by_lerobot(tmp_path):
     from langpref.dataset.video import check_video
 
     summary = run_import(LEROBOT_FIXTURE, write_task(tmp_path / "task", name="lerobot-tiny"), tmp_path / "ds")
-    assert (summary["layout"] == "lerobot" and summary["videos"]
-            and summary["splits"] == {"train": 2, "val": 1, "test": 1})
+    assert (
+        summary["layout"] == "lerobot" and summary["videos"] and summary["splits"] == {"train": 2, "val": 1, "test": 1}
+    )
     ds = load_dataset(tmp_path / "ds")
     assert [ds.load(i).horizon for i in range(4)] == [12, 15, 10, 14]
     assert ds.meta.obs_dim == 6 and ds.meta.action_dim == 3
@@ -177,12 +200,15 @@ def test_bad_episodes_name_the_file_and_leave_nothing(tmp_path, case, file, mess
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".ds")]
 
 
-@pytest.mark.parametrize("ref,message", [
-    ("nofile.py:step_features", "nofile.py not found"),
-    ("features.py:nothing", "has no function 'nothing'"),
-    ("features.py:wrong_shape", "returned shape (10, 1), expected (10, 2)"),
-    ("features.py:broken", "sensor table missing"),
-])
+@pytest.mark.parametrize(
+    "ref,message",
+    [
+        ("nofile.py:step_features", "nofile.py not found"),
+        ("features.py:nothing", "has no function 'nothing'"),
+        ("features.py:wrong_shape", "returned shape (10, 1), expected (10, 2)"),
+        ("features.py:broken", "sensor table missing"),
+    ],
+)
 def test_bad_feature_functions(tmp_path, ref, message):
     with pytest.raises(LangprefError, match=message.replace("(", r"\(").replace(")", r"\)")):
         run_import(write_plain(tmp_path / "rec"), write_task(tmp_path / "task", ref), tmp_path / "ds")
@@ -212,8 +238,13 @@ def test_videos_are_imported(tmp_path):
 
     rec = write_plain(tmp_path / "rec", n=6)
     for i in range(6):
-        imageio.mimwrite(rec / f"ep{i:02d}.mp4", np.full((4, 32, 32, 3), 40 * i, np.uint8), fps=10,
-                         codec="libx264", macro_block_size=8)
+        imageio.mimwrite(
+            rec / f"ep{i:02d}.mp4",
+            np.full((4, 32, 32, 3), 40 * i, np.uint8),
+            fps=10,
+            codec="libx264",
+            macro_block_size=8,
+        )
     summary = run_import(rec, write_task(tmp_path / "task"), tmp_path / "ds")
     assert summary["videos"]
     ds = load_dataset(tmp_path / "ds")
@@ -227,15 +258,18 @@ def test_videos_are_imported(tmp_path):
     assert frames == 4
 
 
-@pytest.mark.parametrize("toml,message", [
-    ('description = "x"\nfeatures = ["a"]\nutterances = "bank.json"\n', "'name'"),
-    ('name = "Bad Name"\ndescription = "x"\nfeatures = ["a"]\nutterances = "bank.json"\n', "must be lowercase"),
-    ('name = "t"\ndescription = "x"\nfeatures = []\nutterances = "bank.json"\n', "at least one feature"),
-    ('name = "t"\ndescription = "x"\nfeatures = ["a"]\nutterances = "missing.json"\n', "missing.json not found"),
-    ('name = "t"\ndescription = "x"\nfeatures = ["a"]\nutterances = "bank.json"\ncolour = 1\n', "unknown key"),
-    ('name = "t"\ndescription = "x"\nfeatures = ["a"\n', "not valid TOML"),
-    ('name = "metaworld"\ndescription = "x"\nfeatures = ["a"]\nutterances = "bank.json"\n', None),
-])
+@pytest.mark.parametrize(
+    "toml,message",
+    [
+        ('description = "x"\nfeatures = ["a"]\nutterances = "bank.json"\n', "'name'"),
+        ('name = "Bad Name"\ndescription = "x"\nfeatures = ["a"]\nutterances = "bank.json"\n', "must be lowercase"),
+        ('name = "t"\ndescription = "x"\nfeatures = []\nutterances = "bank.json"\n', "at least one feature"),
+        ('name = "t"\ndescription = "x"\nfeatures = ["a"]\nutterances = "missing.json"\n', "missing.json not found"),
+        ('name = "t"\ndescription = "x"\nfeatures = ["a"]\nutterances = "bank.json"\ncolour = 1\n', "unknown key"),
+        ('name = "t"\ndescription = "x"\nfeatures = ["a"\n', "not valid TOML"),
+        ('name = "metaworld"\ndescription = "x"\nfeatures = ["a"]\nutterances = "bank.json"\n', None),
+    ],
+)
 def test_bad_task_files(tmp_path, toml, message):
     (tmp_path / "bank.json").write_text(json.dumps(BANK))
     (tmp_path / "task.toml").write_text(toml)
@@ -252,8 +286,10 @@ def test_bad_task_files(tmp_path, toml, message):
 
 
 def test_an_unsplit_bank_needs_three_phrasings(tmp_path):
-    bank = {"reach": {"increase": ["Reach further.", "Go further."], "decrease": ["a.", "b.", "c."]},
-            "effort": BANK["effort"]}
+    bank = {
+        "reach": {"increase": ["Reach further.", "Go further."], "decrease": ["a.", "b.", "c."]},
+        "effort": BANK["effort"],
+    }
     task = read_task_file(write_task(tmp_path / "task", bank=bank))
     with pytest.raises(LangprefError, match="reach.increase has 2 distinct"):
         split_bank(task.utterances, task.features)
@@ -261,8 +297,18 @@ def test_an_unsplit_bank_needs_three_phrasings(tmp_path):
 
 def test_cli_import_and_errors(tmp_path):
     rec, task = write_plain(tmp_path / "rec"), write_task(tmp_path / "task")
-    cmd = [sys.executable, "-m", "langpref.cli", "import", str(rec), "--task", str(task), "--out", str(tmp_path / "ds"),
-           "--json"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "langpref.cli",
+        "import",
+        str(rec),
+        "--task",
+        str(task),
+        "--out",
+        str(tmp_path / "ds"),
+        "--json",
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["num_trajectories"] == 8

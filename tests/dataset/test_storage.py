@@ -80,8 +80,9 @@ def test_trajectories_of_different_lengths_pad_with_their_last_step(synthetic_da
     lengths = [20] * 12
     lengths[5] = 7
     traj = load_dataset(synthetic_dataset).load(5)
-    short = Trajectory(5, traj.observations[:7], traj.actions[:7], traj.step_features[:7], None, None, True, None,
-                       source="episode-5")
+    short = Trajectory(
+        5, traj.observations[:7], traj.actions[:7], traj.step_features[:7], None, None, True, None, source="episode-5"
+    )
     save_trajectory(synthetic_dataset, short)
     meta["lengths"] = lengths
     (synthetic_dataset / "meta.json").write_text(json.dumps(meta))

@@ -52,8 +52,9 @@ def test_language_human_names_the_only_feature_that_matters(space, sign, directi
 
 def test_language_human_follows_eq10_softmax(space):
     w = np.array([0.6, -0.3, 0.74])
-    human = LanguageHuman(w, space.theta, space.table("test"), space.split("train"), space.feature_names,
-                          temperature=2.0, seed=1)
+    human = LanguageHuman(
+        w, space.theta, space.table("test"), space.split("train"), space.feature_names, temperature=2.0, seed=1
+    )
     shown = int(space.split("train")[0])
     expected = softmax(w * (space.theta[human.best] - space.theta[shown]) / 2.0)
     assert np.allclose(human.feature_probabilities(shown), expected)
@@ -68,8 +69,9 @@ def test_language_human_follows_eq10_softmax(space):
 
 def test_language_human_is_seeded(space):
     def texts(seed):
-        h = LanguageHuman(sample_weights(3, 0), space.theta, space.table("test"), space.split("test"),
-                          space.feature_names, seed=seed)
+        h = LanguageHuman(
+            sample_weights(3, 0), space.theta, space.table("test"), space.split("test"), space.feature_names, seed=seed
+        )
         return [h.answer(LanguageQuery(int(i))).text for i in space.split("train")[:15]]
 
     assert texts(4) == texts(4)

@@ -81,8 +81,9 @@ def triple_parse(value: Any, query: TripleQuery) -> TripleAnswer:
     return TripleAnswer(query, int(value))
 
 
-def triple_human(w: np.ndarray, space, candidates: Sequence[int], cfg: HumanConfig,
-                 rng: np.random.Generator) -> TripleHuman:
+def triple_human(
+    w: np.ndarray, space, candidates: Sequence[int], cfg: HumanConfig, rng: np.random.Generator
+) -> TripleHuman:
     return TripleHuman(w, space.theta, cfg.rationality, rng)
 
 
@@ -91,10 +92,19 @@ def triple_from_record(row: Mapping[str, Any]) -> TripleAnswer:
 
 
 TRIPLE = FeedbackKind(
-    name="best_of_three", query=TripleQuery, answer=TripleAnswer, shows=3, make_human=triple_human,
-    pairs=triple_pairs, answer_key="best", parse=triple_parse, value=lambda answer: answer.best,
-    table="triples", to_record=lambda ans: {"a": ans.query.a, "b": ans.query.b, "c": ans.query.c, "best": ans.best},
-    from_record=triple_from_record)
+    name="best_of_three",
+    query=TripleQuery,
+    answer=TripleAnswer,
+    shows=3,
+    make_human=triple_human,
+    pairs=triple_pairs,
+    answer_key="best",
+    parse=triple_parse,
+    value=lambda answer: answer.best,
+    table="triples",
+    to_record=lambda ans: {"a": ans.query.a, "b": ans.query.b, "c": ans.query.c, "best": ans.best},
+    from_record=triple_from_record,
+)
 
 
 @pytest.fixture
@@ -139,8 +149,11 @@ def test_random_queries_show_distinct_trajectories_of_the_pool(triple, space):
 
 def test_registry_names_the_known_kinds_and_refuses_a_second_kind_of_a_taken_name(triple):
     assert {"language", "comparison", "best_of_three"} <= set(KINDS)
-    with pytest.raises(LangprefError, match="unknown feedback 'ranking': choose one of .*language.*comparison|"
-                                            "unknown feedback 'ranking': choose one of .*comparison.*language"):
+    with pytest.raises(
+        LangprefError,
+        match="unknown feedback 'ranking': choose one of .*language.*comparison|"
+        "unknown feedback 'ranking': choose one of .*comparison.*language",
+    ):
         get_kind("ranking")
     register_kind(TRIPLE)  # the same kind again: nothing changes
     with pytest.raises(LangprefError, match="already registered"):
@@ -170,9 +183,19 @@ def test_every_kind_answers_stores_and_parses_its_own_answers(triple, space, nam
         assert np.isclose(batch.weights.sum(), 2.0 if name == "language" else 1.0)
 
 
-@pytest.mark.parametrize("name, bad", [("language", 5), ("language", "  "), ("language", "x" * 501),
-                                       ("comparison", 2), ("comparison", True), ("comparison", "1"),
-                                       ("comparison", 1.0), ("best_of_three", 3)])
+@pytest.mark.parametrize(
+    "name, bad",
+    [
+        ("language", 5),
+        ("language", "  "),
+        ("language", "x" * 501),
+        ("comparison", 2),
+        ("comparison", True),
+        ("comparison", "1"),
+        ("comparison", 1.0),
+        ("best_of_three", 3),
+    ],
+)
 def test_bad_http_values_are_one_line_errors(triple, name, bad):
     kind = get_kind(name)
     query = kind.query(*range(kind.shows))

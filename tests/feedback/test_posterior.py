@@ -75,8 +75,9 @@ def test_prior_alone_before_any_answer_and_samples_follow_the_gaussian():
     np.testing.assert_allclose(post.covariance, np.eye(4) / 2.0)
     fitted = laplace_posterior(_fitted("comparison", queries=10))
     draws = fitted.sample(40000, np.random.default_rng(0))
-    np.testing.assert_allclose(draws.mean(axis=0), fitted.mean, atol=0.05 * np.sqrt(np.diag(fitted.covariance)).max()
-                               + 1e-3)
+    np.testing.assert_allclose(
+        draws.mean(axis=0), fitted.mean, atol=0.05 * np.sqrt(np.diag(fitted.covariance)).max() + 1e-3
+    )
     np.testing.assert_allclose(np.cov(draws.T), fitted.covariance, atol=0.05 * np.abs(fitted.covariance).max())
 
 

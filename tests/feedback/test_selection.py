@@ -40,8 +40,9 @@ def _hand_built_space() -> LatentSpace:
     theta = np.array([[1.0, 1.0, 1.0], [-1.0, 1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, -1.0]])
     phi = np.concatenate([theta, np.full((4, 1), 3.0)], axis=1)
     tables = {s: phrase_table(bank, s, names, encode) for s in ("train", "test")}
-    return LatentSpace("metaworld", names, theta, phi, {"train": (0, 1, 2, 3), "test": (0, 1, 2, 3)}, tables,
-                       encode=encode)
+    return LatentSpace(
+        "metaworld", names, theta, phi, {"train": (0, 1, 2, 3), "test": (0, 1, 2, 3)}, tables, encode=encode
+    )
 
 
 def _sure_of_features_0_and_1() -> RewardLearner:
@@ -84,7 +85,7 @@ def test_comparison_infogain_asks_about_the_uncertain_feature_and_volume_removal
     draws = np.random.default_rng(0).standard_normal((8, 4))
     i, j, score = ComparisonActive(space, space.split("train"), "volume-removal").scores(draws, np.arange(4))
     p = (1 / (1 + np.exp(-(space.phi[i] - space.phi[j]) @ draws.T))).mean(axis=1)
-    np.testing.assert_allclose(score, 1 - p ** 2 - (1 - p) ** 2, rtol=1e-5)
+    np.testing.assert_allclose(score, 1 - p**2 - (1 - p) ** 2, rtol=1e-5)
 
 
 def test_information_gain_is_zero_for_a_certain_answer():
@@ -93,8 +94,9 @@ def test_information_gain_is_zero_for_a_certain_answer():
     xi = learner.params[0].detach().numpy()
     # every draw agrees: nothing to learn, whatever is shown
     same = np.tile(xi, (16, 1))
-    np.testing.assert_allclose(LanguageInfoGain(space, space.split("train"), RewardConfig()).scores(same, np.arange(4)),
-                               0.0, atol=1e-12)
+    np.testing.assert_allclose(
+        LanguageInfoGain(space, space.split("train"), RewardConfig()).scores(same, np.arange(4)), 0.0, atol=1e-12
+    )
     # the draws differ only along feature 2, and the shown trajectory is far short of the best along feature 0
     # alone, with a large xi_0: the person says "increase feature 0" whatever xi_2 is
     far = replace(space, theta=space.theta.copy(), phi=space.phi.copy())
@@ -109,12 +111,24 @@ def test_information_gain_is_zero_for_a_certain_answer():
     assert mutual_information(np.array([[[1.0, 0.0]], [[0.0, 1.0]]]))[0] == pytest.approx(np.log(2))
 
 
-@pytest.mark.parametrize("feedback,strategy", [("language", "infogain"), ("language", "lal-infogain"),
-                                               ("comparison", "infogain"), ("comparison", "volume-removal")])
+@pytest.mark.parametrize(
+    "feedback,strategy",
+    [
+        ("language", "infogain"),
+        ("language", "lal-infogain"),
+        ("comparison", "infogain"),
+        ("comparison", "volume-removal"),
+    ],
+)
 def test_same_seed_same_queries(feedback, strategy):
     space = toy_latent_space("metaworld", n=40, seed=2)
-    cfg = LearnRewardConfig(feedback=feedback, queries=5, query_selection=strategy, candidates=12,
-                            reward=RewardConfig(num_negatives=5, max_iter=50))
+    cfg = LearnRewardConfig(
+        feedback=feedback,
+        queries=5,
+        query_selection=strategy,
+        candidates=12,
+        reward=RewardConfig(num_negatives=5, max_iter=50),
+    )
     w = human_weights(len(space.feature_names), 0, 0)
     runs = []
     for seed in ((0, 0, 0), (0, 0, 0), (0, 0, 1)):
@@ -137,8 +151,9 @@ def test_random_is_the_uniform_stream_of_before(feedback):
     expected = [random_query(kind, space.split("train"), expected_rng) for _ in range(4)]
     for selection in (None, "random"):
         record: list = []
-        cfg = LearnRewardConfig(feedback=feedback, queries=4, query_selection=selection,
-                                reward=RewardConfig(num_negatives=3, max_iter=20))
+        cfg = LearnRewardConfig(
+            feedback=feedback, queries=4, query_selection=selection, reward=RewardConfig(num_negatives=3, max_iter=20)
+        )
         run_reward_learning(space, w, cfg, (3, 1, 2), record)
         assert [chosen.query for chosen, _ in record] == expected
         assert all(chosen.score is None for chosen, _ in record)
@@ -164,8 +179,9 @@ def test_lal_infogain_scores_as_the_follow_up_info_function():
 
 def test_lal_infogain_never_shows_a_trajectory_twice_while_fresh_ones_remain():
     space = toy_latent_space("metaworld", n=40, seed=3)
-    cfg = LearnRewardConfig(queries=8, query_selection="lal-infogain", reward=RewardConfig(num_negatives=3,
-                                                                                          max_iter=20))
+    cfg = LearnRewardConfig(
+        queries=8, query_selection="lal-infogain", reward=RewardConfig(num_negatives=3, max_iter=20)
+    )
     record: list = []
     run_reward_learning(space, human_weights(3, 0, 0), cfg, (0, 0, 0), record)
     shown = [chosen.query.shown for chosen, _ in record]
@@ -194,12 +210,14 @@ def test_active_experiment_writes_curves_intervals_and_targets(tmp_path, make_sy
 
     data = make_synthetic_dataset(tmp_path / "d", n=40)
     cfg = LearnRewardConfig(queries=3, candidates=10, reward=RewardConfig(num_negatives=3, max_iter=20))
-    res = run_active_experiment("metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=2, seeds=1,
-                                progress=False)
+    res = run_active_experiment(
+        "metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=2, seeds=1, progress=False
+    )
     assert set(res["methods"]) == set(METHODS) and len(res["targets"]) == 5
     assert all(len(r["true_reward_of_best"]) == 4 for r in res["methods"].values())
     assert "language-infogain - language-lal-infogain" in res["contrasts"]
     assert (tmp_path / "a" / "active.png").read_bytes()[:4] == b"\x89PNG"
     assert "Paired differences" in (tmp_path / "a" / "active.md").read_text()
     assert json.loads((tmp_path / "a" / "active.json").read_text())["command"].startswith(
-        "langpref experiment active --env metaworld")
+        "langpref experiment active --env metaworld"
+    )

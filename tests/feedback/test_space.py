@@ -57,8 +57,10 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
     from langpref.feedback import HumanConfig, LanguageHuman, LanguageQuery, load_space
 
     data = write_features_dataset(tmp_path / "d")
-    mine = {"speed": {"increase": ["Zoom zoom."], "decrease": ["Easy, tiger."]},
-            "height": {"increase": ["Up you go."], "decrease": ["Get down."]}}
+    mine = {
+        "speed": {"increase": ["Zoom zoom."], "decrease": ["Easy, tiger."]},
+        "height": {"increase": ["Up you go."], "decrease": ["Get down."]},
+    }
     path = tmp_path / "mine.json"
     path.write_text(json.dumps({"metaworld": mine}))
     space = load_space(data, perfect=True, phrasings=path)
@@ -70,8 +72,12 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
     w = np.zeros(3)
     w[speed] = 1.0  # wants speed only: every answer is a speed phrasing of the file
     test = space.split("test")
-    said = {LanguageHuman(w, space.theta, table, test, space.feature_names, temperature=0.05, seed=s)
-            .answer(LanguageQuery(int(test[np.argmin(space.theta[test, speed])]))).text for s in range(5)}
+    said = {
+        LanguageHuman(w, space.theta, table, test, space.feature_names, temperature=0.05, seed=s)
+        .answer(LanguageQuery(int(test[np.argmin(space.theta[test, speed])])))
+        .text
+        for s in range(5)
+    }
     assert said == {"Zoom zoom."}
     assert load_space(data, perfect=True).table("val")  # every bank split is embedded, val included
     path.write_text(json.dumps({"metaworld": {"speed": {"increase": ["Move slower."]}}}))

@@ -70,6 +70,10 @@ def test_probe_phrasings_are_train_only_candidates(env: str) -> None:
     probe = {normalise(t) for by_dir in mapping.values() for texts in by_dir.values() for t in texts}
     bank = load_bank(env)
     shipped = {normalise(t) for split in ("train", "val", "test") for t, _, _ in bank.all_of_split(split)}
-    heldout = {normalise(t) for by_dir in load_user_utterances(HELDOUT, env).values()
-               for texts in by_dir.values() for t in texts}
+    heldout = {
+        normalise(t)
+        for by_dir in load_user_utterances(HELDOUT, env).values()
+        for texts in by_dir.values()
+        for t in texts
+    }
     assert probe and not probe & shipped and not probe & heldout

@@ -27,13 +27,25 @@ KNOWN = {
         ("test", "train", "speed", "decrease", "Decrease the speed.", "Decrease the pace."),
         ("test", "train", "speed", "decrease", "That was rushed.", "That was too rushed."),
         ("test", "train", "distance_to_button", "increase", "Get off the button.", "Stay off the button."),
-        ("test", "train", "distance_to_button", "decrease", "Narrow the distance to the button.",
-         "Close the distance to the button."),
+        (
+            "test",
+            "train",
+            "distance_to_button",
+            "decrease",
+            "Narrow the distance to the button.",
+            "Close the distance to the button.",
+        ),
         ("test", "train", "distance_to_button", "decrease", "Home in on the button.", "Move in on the button."),
         ("test", "train", "distance_to_button", "decrease", "Home in on the button.", "Close in on the button."),
         ("test", "train", "distance_to_button", "decrease", "Zero in on the button.", "Move in on the button."),
-        ("test", "train", "distance_to_button", "decrease", "Don't stay so far from the button.",
-         "Not so far from the button."),
+        (
+            "test",
+            "train",
+            "distance_to_button",
+            "decrease",
+            "Don't stay so far from the button.",
+            "Not so far from the button.",
+        ),
         ("val", "train", "speed", "increase", "Don't move so slowly.", "Don't go so slowly."),
         ("val", "train", "speed", "decrease", "Turn down the speed.", "Tone down the speed."),
         ("val", "train", "distance_to_button", "decrease", "Reach for the button.", "Head for the button."),
@@ -44,14 +56,32 @@ KNOWN = {
     },
     "robosuite": {
         ("test", "train", "distance_to_cube", "decrease", "Less distance to the cube.", "Less distance to the block."),
-        ("test", "train", "distance_to_bottle", "increase", "Don't get so close to the bottle.",
-         "Not so close to the bottle."),
+        (
+            "test",
+            "train",
+            "distance_to_bottle",
+            "increase",
+            "Don't get so close to the bottle.",
+            "Not so close to the bottle.",
+        ),
         ("test", "train", "lift_success", "decrease", "Don't grab the cube.", "Don't take the cube."),
         ("test", "train", "lift_success", "decrease", "Don't grasp the block.", "Don't grip the block."),
-        ("val", "train", "distance_to_cube", "increase", "Don't get so close to the cube.",
-         "Not so close to the cube."),
-        ("val", "train", "distance_to_bottle", "decrease", "Don't stay so far from the bottle.",
-         "Not so far from the bottle."),
+        (
+            "val",
+            "train",
+            "distance_to_cube",
+            "increase",
+            "Don't get so close to the cube.",
+            "Not so close to the cube.",
+        ),
+        (
+            "val",
+            "train",
+            "distance_to_bottle",
+            "decrease",
+            "Don't stay so far from the bottle.",
+            "Not so far from the bottle.",
+        ),
     },
 }
 
@@ -82,4 +112,5 @@ def test_the_check_finds_what_it_lists():
     for env, known in KNOWN.items():
         assert near_duplicates(env) == known  # the list is today's, not a superset
     assert ("test", "train", "speed", "decrease", "That was rushed.", "That was too rushed.") in near_duplicates(
-        "metaworld", 0.85)
+        "metaworld", 0.85
+    )

@@ -17,15 +17,26 @@ FEATS = ["height", "speed"]
 
 
 def test_pairs_on_hand_built_features_skip_ties_and_get_directions_right():
-    features = np.array([[0.0, 1.0],
-                         [1.0, 1.02],   # speed within the tie threshold of trajectory 0
-                         [0.5, 3.0]])
+    features = np.array(
+        [
+            [0.0, 1.0],
+            [1.0, 1.02],  # speed within the tie threshold of trajectory 0
+            [0.5, 3.0],
+        ]
+    )
     pairs = build_pairs(features, thresholds=np.array([0.1, 0.1]))
     got = {(int(a), int(b), int(f)): int(d) for a, b, f, d in zip(pairs.a, pairs.b, pairs.feature, pairs.direction)}
     assert got == {
-        (0, 1, 0): INCREASE, (1, 0, 0): DECREASE,          # height 0 -> 1 and back; speed 1 vs 1.02 is a tie
-        (0, 2, 0): INCREASE, (0, 2, 1): INCREASE, (2, 0, 0): DECREASE, (2, 0, 1): DECREASE,
-        (1, 2, 0): DECREASE, (1, 2, 1): INCREASE, (2, 1, 0): INCREASE, (2, 1, 1): DECREASE,
+        (0, 1, 0): INCREASE,
+        (1, 0, 0): DECREASE,  # height 0 -> 1 and back; speed 1 vs 1.02 is a tie
+        (0, 2, 0): INCREASE,
+        (0, 2, 1): INCREASE,
+        (2, 0, 0): DECREASE,
+        (2, 0, 1): DECREASE,
+        (1, 2, 0): DECREASE,
+        (1, 2, 1): INCREASE,
+        (2, 1, 0): INCREASE,
+        (2, 1, 1): DECREASE,
     }
     assert pairs.a.dtype == np.int64 and len(pairs) == 10
     assert np.array_equal(pairs.group, 2 * pairs.feature + pairs.direction)
@@ -49,8 +60,10 @@ def test_tie_thresholds_are_a_fraction_of_the_train_std():
 
 
 def test_phrasings_table_groups_and_errors():
-    mapping = {"height": {"increase": ["Up.", " Up. ", "Higher."], "decrease": ["Down."]},
-               "speed": {"increase": ["Faster."], "decrease": ["Slower."]}}
+    mapping = {
+        "height": {"increase": ["Up.", " Up. ", "Higher."], "decrease": ["Down."]},
+        "speed": {"increase": ["Faster."], "decrease": ["Slower."]},
+    }
     ph = phrasings_from_mapping(mapping, FEATS)
     assert ph.texts == ("Up.", "Higher.", "Down.", "Faster.", "Slower.")  # whitespace-normalised, deduplicated
     assert [list(ids) for ids in ph.group_ids] == [[0, 1], [2], [3], [4]]
@@ -69,8 +82,10 @@ def test_phrasings_table_groups_and_errors():
 
 
 def test_sampling_stays_in_the_group_and_covers_it():
-    mapping = {"height": {"increase": ["a", "b", "c"], "decrease": ["d"]},
-               "speed": {"increase": ["e", "f"], "decrease": ["g", "h", "i", "j"]}}
+    mapping = {
+        "height": {"increase": ["a", "b", "c"], "decrease": ["d"]},
+        "speed": {"increase": ["e", "f"], "decrease": ["g", "h", "i", "j"]},
+    }
     ph = phrasings_from_mapping(mapping, FEATS)
     rng = np.random.default_rng(0)
     groups = np.repeat(np.arange(4), 400)

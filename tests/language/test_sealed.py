@@ -51,6 +51,7 @@ def _task_features(task: str) -> tuple[str, ...]:
     if task == "metaworld-reach":
         pytest.importorskip("langpref_reach")
         from langpref_reach import TASK
+
         return tuple(TASK.features)
     raise AssertionError(f"unknown task {task}")
 
@@ -60,8 +61,9 @@ def _sealed() -> dict:
 
 
 def _phrasings(section: dict) -> list[str]:
-    return [p for f, dirs in section.items() if not f.startswith("_")
-            for d in ("increase", "decrease") for p in dirs[d]]
+    return [
+        p for f, dirs in section.items() if not f.startswith("_") for d in ("increase", "decrease") for p in dirs[d]
+    ]
 
 
 @pytest.mark.parametrize("task", TASKS)

@@ -20,8 +20,17 @@ torch.set_num_threads(1)
 MW_FEATURES = ["height", "speed", "distance_to_button"]
 
 
-def make_dataset(root: Path, *, env: str = "metaworld", n: int = 16, horizon: int = 20, obs_dim: int = 6,
-                 action_dim: int = 2, seed: int = 0, feature_names: list[str] | None = None) -> Path:
+def make_dataset(
+    root: Path,
+    *,
+    env: str = "metaworld",
+    n: int = 16,
+    horizon: int = 20,
+    obs_dim: int = 6,
+    action_dim: int = 2,
+    seed: int = 0,
+    feature_names: list[str] | None = None,
+) -> Path:
     rng = np.random.default_rng(seed)
     names = feature_names or MW_FEATURES
     layout = [{"name": "hand", "start": 0, "stop": 3}, {"name": "rest", "start": 3, "stop": obs_dim}]
@@ -30,17 +39,36 @@ def make_dataset(root: Path, *, env: str = "metaworld", n: int = 16, horizon: in
         level = rng.uniform(-1, 1, size=obs_dim)
         obs = (level + 0.3 * rng.standard_normal((horizon, obs_dim))).astype(np.float32)
         act = rng.standard_normal((horizon, action_dim)).astype(np.float32)
-        step_features = obs[:, : len(names)].astype(np.float64) if len(names) <= obs_dim else \
-            np.tile(obs[:, :1], (1, len(names)))
-        traj = Trajectory(index=i, observations=obs, actions=act, step_features=step_features,
-                          qpos=np.zeros((horizon, 2)), qvel=np.zeros((horizon, 2)), success=bool(i % 2), seed=i)
+        step_features = (
+            obs[:, : len(names)].astype(np.float64) if len(names) <= obs_dim else np.tile(obs[:, :1], (1, len(names)))
+        )
+        traj = Trajectory(
+            index=i,
+            observations=obs,
+            actions=act,
+            step_features=step_features,
+            qpos=np.zeros((horizon, 2)),
+            qvel=np.zeros((horizon, 2)),
+            success=bool(i % 2),
+            seed=i,
+        )
         save_trajectory(root, traj)
         feats.append(traj.features)
     n_train, n_val = int(n * 0.625), (n - int(n * 0.625)) // 2
-    splits = {"train": list(range(n_train)), "val": list(range(n_train, n_train + n_val)),
-              "test": list(range(n_train + n_val, n))}
-    meta = DatasetMeta(env=env, horizon=horizon, obs_layout=layout, action_dim=action_dim, feature_names=names,
-                       splits=splits, num_trajectories=n)
+    splits = {
+        "train": list(range(n_train)),
+        "val": list(range(n_train, n_train + n_val)),
+        "test": list(range(n_train + n_val, n)),
+    }
+    meta = DatasetMeta(
+        env=env,
+        horizon=horizon,
+        obs_layout=layout,
+        action_dim=action_dim,
+        feature_names=names,
+        splits=splits,
+        num_trajectories=n,
+    )
     write_meta(root, meta, np.array(feats))
     return root
 
@@ -59,9 +87,21 @@ def phrasings(tiny_texts):
 def tiny_config(data: Path, out: Path, **overrides):
     from langpref.model.config import ModelConfig, TrainConfig
 
-    cfg = TrainConfig(data=str(data), out=str(out), model=ModelConfig(latent_dim=16, max_length=12),
-                      stage1_epochs=6, stage1_batch_size=32, stage1_lr=1e-2, stage1_head_lr=1e-2, stage2_epochs=1,
-                      stage2_batch_size=128, stage2_phrasings_per_step=6, patience=0, device="cpu", seed=0)
+    cfg = TrainConfig(
+        data=str(data),
+        out=str(out),
+        model=ModelConfig(latent_dim=16, max_length=12),
+        stage1_epochs=6,
+        stage1_batch_size=32,
+        stage1_lr=1e-2,
+        stage1_head_lr=1e-2,
+        stage2_epochs=1,
+        stage2_batch_size=128,
+        stage2_phrasings_per_step=6,
+        patience=0,
+        device="cpu",
+        seed=0,
+    )
     for k, v in overrides.items():
         setattr(cfg, k, v)
     return cfg
@@ -74,6 +114,7 @@ def trained(tiny_data, phrasings, tmp_path_factory):
 
     root = tmp_path_factory.mktemp("models")
     cfg = tiny_config(tiny_data, root / "cofinetuned")
-    result = train(cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False,
-                   stage1_out=root / "frozen")
+    result = train(
+        cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False, stage1_out=root / "frozen"
+    )
     return result

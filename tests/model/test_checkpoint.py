@@ -38,8 +38,7 @@ def test_evaluate_and_embed_on_a_loaded_model(trained, tiny_data, phrasings):
     dataset = load_dataset(tiny_data)
     out = evaluate_split(model, dataset, "train", phrasings[0])
     assert out["accuracy"] > 0.75 and set(out["per_feature"]) == {"height", "speed", "distance_to_button"}
-    assert out["num_samples"] == sum(len(phrasings[0].group_ids[2 * f + d]) for f, d in
-                                     zip(*_pairs_fd(model, dataset)))
+    assert out["num_samples"] == sum(len(phrasings[0].group_ids[2 * f + d]) for f, d in zip(*_pairs_fd(model, dataset)))
     e = embed_text(model, "Move faster.")
     assert (e["feature"], e["direction"]) == ("speed", "increase") and 1 / 6 < e["confidence"] <= 1
     with pytest.raises(LangprefError, match="empty"):
@@ -54,8 +53,13 @@ def _pairs_fd(model, dataset):
 
 
 def test_mismatched_dataset_fails_with_one_line(trained, tmp_path):
-    other_env = load_dataset(make_dataset(tmp_path / "rs", env="robosuite", feature_names=[
-        "height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success"]))
+    other_env = load_dataset(
+        make_dataset(
+            tmp_path / "rs",
+            env="robosuite",
+            feature_names=["height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success"],
+        )
+    )
     other_obs = load_dataset(make_dataset(tmp_path / "obs7", obs_dim=7))
     for ds, match in ((other_env, "robosuite"), (other_obs, "observation layout")):
         with pytest.raises(LangprefError, match=match) as exc:

@@ -15,10 +15,26 @@ def tiny_config(data, out, **overrides):
     """tests/model/conftest.py's tiny config (copied: `from conftest import` may find another folder's conftest)."""
     from langpref.model.config import ModelConfig, TrainConfig
 
-    return TrainConfig(**{**dict(data=str(data), out=str(out), model=ModelConfig(latent_dim=16, max_length=12),
-                                 stage1_epochs=6, stage1_batch_size=32, stage1_lr=1e-2, stage1_head_lr=1e-2,
-                                 stage2_epochs=1, stage2_batch_size=128, stage2_phrasings_per_step=6, patience=0,
-                                 device="cpu", seed=0), **overrides})
+    return TrainConfig(
+        **{
+            **dict(
+                data=str(data),
+                out=str(out),
+                model=ModelConfig(latent_dim=16, max_length=12),
+                stage1_epochs=6,
+                stage1_batch_size=32,
+                stage1_lr=1e-2,
+                stage1_head_lr=1e-2,
+                stage2_epochs=1,
+                stage2_batch_size=128,
+                stage2_phrasings_per_step=6,
+                patience=0,
+                device="cpu",
+                seed=0,
+            ),
+            **overrides,
+        }
+    )
 
 
 SCRIPT = textwrap.dedent("""
@@ -56,12 +72,15 @@ def _train_in_subprocess(cfg, tiny_texts) -> dict:
 
 
 def test_both_stages_same_seed_same_weights_across_processes_on_two_threads(tiny_data, tiny_texts, tmp_path):
-    runs = [_train_in_subprocess(tiny_config(tiny_data, tmp_path / f"m{i}", stage1_epochs=2, stage2_epochs=1),
-                                 tiny_texts) for i in range(2)]
+    runs = [
+        _train_in_subprocess(tiny_config(tiny_data, tmp_path / f"m{i}", stage1_epochs=2, stage2_epochs=1), tiny_texts)
+        for i in range(2)
+    ]
     assert runs[0]["stages"] == [1, 2]  # both stages ran, the co-finetuned language model included
     assert any(k.startswith("lang.transformer") for k in runs[0]["digest"])
     assert runs[0]["history"] == runs[1]["history"]
     assert runs[0]["digest"] == runs[1]["digest"]
-    other = _train_in_subprocess(tiny_config(tiny_data, tmp_path / "seed1", stage1_epochs=2, stage2_epochs=1,
-                                             seed=1), tiny_texts)
+    other = _train_in_subprocess(
+        tiny_config(tiny_data, tmp_path / "seed1", stage1_epochs=2, stage2_epochs=1, seed=1), tiny_texts
+    )
     assert other["digest"] != runs[0]["digest"]  # the test can fail: a different seed moves the weights

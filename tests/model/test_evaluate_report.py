@@ -11,8 +11,12 @@ from langpref.model.evaluate import alignment_counts, evaluate_split, per_phrasi
 def test_per_phrasing_counts_on_hand_built_embeddings():
     phi = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
     psi = np.array([[1.0, 0.0], [-1.0, 0.0], [-2.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-    pairs = Pairs(a=np.array([0, 1, 2, 0]), b=np.array([1, 0, 1, 2]), feature=np.array([0, 0, 0, 1]),
-                  direction=np.array([0, 1, 1, 0]))
+    pairs = Pairs(
+        a=np.array([0, 1, 2, 0]),
+        b=np.array([1, 0, 1, 2]),
+        feature=np.array([0, 0, 0, 1]),
+        direction=np.array([0, 1, 1, 0]),
+    )
     groups = (np.array([0, 2]), np.array([1]), np.array([3]), np.array([4]))
     correct, total = phrasing_counts(phi, psi, pairs, groups, 5)
     assert correct.tolist() == [1, 2, 0, 0, 0] and total.tolist() == [1, 2, 1, 1, 0]

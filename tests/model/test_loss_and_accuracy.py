@@ -17,8 +17,8 @@ def test_losses_match_the_paper_equations_on_hand_numbers():
     assert la[0].item() == pytest.approx(-math.log(1 / (1 + math.exp(-1.0))))
     assert la[1].item() == pytest.approx(math.log(2.0))  # psi . (phi_B - phi_A) = 0
     ln = norm_loss(phi_a, phi_b, psi, a=0.1, b=0.5)
-    assert ln[0].item() == pytest.approx(0.0)                       # |phi| <= 1, |psi| = 1
-    assert ln[1].item() == pytest.approx(0.1 * 1.0 + 0.5 * 4.0)     # hinge |phi_A| - 1 = 1; (|psi| - 1)^2 = 4
+    assert ln[0].item() == pytest.approx(0.0)  # |phi| <= 1, |psi| = 1
+    assert ln[1].item() == pytest.approx(0.1 * 1.0 + 0.5 * 4.0)  # hinge |phi_A| - 1 = 1; (|psi| - 1)^2 = 4
     total, a, n = latent_loss(phi_a, phi_b, psi, 0.1, 0.5)
     assert total.item() == pytest.approx(a.item() + n.item())
 
@@ -26,10 +26,21 @@ def test_losses_match_the_paper_equations_on_hand_numbers():
 def test_accuracy_on_hand_built_embeddings_with_known_answers():
     # 1-D features of 3 trajectories; phi = (feature0, feature1); psi: f0 up, f0 down, f1 up, f1 down
     phi = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])  # feature 1 not encoded at all: every score is 0 -> wrong
-    psi = np.array([[1.0, 0.0], [-1.0, 0.0], [-2.0, 0.0],   # phrasing 2 says "f0 up" but points down: always wrong
-                    [0.0, 1.0], [0.0, -1.0]])
-    pairs = Pairs(a=np.array([0, 1, 2, 0]), b=np.array([1, 0, 1, 2]), feature=np.array([0, 0, 0, 1]),
-                  direction=np.array([0, 1, 1, 0]))
+    psi = np.array(
+        [
+            [1.0, 0.0],
+            [-1.0, 0.0],
+            [-2.0, 0.0],  # phrasing 2 says "f0 up" but points down: always wrong
+            [0.0, 1.0],
+            [0.0, -1.0],
+        ]
+    )
+    pairs = Pairs(
+        a=np.array([0, 1, 2, 0]),
+        b=np.array([1, 0, 1, 2]),
+        feature=np.array([0, 0, 0, 1]),
+        direction=np.array([0, 1, 1, 0]),
+    )
     groups = [np.array([0, 2]), np.array([1]), np.array([3]), np.array([4])]
     correct, total = alignment_counts(phi, psi, pairs, groups, num_features=2)
     # pair (0,1) f0 up: phrasings 0 (right) and 2 (wrong); (1,0) down: phrasing 1 right; (2,1) down: right

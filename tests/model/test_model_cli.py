@@ -13,29 +13,62 @@ def run(capsys, *argv):
 
 def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     model = tmp_path / "m"
-    code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(model), "--freeze-language",
-                         "--epochs", "3", "--batch-size", "64", "--latent-dim", "16", "--max-length", "16",
-                         "--device", "cpu", "--json")
+    code, out, err = run(
+        capsys,
+        "train",
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(model),
+        "--freeze-language",
+        "--epochs",
+        "3",
+        "--batch-size",
+        "64",
+        "--latent-dim",
+        "16",
+        "--max-length",
+        "16",
+        "--device",
+        "cpu",
+        "--json",
+    )
     assert code == 0, err
     summary = json.loads(out)
     assert summary["stages"] == 1 and summary["out"] == str(model)
     assert "stage 1" in err  # the progress bar goes to stderr
 
-    code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--split", "val",
-                         "--json")
+    code, out, err = run(
+        capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--split", "val", "--json"
+    )
     assert code == 0, err
     res = json.loads(out)
-    assert 0 <= res["accuracy"] <= 1 and res["num_samples"] > 0 and set(res["per_feature"]) <= {
-        "height", "speed", "distance_to_button"}
+    assert (
+        0 <= res["accuracy"] <= 1
+        and res["num_samples"] > 0
+        and set(res["per_feature"]) <= {"height", "speed", "distance_to_button"}
+    )
 
-    code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--split", "val",
-                         "--phrasing-split", "train", "--json")
+    code, out, err = run(
+        capsys,
+        "evaluate",
+        "--model",
+        str(model),
+        "--data",
+        str(tiny_data),
+        "--split",
+        "val",
+        "--phrasing-split",
+        "train",
+        "--json",
+    )
     assert code == 0 and json.loads(out)["utterances"] == "bank:train", err
 
     user = tmp_path / "mine.json"
     user.write_text(json.dumps({"_note": "mine", "metaworld": {"speed": {"increase": ["Hurry up!"]}}}))
-    code, out, err = run(capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--utterances",
-                         str(user), "--json")
+    code, out, err = run(
+        capsys, "evaluate", "--model", str(model), "--data", str(tiny_data), "--utterances", str(user), "--json"
+    )
     assert code == 0, err
     res = json.loads(out)
     assert list(res["per_feature"]) == ["speed"]
@@ -49,27 +82,46 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     assert hurry == float((read["feature"], read["direction"]) == ("speed", "increase"))
     assert len(res["misread"]) == 1 - hurry
 
-    code, out, err = run(capsys, "visualize", "--model", str(model), "--data", str(tiny_data), "--out",
-                         str(tmp_path / "v.png"))
+    code, out, err = run(
+        capsys, "visualize", "--model", str(model), "--data", str(tiny_data), "--out", str(tmp_path / "v.png")
+    )
     assert code == 0, err and (tmp_path / "v.png").stat().st_size > 1000
 
     code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(model), "--freeze-language")
     assert code == 2 and "already exists" in err and err.count("\n") == 1
 
-    code, out, err = run(capsys, "train", "--data", str(tiny_data), "--out", str(tmp_path / "m2"), "--freeze-language",
-                         "--utterances", str(user), "--extend-bank", "--epochs", "1", "--latent-dim", "8",
-                         "--no-observation-deltas", "--json")
+    code, out, err = run(
+        capsys,
+        "train",
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(tmp_path / "m2"),
+        "--freeze-language",
+        "--utterances",
+        str(user),
+        "--extend-bank",
+        "--epochs",
+        "1",
+        "--latent-dim",
+        "8",
+        "--no-observation-deltas",
+        "--json",
+    )
     assert code == 0, err
     saved = json.loads((tmp_path / "m2" / "config.json").read_text())
     assert saved["train_config"]["utterances"] == str(user) and saved["train_config"]["extend_bank"] is True
     assert saved["model"]["observation_deltas"] is False and len(saved["normalisation"]["mean"]) == 6 + 2
 
 
-@pytest.mark.parametrize("argv,match", [
-    (["embed", "--model", "MODEL", "   "], "empty"),
-    (["embed", "--model", "MODEL", "qwertyuiop"], "does not read as feedback"),
-    (["evaluate", "--model", "NOPE", "--data", "DATA"], "does not exist"),
-])
+@pytest.mark.parametrize(
+    "argv,match",
+    [
+        (["embed", "--model", "MODEL", "   "], "empty"),
+        (["embed", "--model", "MODEL", "qwertyuiop"], "does not read as feedback"),
+        (["evaluate", "--model", "NOPE", "--data", "DATA"], "does not exist"),
+    ],
+)
 def test_one_line_errors(trained, tiny_data, capsys, argv, match):
     argv = [str(trained.out) if a == "MODEL" else str(tiny_data) if a == "DATA" else a for a in argv]
     code, out, err = run(capsys, *argv)

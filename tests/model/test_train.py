@@ -51,8 +51,15 @@ def test_same_seed_same_numbers(tiny_data, phrasings, tmp_path):
 
 
 def test_mixed_precision_leaves_the_cpu_path_unchanged(tiny_data, phrasings, tmp_path):
-    runs = [train(tiny_config(tiny_data, tmp_path / f"amp{amp}", stage1_epochs=1, stage2_epochs=1, mixed_precision=amp),
-                  train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False) for amp in (True, False)]
+    runs = [
+        train(
+            tiny_config(tiny_data, tmp_path / f"amp{amp}", stage1_epochs=1, stage2_epochs=1, mixed_precision=amp),
+            train_phrasings=phrasings[0],
+            val_phrasings=phrasings[1],
+            progress=False,
+        )
+        for amp in (True, False)
+    ]
     s0, s1 = runs[0].model.state_dict(), runs[1].model.state_dict()
     assert all(torch.equal(s0[k], s1[k]) for k in s0)
 

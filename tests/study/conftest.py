@@ -25,6 +25,7 @@ TINY = {"split": "all", "improve_max_iterations": 3, "pref_queries": 4, "rating_
 ADMIN = "admin-token-for-tests-0123456789"
 SRC = str(Path(__file__).resolve().parents[2] / "src")
 
+
 @pytest.fixture(scope="session")
 def study_data(tmp_path_factory) -> Path:
     from langpref.dataset.generate import GenerateConfig, generate
@@ -42,11 +43,24 @@ def study_model(study_data, tmp_path_factory, tiny_texts) -> Path:
 
     features = ["height", "speed", "distance_to_button"]
     out = tmp_path_factory.mktemp("study_model") / "model"
-    cfg = TrainConfig(data=str(study_data), out=str(out), model=ModelConfig(latent_dim=16, max_length=16),
-                      stage1_epochs=2, stage1_batch_size=256, stage2_epochs=0, patience=0, device="cpu", seed=0)
+    cfg = TrainConfig(
+        data=str(study_data),
+        out=str(out),
+        model=ModelConfig(latent_dim=16, max_length=16),
+        stage1_epochs=2,
+        stage1_batch_size=256,
+        stage2_epochs=0,
+        patience=0,
+        device="cpu",
+        seed=0,
+    )
     train_texts, val_texts = tiny_texts
-    train(cfg, train_phrasings=phrasings_from_mapping(train_texts, features),
-          val_phrasings=phrasings_from_mapping(val_texts, features), progress=False)
+    train(
+        cfg,
+        train_phrasings=phrasings_from_mapping(train_texts, features),
+        val_phrasings=phrasings_from_mapping(val_texts, features),
+        progress=False,
+    )
     return out
 
 
@@ -61,16 +75,21 @@ def engine(study_model, study_data):
 def serve_config(model: Path, data: Path, db: Path, **study):
     from langpref.study.config import ServeConfig, StudyConfig
 
-    return ServeConfig(model=str(model), data=str(data), db=str(db), admin_token=ADMIN, prerender=False,
-                       study=StudyConfig(**{**TINY, **study}))
+    return ServeConfig(
+        model=str(model),
+        data=str(data),
+        db=str(db),
+        admin_token=ADMIN,
+        prerender=False,
+        study=StudyConfig(**{**TINY, **study}),
+    )
 
 
 @pytest.fixture
 def study_state(engine, study_model, study_data, tmp_path):
     from langpref.study.serve import build_state
 
-    state = build_state(serve_config(study_model, study_data, tmp_path / "study.sqlite"), engine=engine,
-                        progress=False)
+    state = build_state(serve_config(study_model, study_data, tmp_path / "study.sqlite"), engine=engine, progress=False)
     yield state
     state.videos.close()
 
@@ -102,22 +121,48 @@ def _answer_for(step: dict, feedback: str) -> dict:
     if kind == "survey":
         answers = {}
         for q in step["questions"]:
-            answers[q["id"]] = {"likert": q["min"], "text": "some words", "choice": q["options"][0] if q["options"]
-                                else None, "multi": q["options"][:1]}[q["type"]]
+            answers[q["id"]] = {
+                "likert": q["min"],
+                "text": "some words",
+                "choice": q["options"][0] if q["options"] else None,
+                "multi": q["options"][:1],
+            }[q["type"]]
         return {"answers": answers}
-    return {"language": {"feedback": feedback, "client_ms": 1.0}, "comparison": {"choice": 1, "client_ms": 1.0},
-            "satisfaction": {"satisfied": False}, "rating": {"rating": 4}}[kind]
+    return {
+        "language": {"feedback": feedback, "client_ms": 1.0},
+        "comparison": {"choice": 1, "client_ms": 1.0},
+        "satisfaction": {"satisfied": False},
+        "rating": {"rating": 4},
+    }[kind]
 
 
-def run_server(model: Path, data: Path, db: Path, *extra: str, log: Path | None = None, prerender: bool = False,
-               **study) -> tuple[subprocess.Popen, str]:
+def run_server(
+    model: Path, data: Path, db: Path, *extra: str, log: Path | None = None, prerender: bool = False, **study
+) -> tuple[subprocess.Popen, str]:
     """`langpref study serve` in its own process on a free loopback port; (process, base URL) once it answers."""
     import httpx
 
     protocol = [x for k, v in {**TINY, **study}.items() for x in (f"--{k.replace('_', '-')}", str(v))]
-    args = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data),
-            "--db", str(db), "--port", "0", "--admin-token", ADMIN, *protocol,
-            *([] if prerender else ["--no-prerender"]), *extra]
+    args = [
+        sys.executable,
+        "-m",
+        "langpref",
+        "study",
+        "serve",
+        "--model",
+        str(model),
+        "--data",
+        str(data),
+        "--db",
+        str(db),
+        "--port",
+        "0",
+        "--admin-token",
+        ADMIN,
+        *protocol,
+        *([] if prerender else ["--no-prerender"]),
+        *extra,
+    ]
     env = {**os.environ, "PYTHONPATH": SRC + os.pathsep + os.environ.get("PYTHONPATH", ""), "HF_HUB_OFFLINE": "1"}
     err = open(log, "w") if log else subprocess.DEVNULL  # noqa: SIM115 (the server writes it while it runs)
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=err, env=env, text=True)

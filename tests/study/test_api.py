@@ -59,8 +59,15 @@ def test_whole_session_follows_the_contract(client, h, study_state):
     pid, headers = h.join(client)
     steps = walk(client, h, pid, headers)
     phases = list(dict.fromkeys(s["phase"] for s in steps))
-    assert phases == ["pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey",
-                      "done"]
+    assert phases == [
+        "pre_survey",
+        "improve",
+        "improve_survey",
+        "pref_language",
+        "pref_comparison",
+        "pref_survey",
+        "done",
+    ]
     assert steps[-1]["kind"] == "done"
     # after each language answer the page learns how the robot understood it
     after = [b for a, b in itertools.pairwise(steps) if a["kind"] == "language"]
@@ -77,8 +84,9 @@ def test_whole_session_follows_the_contract(client, h, study_state):
     assert conn.execute("SELECT count(*) FROM feedback WHERE participant_id=?", (pid,)).fetchone()[0] == 3 + 4
     assert conn.execute("SELECT count(*) FROM comparisons WHERE participant_id=?", (pid,)).fetchone()[0] == 4
     assert conn.execute("SELECT count(*) FROM ratings WHERE participant_id=?", (pid,)).fetchone()[0] == 4
-    assert conn.execute("SELECT count(*) FROM answers WHERE answered_at IS NULL "
-                        "OR server_ms IS NULL").fetchone()[0] == 0
+    assert (
+        conn.execute("SELECT count(*) FROM answers WHERE answered_at IS NULL OR server_ms IS NULL").fetchone()[0] == 0
+    )
     assert conn.execute("SELECT finished_at FROM participants WHERE id=?", (pid,)).fetchone()[0] is not None
     # a finished study takes no more answers
     r = client.post(f"/api/participants/{pid}/answer", json={"rating": 3, "seq": steps[-1]["seq"]}, headers=headers)
@@ -97,14 +105,17 @@ def test_study_2_order_is_counterbalanced(client, h):
 def test_reload_shows_the_same_step(client, h):
     pid, headers = h.join(client)
     url = f"/api/participants/{pid}/step"
-    client.post(f"/api/participants/{pid}/answer", json=h.answer_for(client.get(url, headers=headers).json()),
-                headers=headers)
+    client.post(
+        f"/api/participants/{pid}/answer", json=h.answer_for(client.get(url, headers=headers).json()), headers=headers
+    )
     first = client.get(url, headers=headers).json()
     assert first["kind"] == "language" and first["phase"] == "improve"
     assert client.get(url, headers=headers).json() == first
-    r = client.post(f"/api/participants/{pid}/answer", json={"feedback": "Go lower please", "client_ms": 5,
-                                                             "seq": first["seq"]},
-                    headers=headers)
+    r = client.post(
+        f"/api/participants/{pid}/answer",
+        json={"feedback": "Go lower please", "client_ms": 5, "seq": first["seq"]},
+        headers=headers,
+    )
     step = r.json()
     assert step["kind"] == "satisfaction" and client.get(url, headers=headers).json() == step
 
@@ -112,10 +123,12 @@ def test_reload_shows_the_same_step(client, h):
 def test_study_1_stops_when_satisfied(client, h):
     pid, headers = h.join(client)
     url = f"/api/participants/{pid}/answer"
-    step = client.post(url, json=h.answer_for(client.get(f"/api/participants/{pid}/step", headers=headers).json()),
-                       headers=headers).json()
-    step = client.post(url, json={"feedback": "Move faster.", "client_ms": 3, "seq": step["seq"]},
-                       headers=headers).json()
+    step = client.post(
+        url, json=h.answer_for(client.get(f"/api/participants/{pid}/step", headers=headers).json()), headers=headers
+    ).json()
+    step = client.post(
+        url, json={"feedback": "Move faster.", "client_ms": 3, "seq": step["seq"]}, headers=headers
+    ).json()
     assert step["kind"] == "satisfaction" and step["progress"] == {"done": 1, "total": 3}
     assert step["videos"][0].startswith("/videos/traj")
     step = client.post(url, json={"satisfied": True, "seq": step["seq"]}, headers=headers).json()
@@ -129,8 +142,12 @@ def test_improvement_follows_equation_4(engine):
     phi, psi = engine.space.phi, engine.psi("Move faster.")
     for start in engine.study[:4]:
         got = engine.improve(int(start), "Move faster.")
-        scores = [0.0 if j == start else (phi[j] - phi[start]) @ psi
-                  / (np.linalg.norm(phi[j] - phi[start]) * np.linalg.norm(psi)) for j in engine.study]
+        scores = [
+            0.0
+            if j == start
+            else (phi[j] - phi[start]) @ psi / (np.linalg.norm(phi[j] - phi[start]) * np.linalg.norm(psi))
+            for j in engine.study
+        ]
         assert got == int(engine.study[int(np.argmax(scores))])
 
 

@@ -28,8 +28,13 @@ def bodies(step_seq: int) -> list[bytes]:
 
 def http(sock: socket.socket, method: str, path: str, body: bytes = b"", headers: dict | None = None):
     """One request on an open connection; (status, headers, body)."""
-    head = [f"{method} {path} HTTP/1.1", "Host: 127.0.0.1", f"Content-Length: {len(body)}",
-            "Content-Type: application/json", *(f"{k}: {v}" for k, v in (headers or {}).items())]
+    head = [
+        f"{method} {path} HTTP/1.1",
+        "Host: 127.0.0.1",
+        f"Content-Length: {len(body)}",
+        "Content-Type: application/json",
+        *(f"{k}: {v}" for k, v in (headers or {}).items()),
+    ]
     sock.sendall(("\r\n".join(head) + "\r\n\r\n").encode() + body)
     buf = b""
     while b"\r\n\r\n" not in buf:
@@ -68,15 +73,19 @@ def test_bad_bodies_are_one_line_4xx_on_a_connection_that_survives(live, h):
         path = f"/api/participants/{me['participant_id']}"
         status, _, body = http(sock, "GET", f"{path}/step", headers=auth)
         step = json.loads(body)
-        status, _, body = http(sock, "POST", f"{path}/answer", json.dumps({**h.answer_for(step), "seq": 0}).encode(),
-                               auth)
+        status, _, body = http(
+            sock, "POST", f"{path}/answer", json.dumps({**h.answer_for(step), "seq": 0}).encode(), auth
+        )
         assert status == 200, body
         step = json.loads(body)
         assert step["kind"] == "language"
         invalid = [NESTED, b'{"a": ' + BIG.encode() + b"}", b"\xc3\x28", b'{"a": NaN}']
         for bad in [*bodies(step["seq"]), *invalid]:
-            targets = (f"{path}/answer", "/api/participants/resume",
-                       *(("/api/participants",) if bad in invalid else ()))
+            targets = (
+                f"{path}/answer",
+                "/api/participants/resume",
+                *(("/api/participants",) if bad in invalid else ()),
+            )
             for target in targets:
                 status, hdrs, body = http(sock, "POST", target, bad, auth)
                 assert 400 <= status < 500, (target, bad[:60], status, body[:300])

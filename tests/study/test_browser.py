@@ -19,8 +19,16 @@ from pathlib import Path
 import pytest
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-        "--disable-sync", "--no-first-run", "--autoplay-policy=no-user-gesture-required"]
+ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--autoplay-policy=no-user-gesture-required",
+]
 EVIL = "<script>window.pwned=1</script> move faster"
 
 
@@ -97,10 +105,15 @@ def assert_videos_play(page, count: int) -> None:
     page.wait_for_function(
         f"""() => {{ const vs = [...document.querySelectorAll('video')];
               return vs.length === {count} && vs.every(v => v.readyState >= 2 && v.duration > 0 && v.currentTime > 0
-                                                           && !v.paused && !v.error); }}""", timeout=120000)
+                                                           && !v.paused && !v.error); }}""",
+        timeout=120000,
+    )
     t1 = page.evaluate("[...document.querySelectorAll('video')].map(v => v.currentTime)")
-    page.wait_for_function(f"""() => {{ const t = {t1};
-        return [...document.querySelectorAll('video')].every((v, i) => v.currentTime !== t[i]); }}""", timeout=30000)
+    page.wait_for_function(
+        f"""() => {{ const t = {t1};
+        return [...document.querySelectorAll('video')].every((v, i) => v.currentTime !== t[i]); }}""",
+        timeout=30000,
+    )
     assert page.is_hidden(".frame.loading")  # the "being prepared" line is gone once they play
 
 
@@ -256,8 +269,10 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
     lp.fill("#resume-code", code.lower())
     lp.click("#resume-form button[type=submit]")
     wait_kind(lp, "done")
-    assert json.loads(lp.evaluate("localStorage.getItem('langpref-participant')"))["participant_id"] == \
-        json.loads(stored)["participant_id"]
+    assert (
+        json.loads(lp.evaluate("localStorage.getItem('langpref-participant')"))["participant_id"]
+        == json.loads(stored)["participant_id"]
+    )
     assert json.loads(lp.evaluate("localStorage.getItem('langpref-participant-previous')")) == [bogus]  # kept
     lost.close()
 
@@ -282,16 +297,18 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
     phone.evaluate(f"localStorage.setItem('langpref-participant', {json.dumps(json.dumps(survey_session))})")
     phone.goto(url + "/study")
     wait_kind(phone, "survey", "pre_survey")
-    ys = phone.eval_on_selector_all("fieldset[data-type=likert] >> nth=0 >> input",
-                                    "els => els.map(e => Math.round(e.getBoundingClientRect().top))")
+    ys = phone.eval_on_selector_all(
+        "fieldset[data-type=likert] >> nth=0 >> input", "els => els.map(e => Math.round(e.getBoundingClientRect().top))"
+    )
     assert len(ys) == 5 and len(set(ys)) == 1, ys  # 1 2 3 4 5 on one line
     phone.evaluate(f"localStorage.setItem('langpref-participant', {json.dumps(json.dumps(comparison_session))})")
     phone.goto(url + "/study")
     begin(phone, "pref_comparison", "first method")
     wait_kind(phone, "comparison", "pref_comparison")
     assert_videos_play(phone, 2)
-    boxes = phone.eval_on_selector_all("video, .choices button", "els => els.map(e => e.getBoundingClientRect())"
-                                       ".map(r => [r.top, r.bottom])")
+    boxes = phone.eval_on_selector_all(
+        "video, .choices button", "els => els.map(e => e.getBoundingClientRect()).map(r => [r.top, r.bottom])"
+    )
     assert all(0 <= top and bottom <= 844 for top, bottom in boxes), boxes  # both videos and both buttons on screen
     assert "keys 1 and 2" not in phone.inner_text("main")
     shots(phone, "phone_comparison")
@@ -309,16 +326,28 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
     admin.wait_for_selector("#participants tbody tr")
     texts = admin.eval_on_selector_all("li.feedback-text", "els => els.map(e => e.textContent)")
     assert any(EVIL in t for t in texts)
-    assert admin.evaluate("window.pwned === undefined && document.querySelectorAll('#participants script').length "
-                          "=== 0")
+    assert admin.evaluate(
+        "window.pwned === undefined && document.querySelectorAll('#participants script').length === 0"
+    )
     assert code in admin.inner_text("#participants")
     admin.on("dialog", lambda d: d.accept("a test run"))
     admin.click("#participants tbody tr >> nth=1 >> button.exclude")
     admin.wait_for_selector("#participants tbody tr.excluded")
-    assert conn.execute("SELECT number, excluded_reason FROM participants WHERE excluded=1").fetchall() == \
-        [(2, "a test run")]
+    assert conn.execute("SELECT number, excluded_reason FROM participants WHERE excluded=1").fetchall() == [
+        (2, "a test run")
+    ]
     shots(admin, "admin")
     assert not errors, errors
     print(f"screenshots in {shots.folder}")
-    assert set(shots.taken) >= {"guidelines", "survey", "language", "satisfaction", "comparison", "rating", "done",
-                                "admin", "phone_guidelines", "phone_comparison"}
+    assert set(shots.taken) >= {
+        "guidelines",
+        "survey",
+        "language",
+        "satisfaction",
+        "comparison",
+        "rating",
+        "done",
+        "admin",
+        "phone_guidelines",
+        "phone_comparison",
+    }

@@ -62,8 +62,11 @@ def test_summary_holds_the_papers_analyses(simulated_db, tmp_path):
     test = s["study2_ratings"]["auc_paired_test"]
     assert test["n"] == 4 and ("note" in test or 0 <= test["t_p_value"] <= 1)
     aspects = s["study2_aspects"]
-    assert aspects["respondents"] == 4 and set(aspects["language"]) >= {"Time efficiency", "Convenience",
-                                                                         "Adaptability"}
+    assert aspects["respondents"] == 4 and set(aspects["language"]) >= {
+        "Time efficiency",
+        "Convenience",
+        "Adaptability",
+    }
     assert sum(s["study2_preference"].values()) == 4
     it = s["study1_iterations_to_satisfaction"]
     assert len(it["per_participant"]) == 4 and it["not_satisfied"] + it["n"] == 4

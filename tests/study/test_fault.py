@@ -43,8 +43,12 @@ def test_sigkill_and_restart_lose_nothing(h, tmp_path):
         # kill with an answer in flight: afterwards it is either stored with its next step, or not at all
         def post():
             try:
-                httpx.post(f"{url}{base}/answer", json={"feedback": "Move slower.", "client_ms": 4, "seq": step["seq"]},
-                           headers=headers, timeout=5)
+                httpx.post(
+                    f"{url}{base}/answer",
+                    json={"feedback": "Move slower.", "client_ms": 4, "seq": step["seq"]},
+                    headers=headers,
+                    timeout=5,
+                )
             except httpx.HTTPError:
                 pass
 
@@ -72,8 +76,12 @@ def test_sigkill_and_restart_lose_nothing(h, tmp_path):
             n += 1
         seqs = [r[0] for r in conn.execute("SELECT seq FROM answers WHERE participant_id=? ORDER BY seq", (pid,))]
         assert seqs == list(range(n))
-        assert conn.execute("SELECT count(*) FROM feedback WHERE participant_id=? AND phase='pref_language'",
-                            (pid,)).fetchone()[0] == 4
+        assert (
+            conn.execute(
+                "SELECT count(*) FROM feedback WHERE participant_id=? AND phase='pref_language'", (pid,)
+            ).fetchone()[0]
+            == 4
+        )
         assert conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
     finally:
         h.stop(proc)

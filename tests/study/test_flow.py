@@ -79,6 +79,7 @@ def default_answers(satisfied_at=None):
         if step.kind == "satisfaction":
             return Answer("satisfaction", satisfied_at is not None and step.number >= satisfied_at)
         return Answer("rating", 4)
+
     return answer
 
 
@@ -92,21 +93,47 @@ def test_whole_path_follows_the_paper():
     phases = [s.phase for s in steps]
     assert phases[0] == "pre_survey" and phases[-1] == "done"
     order = list(dict.fromkeys(phases))
-    assert order == ["pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey",
-                     "done"]
+    assert order == [
+        "pre_survey",
+        "improve",
+        "improve_survey",
+        "pref_language",
+        "pref_comparison",
+        "pref_survey",
+        "done",
+    ]
     improve = [(s.kind, s.number, s.shown) for s in steps if s.phase == "improve"]
     # never satisfied: 3 rounds of feedback, each followed by the improved trajectory
-    assert improve == [("language", 0, (0,)), ("satisfaction", 1, (1,)), ("language", 1, (1,)),
-                       ("satisfaction", 2, (2,)), ("language", 2, (2,)), ("satisfaction", 3, (3,))]
+    assert improve == [
+        ("language", 0, (0,)),
+        ("satisfaction", 1, (1,)),
+        ("language", 1, (1,)),
+        ("satisfaction", 2, (2,)),
+        ("language", 2, (2,)),
+        ("satisfaction", 3, (3,)),
+    ]
     lang = [(s.kind, s.number, s.shown) for s in steps if s.phase == "pref_language"]
-    assert lang == [("language", 1, (101,)), ("language", 2, (102,)), ("rating", 2, (7,)),
-                    ("language", 3, (103,)), ("language", 4, (104,)), ("rating", 4, (7,))]
+    assert lang == [
+        ("language", 1, (101,)),
+        ("language", 2, (102,)),
+        ("rating", 2, (7,)),
+        ("language", 3, (103,)),
+        ("language", 4, (104,)),
+        ("rating", 4, (7,)),
+    ]
     comp = [(s.kind, s.number) for s in steps if s.phase == "pref_comparison"]
-    assert comp == [("comparison", 1), ("comparison", 2), ("rating", 2), ("comparison", 3), ("comparison", 4),
-                    ("rating", 4)]
+    assert comp == [
+        ("comparison", 1),
+        ("comparison", 2),
+        ("rating", 2),
+        ("comparison", 3),
+        ("comparison", 4),
+        ("rating", 4),
+    ]
     assert [x[1] for x in robot.learned if x[0] == "language"] == [1, 2, 3, 4]
     assert [x[2] for x in robot.learned if x[0] == "comparison"] == [
-        ComparisonAnswer(ComparisonQuery(100 + q, 200 + q), 1) for q in (1, 2, 3, 4)]
+        ComparisonAnswer(ComparisonQuery(100 + q, 200 + q), 1) for q in (1, 2, 3, 4)
+    ]
     # the step after every language answer says how the robot understood it
     after_language = [b for a, b in itertools.pairwise(steps) if a.kind == "language"]
     assert after_language and all(b.extra["understood"]["feature"] == "speed" for b in after_language)
@@ -120,8 +147,11 @@ def test_counterbalanced_order_and_satisfaction_ends_study_1():
     assert [s.kind for s in steps if s.phase == "improve"] == ["language", "satisfaction"] * 2
     # Q = 2 is not a multiple of 5: the one rating comes after the last query
     assert cfg.rating_points() == [2]
-    assert [(s.kind, s.number) for s in steps if s.phase == "pref_language"] == [("language", 1), ("language", 2),
-                                                                                  ("rating", 2)]
+    assert [(s.kind, s.number) for s in steps if s.phase == "pref_language"] == [
+        ("language", 1),
+        ("language", 2),
+        ("rating", 2),
+    ]
 
 
 def test_rating_points_and_progress():
@@ -133,17 +163,26 @@ def test_rating_points_and_progress():
     assert progress(cfg, Step(5, "improve", "satisfaction", (1,), number=2)) == {"done": 2, "total": 10}
 
 
-@pytest.mark.parametrize("body, status", [
-    ([], 400), ({}, 400), ({"feedback": "x", "choice": 1, "seq": 3}, 400), ({"choice": 1, "client_ms": 3}, 409),
-    ({"feedback": "   \n\t ", "client_ms": 3, "seq": 3}, 400), ({"feedback": "x" * 501, "client_ms": 3, "seq": 3}, 400),
-    ({"feedback": 5, "client_ms": 3, "seq": 3}, 400), ({"feedback": "ok", "seq": 3}, 400),
-    ({"feedback": "ok", "client_ms": -1, "seq": 3}, 400), ({"feedback": "ok", "client_ms": True, "seq": 3}, 400),
-    ({"feedback": "ok", "client_ms": 3, "seq": 4}, 409),
-    # a seq that is not an integer (without one, DESIGN.md's clients, the answer is for the current step)
-    ({"feedback": "Move faster.", "client_ms": 3, "seq": "3"}, 400),
-    ({"feedback": "Move\x00 faster.", "client_ms": 3, "seq": 3}, 400),
-    ({"feedback": "Move faster.", "client_ms": 10 ** 400, "seq": 3}, 400),
-])
+@pytest.mark.parametrize(
+    "body, status",
+    [
+        ([], 400),
+        ({}, 400),
+        ({"feedback": "x", "choice": 1, "seq": 3}, 400),
+        ({"choice": 1, "client_ms": 3}, 409),
+        ({"feedback": "   \n\t ", "client_ms": 3, "seq": 3}, 400),
+        ({"feedback": "x" * 501, "client_ms": 3, "seq": 3}, 400),
+        ({"feedback": 5, "client_ms": 3, "seq": 3}, 400),
+        ({"feedback": "ok", "seq": 3}, 400),
+        ({"feedback": "ok", "client_ms": -1, "seq": 3}, 400),
+        ({"feedback": "ok", "client_ms": True, "seq": 3}, 400),
+        ({"feedback": "ok", "client_ms": 3, "seq": 4}, 409),
+        # a seq that is not an integer (without one, DESIGN.md's clients, the answer is for the current step)
+        ({"feedback": "Move faster.", "client_ms": 3, "seq": "3"}, 400),
+        ({"feedback": "Move\x00 faster.", "client_ms": 3, "seq": 3}, 400),
+        ({"feedback": "Move faster.", "client_ms": 10**400, "seq": 3}, 400),
+    ],
+)
 def test_parse_answer_refuses_bad_language_answers(body, status):
     step = Step(3, "improve", "language", (0,))
     with pytest.raises(AnswerError) as info:
@@ -166,8 +205,9 @@ def test_parse_answer_accepts_and_trims():
     for bad in (2, -1, True, "1", 0.0):
         with pytest.raises(AnswerError):
             parse_answer({"choice": bad, "client_ms": 1, "seq": 4}, comp)
-    assert (parse_answer({"choice": 1, "client_ms": 1, "seq": 4}, comp).value
-            == ComparisonAnswer(ComparisonQuery(0, 1), 1))
+    assert parse_answer({"choice": 1, "client_ms": 1, "seq": 4}, comp).value == ComparisonAnswer(
+        ComparisonQuery(0, 1), 1
+    )
     with pytest.raises(WrongStep):
         parse_answer({"rating": 3}, Step(9, "done", "done"))
 
@@ -175,16 +215,23 @@ def test_parse_answer_accepts_and_trims():
 def test_survey_validation():
     ok = {q["id"]: value_for(q, likert=5, multi=2) for q in SURVEYS["pre"]}
     assert validate_answers("pre", ok)["robotics_experience"] == 5
-    for qid, bad in (("robotics_experience", 6), ("robotics_experience", True), ("gender", "Robot"),
-                     ("race", "Asian"), ("race", ["Asian", "Asian"]), ("age", 27)):
+    for qid, bad in (
+        ("robotics_experience", 6),
+        ("robotics_experience", True),
+        ("gender", "Robot"),
+        ("race", "Asian"),
+        ("race", ["Asian", "Asian"]),
+        ("age", 27),
+    ):
         with pytest.raises(LangprefError):
             validate_answers("pre", {**ok, qid: bad})
     with pytest.raises(LangprefError, match="unknown question"):
         validate_answers("pre", {**ok, "favourite_colour": "blue"})
     with pytest.raises(LangprefError, match="needs an answer"):
         validate_answers("pre", {k: v for k, v in ok.items() if k != "gender"})
-    pref = {q["id"]: ["None of them"] if q["type"] == "multi" else value_for(q, likert=2, text="")
-            for q in SURVEYS["pref"]}
+    pref = {
+        q["id"]: ["None of them"] if q["type"] == "multi" else value_for(q, likert=2, text="") for q in SURVEYS["pref"]
+    }
     assert "comments" not in validate_answers("pref", pref)  # optional text left empty
     with pytest.raises(LangprefError, match="None of them"):
         validate_answers("pref", {**pref, "aspects_language": ["None of them", "Convenience"]})

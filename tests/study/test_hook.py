@@ -70,8 +70,11 @@ def walk(client, h, until_kind: str | None = None) -> tuple[str, dict[str, str],
 
 def shown(state, steps) -> list[tuple[str, int, int]]:
     """(kind, position, trajectory) of every video of the steps, in order."""
-    return [(s["kind"], pos, state.videos.index_of(url.rsplit("/", 1)[1]))
-            for s, _ in steps for pos, url in enumerate(s["videos"])]
+    return [
+        (s["kind"], pos, state.videos.index_of(url.rsplit("/", 1)[1]))
+        for s, _ in steps
+        for pos, url in enumerate(s["videos"])
+    ]
 
 
 def answers_stored(state, pid: str) -> int:
@@ -110,8 +113,7 @@ def test_failing_and_missing_hooks_are_logged_and_counted(hooked, h, tmp_path, c
     assert (last["status"], last["returncode"], last["participant"]) == ("failed", 1, pid)
     assert "robot offline" in last["output"]
     assert client.get("/api/admin/participants", headers=h.admin).json()["hooks"]["counts"]["failed"] == n
-    assert any("--on-show hook failed" in r.getMessage() and "robot offline" in r.getMessage()
-               for r in caplog.records)
+    assert any("--on-show hook failed" in r.getMessage() and "robot offline" in r.getMessage() for r in caplog.records)
 
     # a program that is gone by the time it runs: an error on the dashboard, the study goes on
     script = tmp_path / "replay.sh"
@@ -142,8 +144,11 @@ def test_hanging_hook_is_killed_at_its_timeout_and_never_delays_a_step(hooked, h
 
 
 def test_a_hook_that_cannot_run_is_refused_at_start(h, tmp_path):
-    for command, message in (("", "not a command line"), ("'unbalanced", "not a command line"),
-                             (str(tmp_path / "no-such-replay.sh"), "not found")):
+    for command, message in (
+        ("", "not a command line"),
+        ("'unbalanced", "not a command line"),
+        (str(tmp_path / "no-such-replay.sh"), "not found"),
+    ):
         cfg = replace(h.serve_config(tmp_path / "x.sqlite"), on_show=command)
         with pytest.raises(LangprefError, match=message):
             cfg.validate()

@@ -33,8 +33,11 @@ def test_formulas_are_neutralised_in_every_csv(client, h, study_state, tmp_path)
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "language")
     formula = '=HYPERLINK("http://evil.example","x") move faster'
-    r = client.post(f"/api/participants/{pid}/answer", json={"feedback": formula, "client_ms": 3, "seq": step["seq"]},
-                    headers=headers)
+    r = client.post(
+        f"/api/participants/{pid}/answer",
+        json={"feedback": formula, "client_ms": 3, "seq": step["seq"]},
+        headers=headers,
+    )
     assert r.status_code == 200, r.text
     export(study_state.db_path, tmp_path / "out")
     risky = ("=", "+", "-", "@", "\t", "\r")
@@ -64,8 +67,13 @@ def test_control_characters_refused_bidi_removed_unknown_fields_dropped(client, 
     for bad in ("Move\x00 faster", "Move \x1b[31mfaster"):
         r = client.post(url, json={"feedback": bad, "client_ms": 3, "seq": step["seq"]}, headers=headers)
         assert r.status_code == 400 and "control characters" in r.json()["error"]
-    body = {"feedback": "\u202eMove faster.\u202c", "client_ms": 3, "seq": step["seq"], "junk": "j" * 60000,
-            "more": {"a": [1, 2]}}
+    body = {
+        "feedback": "\u202eMove faster.\u202c",
+        "client_ms": 3,
+        "seq": step["seq"],
+        "junk": "j" * 60000,
+        "more": {"a": [1, 2]},
+    }
     assert client.post(url, json=body, headers=headers).status_code == 200
     conn = study_state.connect()
     assert conn.execute("SELECT text FROM feedback").fetchone()[0] == "Move faster."
@@ -125,8 +133,9 @@ def test_excluded_participants_are_left_out(client, h, study_state, tmp_path):
     first = people[0][0]
     r = client.post(f"/api/admin/participants/{first}/exclude", json={"excluded": True, "reason": "a test run"})
     assert r.status_code == 401
-    r = client.post(f"/api/admin/participants/{first}/exclude", json={"excluded": True, "reason": "a test run"},
-                    headers=h.admin)
+    r = client.post(
+        f"/api/admin/participants/{first}/exclude", json={"excluded": True, "reason": "a test run"}, headers=h.admin
+    )
     assert r.status_code == 200, r.text
     rows = client.get("/api/admin/participants", headers=h.admin).json()["participants"]
     assert [p["excluded"] for p in rows] == [True, False, False] and rows[0]["excluded_reason"] == "a test run"

@@ -13,8 +13,12 @@ def test_twenty_participants_at_once(h, tmp_path):
     db = tmp_path / "load.sqlite"
     proc, url = h.run_server(db, log=tmp_path / "server.log")
     try:
-        result = simulate(url, SimConfig(participants=20, seed=2, think_ms=(0.0, 100.0), deadline_s=240.0),
-                          data_dir=h.data, split="all")
+        result = simulate(
+            url,
+            SimConfig(participants=20, seed=2, think_ms=(0.0, 100.0), deadline_s=240.0),
+            data_dir=h.data,
+            split="all",
+        )
     finally:
         h.stop(proc)
     print({k: v for k, v in result.items() if k != "per_participant"})

@@ -17,12 +17,17 @@ from langpref.study.faultbench import alive, descendants
 
 def start_rendering(h, tmp_path, name: str):
     """A server with a video being made: (process, url, its render worker's pids)."""
-    proc, url = h.run_server(tmp_path / f"{name}.sqlite", "--video-width", "64", "--video-height", "48",
-                             log=tmp_path / f"{name}.log")
+    proc, url = h.run_server(
+        tmp_path / f"{name}.sqlite", "--video-width", "64", "--video-height", "48", log=tmp_path / f"{name}.log"
+    )
     pid, headers = h.join(httpx.Client(base_url=url, timeout=30))
     step = httpx.get(f"{url}/api/participants/{pid}/step", headers=headers).json()
-    r = httpx.post(f"{url}/api/participants/{pid}/answer", json={**h.answer_for(step), "seq": step["seq"]},
-                   headers=headers, timeout=30)
+    r = httpx.post(
+        f"{url}/api/participants/{pid}/answer",
+        json={**h.answer_for(step), "seq": step["seq"]},
+        headers=headers,
+        timeout=30,
+    )
     assert r.status_code == 200, r.text
     video = r.json()["videos"][0]
     httpx.get(url + video, timeout=30)  # the worker starts

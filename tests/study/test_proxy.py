@@ -37,13 +37,34 @@ def nginx_bin():
 def local_config(tmp_path: Path, upstream: int, https: int, http: int) -> Path:
     """The shipped site file, made to run here: its ports, a self-signed certificate, a prefix in tmp_path."""
     cert, key = tmp_path / "fullchain.pem", tmp_path / "privkey.pem"
-    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj",
-                    "/CN=study.lab.example", "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
+    subprocess.run(
+        [
+            "openssl",
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=study.lab.example",
+            "-keyout",
+            str(key),
+            "-out",
+            str(cert),
+        ],
+        check=True,
+        capture_output=True,
+    )
     site = CONF.read_text()
-    for old, new in (("127.0.0.1:8000", f"127.0.0.1:{upstream}"), ("listen 443 ssl", f"listen 127.0.0.1:{https} ssl"),
-                     ("listen 80", f"listen 127.0.0.1:{http}"),
-                     ("/etc/ssl/langpref-study/fullchain.pem", str(cert)),
-                     ("/etc/ssl/langpref-study/privkey.pem", str(key))):
+    for old, new in (
+        ("127.0.0.1:8000", f"127.0.0.1:{upstream}"),
+        ("listen 443 ssl", f"listen 127.0.0.1:{https} ssl"),
+        ("listen 80", f"listen 127.0.0.1:{http}"),
+        ("/etc/ssl/langpref-study/fullchain.pem", str(cert)),
+        ("/etc/ssl/langpref-study/privkey.pem", str(key)),
+    ):
         assert old in site, old
         site = site.replace(old, new)
     (tmp_path / "site.conf").write_text(site)
@@ -85,8 +106,9 @@ def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine,
         upstream = int(url.rsplit(":", 1)[1])
         https, http = free_port(), free_port()
         conf = local_config(tmp_path, upstream, https, http)
-        check = subprocess.run([nginx_bin, "-t", "-p", str(tmp_path), "-c", str(conf)], check=False,
-                               capture_output=True, text=True)
+        check = subprocess.run(
+            [nginx_bin, "-t", "-p", str(tmp_path), "-c", str(conf)], check=False, capture_output=True, text=True
+        )
         assert check.returncode == 0, check.stderr
         proc = subprocess.Popen([nginx_bin, "-p", str(tmp_path), "-c", str(conf)], stderr=subprocess.PIPE, text=True)
         try:

@@ -18,8 +18,9 @@ def test_a_learner_rebuilt_from_the_database_equals_the_one_in_memory(client, h,
     pid, headers = h.join(client)
     step, n = client.get(f"/api/participants/{pid}/step", headers=headers).json(), 0
     while step["kind"] != "done":
-        r = client.post(f"/api/participants/{pid}/answer", json=h.answer_for(step, FEEDBACK[n % len(FEEDBACK)]),
-                        headers=headers)
+        r = client.post(
+            f"/api/participants/{pid}/answer", json=h.answer_for(step, FEEDBACK[n % len(FEEDBACK)]), headers=headers
+        )
         assert r.status_code == 200, r.text
         step, n = r.json(), n + 1
     conn = study_state.connect()

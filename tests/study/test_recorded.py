@@ -14,14 +14,27 @@ import av
 import numpy as np
 import pytest
 
-COLOURS = {"ep_red": (220, 30, 30), "ep_green": (30, 200, 40), "ep_blue": (30, 40, 220), "ep_yellow": (230, 220, 30),
-           "ep_magenta": (210, 40, 210), "ep_cyan": (40, 210, 220), "ep_white": (235, 235, 235),
-           "ep_black": (15, 15, 15)}
+COLOURS = {
+    "ep_red": (220, 30, 30),
+    "ep_green": (30, 200, 40),
+    "ep_blue": (30, 40, 220),
+    "ep_yellow": (230, 220, 30),
+    "ep_magenta": (210, 40, 210),
+    "ep_cyan": (40, 210, 220),
+    "ep_white": (235, 235, 235),
+    "ep_black": (15, 15, 15),
+}
 FEATURES = ("speed", "height")
-BANK = {"speed": {"increase": ["Move faster.", "Speed up.", "Go quicker.", "Hurry up a bit."],
-                  "decrease": ["Move slower.", "Slow down.", "Go more slowly.", "Take it easy."]},
-        "height": {"increase": ["Move higher.", "Go up more.", "Raise the gripper.", "Lift your hand up."],
-                   "decrease": ["Move lower.", "Go down more.", "Lower the gripper.", "Keep your hand down."]}}
+BANK = {
+    "speed": {
+        "increase": ["Move faster.", "Speed up.", "Go quicker.", "Hurry up a bit."],
+        "decrease": ["Move slower.", "Slow down.", "Go more slowly.", "Take it easy."],
+    },
+    "height": {
+        "increase": ["Move higher.", "Go up more.", "Raise the gripper.", "Lift your hand up."],
+        "decrease": ["Move lower.", "Go down more.", "Lower the gripper.", "Keep your hand down."],
+    },
+}
 TASK_TOML = """name = "tiny-colours"
 description = "Wave the gripper over the table."
 features = ["speed", "height"]
@@ -68,8 +81,13 @@ def recorded_data(tmp_path_factory) -> Path:
         steps = 12 + 2 * i
         obs = (rng.uniform(-1, 1, 4) + 0.2 * rng.standard_normal((steps, 4))).astype(np.float32)
         actions = rng.standard_normal((steps, 2)).astype(np.float32)
-        np.savez(src / f"{name}.npz", observations=obs, actions=actions, features=obs[:, :2].mean(axis=0),
-                 success=np.asarray(i % 2 == 0))
+        np.savez(
+            src / f"{name}.npz",
+            observations=obs,
+            actions=actions,
+            features=obs[:, :2].mean(axis=0),
+            success=np.asarray(i % 2 == 0),
+        )
         write_video(src / f"{name}.mp4", COLOURS[name])
     (root / "utterances.json").write_text(json.dumps(BANK))
     (root / "task.toml").write_text(TASK_TOML)
@@ -87,9 +105,20 @@ def recorded_model(recorded_data, tmp_path_factory) -> Path:
     from langpref.model.train import train
 
     out = tmp_path_factory.mktemp("recorded_model") / "model"
-    train(TrainConfig(data=str(recorded_data), out=str(out), model=ModelConfig(latent_dim=16, max_length=16),
-                      stage1_epochs=2, stage1_batch_size=256, stage2_epochs=0, patience=0, device="cpu", seed=0),
-          progress=False)
+    train(
+        TrainConfig(
+            data=str(recorded_data),
+            out=str(out),
+            model=ModelConfig(latent_dim=16, max_length=16),
+            stage1_epochs=2,
+            stage1_batch_size=256,
+            stage2_epochs=0,
+            patience=0,
+            device="cpu",
+            seed=0,
+        ),
+        progress=False,
+    )
     return out
 
 
@@ -99,11 +128,17 @@ def recorded_state(recorded_model, recorded_data, tmp_path, h):
     from langpref.study.serve import build_state
 
     script = tmp_path / "record_env.py"
-    script.write_text("import json, os, sys\nwith open(sys.argv[1], 'a') as f:\n"
-                      "    f.write(json.dumps({k: v for k, v in os.environ.items() if k.startswith('LANGPREF_')}) + "
-                      "'\\n')\n")
-    cfg = replace(h.serve_config(tmp_path / "study.sqlite"), model=str(recorded_model), data=str(recorded_data),
-                  on_show=shlex.join([sys.executable, str(script), str(tmp_path / "runs.jsonl")]))
+    script.write_text(
+        "import json, os, sys\nwith open(sys.argv[1], 'a') as f:\n"
+        "    f.write(json.dumps({k: v for k, v in os.environ.items() if k.startswith('LANGPREF_')}) + "
+        "'\\n')\n"
+    )
+    cfg = replace(
+        h.serve_config(tmp_path / "study.sqlite"),
+        model=str(recorded_model),
+        data=str(recorded_data),
+        on_show=shlex.join([sys.executable, str(script), str(tmp_path / "runs.jsonl")]),
+    )
     state = build_state(cfg, progress=False)
     yield state
     state.hook.close()
@@ -133,8 +168,11 @@ def test_study_shows_the_recorded_videos(recorded_state, recorded_data, tmp_path
                 # the recording's own video (its episode's colour), transcoded to webm
                 assert nearest_episode(mean_colour(served)) == ds.load(seen[-1][1]).source
             if step["kind"] == "language":  # feedback phrased as in the task's bank
-                body = {"feedback": BANK["height"]["decrease"][language_answers % 4], "client_ms": 1.0,
-                        "seq": step["seq"]}
+                body = {
+                    "feedback": BANK["height"]["decrease"][language_answers % 4],
+                    "client_ms": 1.0,
+                    "seq": step["seq"],
+                }
                 language_answers += 1
             else:
                 body = h.answer_for(step)
@@ -152,8 +190,9 @@ def test_study_shows_the_recorded_videos(recorded_state, recorded_data, tmp_path
             served.write_bytes(client.get(url).content)
             assert nearest_episode(mean_colour(served)) == ds.load(index).source
     assert language_answers >= 2
-    stored = recorded_state.connect().execute(
-        "SELECT count(*) FROM feedback WHERE participant_id=?", (pid,)).fetchone()[0]
+    stored = (
+        recorded_state.connect().execute("SELECT count(*) FROM feedback WHERE participant_id=?", (pid,)).fetchone()[0]
+    )
     assert stored == language_answers
     # the hook learnt each shown trajectory's recorded episode
     assert recorded_state.hook.wait(timeout=60)
@@ -168,8 +207,7 @@ def test_mp4_study_serves_the_recorded_file_as_is(recorded_data, tmp_path):
     from langpref.study.videos import VideoCache
 
     ds = load_dataset(recorded_data)
-    cache = VideoCache(recorded_data, tmp_path / "videos", VideoConfig(format="mp4", width=64), [0, 3],
-                       progress=False)
+    cache = VideoCache(recorded_data, tmp_path / "videos", VideoConfig(format="mp4", width=64), [0, 3], progress=False)
     try:
         for index in (0, 3):
             assert cache.ensure(index, timeout=120).read_bytes() == ds.video_path(index).read_bytes()
@@ -192,13 +230,32 @@ def test_every_command_runs_on_the_recorded_task(recorded_data, recorded_model, 
     ev = run("evaluate", "--model", m, "--data", d)
     assert set(ev["per_feature"]) == set(FEATURES) and ev["num_samples"] > 0
     mine = tmp_path / "mine.json"
-    mine.write_text(json.dumps({"tiny-colours": {"speed": {"increase": ["Zoom along faster."]}},
-                                "some-other-lab-task": {"grip": {"increase": ["Hold tighter."]}}}))
+    mine.write_text(
+        json.dumps(
+            {
+                "tiny-colours": {"speed": {"increase": ["Zoom along faster."]}},
+                "some-other-lab-task": {"grip": {"increase": ["Hold tighter."]}},
+            }
+        )
+    )
     assert run("evaluate", "--model", m, "--data", d, "--utterances", str(mine))["num_phrasings"] == 1
     assert run("embed", "--model", m, "Go quicker.")["feature"] in FEATURES
     improve = run("improve", "--model", m, "--data", d, "--iterations", "2", "--seeds", "2")
     assert len(improve["curve"]) == 3
     for feedback in ("language", "comparison"):
-        reward = run("learn-reward", "--model", m, "--data", d, "--feedback", feedback, "--queries", "3",
-                     "--humans", "2", "--seeds", "1")
+        reward = run(
+            "learn-reward",
+            "--model",
+            m,
+            "--data",
+            d,
+            "--feedback",
+            feedback,
+            "--queries",
+            "3",
+            "--humans",
+            "2",
+            "--seeds",
+            "1",
+        )
         assert len(reward["cross_entropy"]) == 4 and len(reward["true_reward_of_best"]) == 4

@@ -53,21 +53,50 @@ def with_seq(body: bytes, seq: int) -> bytes:
 
 
 BAD_BODIES = {
-    "survey": [b"{not json", b"[1, 2]", b'"text"', b"{}", b'{"answers": []}', b'{"answers": {"age": "3"}}',
-               b'{"answers": {"nope": 1}}', b'{"feedback": "hi", "client_ms": 1}', b"\xff\xfe",
-               json.dumps({"answers": {"robotics_experience": 9}}).encode()],
-    "language": [b'{"feedback": ""}', b'{"feedback": "   ", "client_ms": 1}', b'{"feedback": "\\n\\t", "client_ms": 1}',
-                 json.dumps({"feedback": "a" * 501, "client_ms": 1}).encode(), b'{"feedback": "ok"}',
-                 b'{"feedback": ["ok"], "client_ms": 1}', b'{"feedback": "ok", "client_ms": "soon"}',
-                 b'{"choice": 0, "client_ms": 1}', b'{"rating": 3}', b'{"satisfied": true}',
-                 b'{"feedback": "ok", "client_ms": 1, "seq": 99}',
-                 b'{"feedback": "move\\u0000 faster", "client_ms": 1}',
-                 b'{"feedback": "Move faster.", "client_ms": 1, "seq": null}'],
-    "comparison": [b'{"choice": 2, "client_ms": 1}', b'{"choice": -1, "client_ms": 1}',
-                   b'{"choice": "0", "client_ms": 1}',
-                   b'{"choice": true, "client_ms": 1}', b'{"choice": 1}', b'{"feedback": "x", "client_ms": 1}'],
-    "rating": [b'{"rating": 0}', b'{"rating": 6}', b'{"rating": 4.5}', b'{"rating": "5"}', b'{"rating": null}',
-               b'{"rating": false}', b'{"choice": 1, "client_ms": 1}'],
+    "survey": [
+        b"{not json",
+        b"[1, 2]",
+        b'"text"',
+        b"{}",
+        b'{"answers": []}',
+        b'{"answers": {"age": "3"}}',
+        b'{"answers": {"nope": 1}}',
+        b'{"feedback": "hi", "client_ms": 1}',
+        b"\xff\xfe",
+        json.dumps({"answers": {"robotics_experience": 9}}).encode(),
+    ],
+    "language": [
+        b'{"feedback": ""}',
+        b'{"feedback": "   ", "client_ms": 1}',
+        b'{"feedback": "\\n\\t", "client_ms": 1}',
+        json.dumps({"feedback": "a" * 501, "client_ms": 1}).encode(),
+        b'{"feedback": "ok"}',
+        b'{"feedback": ["ok"], "client_ms": 1}',
+        b'{"feedback": "ok", "client_ms": "soon"}',
+        b'{"choice": 0, "client_ms": 1}',
+        b'{"rating": 3}',
+        b'{"satisfied": true}',
+        b'{"feedback": "ok", "client_ms": 1, "seq": 99}',
+        b'{"feedback": "move\\u0000 faster", "client_ms": 1}',
+        b'{"feedback": "Move faster.", "client_ms": 1, "seq": null}',
+    ],
+    "comparison": [
+        b'{"choice": 2, "client_ms": 1}',
+        b'{"choice": -1, "client_ms": 1}',
+        b'{"choice": "0", "client_ms": 1}',
+        b'{"choice": true, "client_ms": 1}',
+        b'{"choice": 1}',
+        b'{"feedback": "x", "client_ms": 1}',
+    ],
+    "rating": [
+        b'{"rating": 0}',
+        b'{"rating": 6}',
+        b'{"rating": 4.5}',
+        b'{"rating": "5"}',
+        b'{"rating": null}',
+        b'{"rating": false}',
+        b'{"choice": 1, "client_ms": 1}',
+    ],
     "satisfaction": [b'{"satisfied": "yes"}', b'{"satisfied": 1}', b'{"satisfied": null}', b'{"rating": 4}'],
 }
 
@@ -79,8 +108,9 @@ def test_bad_answers_are_refused_and_change_nothing(client, h, study_state, kind
     before = snapshot(study_state)
     for body in BAD_BODIES[kind]:
         body = with_seq(body, step["seq"])
-        r = client.post(f"/api/participants/{pid}/answer", content=body,
-                        headers={**headers, "Content-Type": "application/json"})
+        r = client.post(
+            f"/api/participants/{pid}/answer", content=body, headers={**headers, "Content-Type": "application/json"}
+        )
         assert 400 <= r.status_code < 500, (body, r.status_code, r.text)
         is_error(r, r.status_code)
     assert snapshot(study_state) == before
@@ -145,8 +175,14 @@ def test_script_in_feedback_is_stored_verbatim_and_escaped_in_reports(client, h,
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "language")
     evil = "<script>alert('x')</script> move faster"
-    assert client.post(f"/api/participants/{pid}/answer", json={"feedback": evil, "client_ms": 2, "seq": step["seq"]},
-                       headers=headers).status_code == 200
+    assert (
+        client.post(
+            f"/api/participants/{pid}/answer",
+            json={"feedback": evil, "client_ms": 2, "seq": step["seq"]},
+            headers=headers,
+        ).status_code
+        == 200
+    )
     data = client.get("/api/admin/participants", headers=h.admin).json()
     assert data["participants"][0]["recent_feedback"][0]["text"] == evil  # JSON, shown with textContent
     out = export(study_state.db_path, tmp_path / "export")
@@ -162,12 +198,22 @@ def test_unexpected_routes_and_methods_are_json_errors(client):
     is_error(client.post("/api/participants", content=b"{" + b" " * 70000 + b"}"), 413)
 
 
-@pytest.mark.parametrize("path", [
-    "/videos/../study.sqlite", "/videos/..%2Fstudy.sqlite", "/videos/%2e%2e/%2e%2e/etc/passwd",
-    "/videos/..%2F..%2F..%2Fetc%2Fpasswd", "/videos/traj000001-0000000000.webm", "/videos/traj999999-{tag}.webm",
-    "/videos/traj000001-{tag}.mp4", "/videos/..%2Ftraj000001-{tag}.webm", "/videos/x%2F..%2Ftraj000001-{tag}.webm",
-    "/videos/", "/videos/%00",
-])
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/videos/../study.sqlite",
+        "/videos/..%2Fstudy.sqlite",
+        "/videos/%2e%2e/%2e%2e/etc/passwd",
+        "/videos/..%2F..%2F..%2Fetc%2Fpasswd",
+        "/videos/traj000001-0000000000.webm",
+        "/videos/traj999999-{tag}.webm",
+        "/videos/traj000001-{tag}.mp4",
+        "/videos/..%2Ftraj000001-{tag}.webm",
+        "/videos/x%2F..%2Ftraj000001-{tag}.webm",
+        "/videos/",
+        "/videos/%00",
+    ],
+)
 def test_video_paths_cannot_leave_the_cache(client, study_state, path):
     r = client.get(path.format(tag=study_state.videos.tag))
     is_error(r, 404)

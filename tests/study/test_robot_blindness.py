@@ -36,8 +36,9 @@ def test_the_study_robot_is_blind_to_the_true_features(engine):
     answers = {}
     for method in ("language", "comparison"):
         kind = get_kind(method)
-        human = kind.make_human(w, engine.space, engine.study, HumanConfig(phrasing_split="train"),
-                                np.random.default_rng(0))
+        human = kind.make_human(
+            w, engine.space, engine.study, HumanConfig(phrasing_split="train"), np.random.default_rng(0)
+        )
         answers[method] = [human.answer(kind.query(*robot.query(p, method, n))) for n in range(1, 6)]
     runs = []
     for eng in (engine, _scrambled(engine)):
@@ -51,8 +52,10 @@ def test_the_study_robot_is_blind_to_the_true_features(engine):
                 assert r.query(p, method, n) == asked
                 r.learn(p, method, n, answer)
                 history[method].append(answer)
-            out[method] = ([x.detach().numpy().copy() for x in r._learners[(p.id, method)][0].params],
-                           r.best(p, method))
+            out[method] = (
+                [x.detach().numpy().copy() for x in r._learners[(p.id, method)][0].params],
+                r.best(p, method),
+            )
         runs.append(out)
     assert runs[0]["moves"] == runs[1]["moves"]
     for method in ("language", "comparison"):

@@ -57,8 +57,7 @@ def test_unknown_participant_ids_leave_no_memory_behind(client):
     try:
         before = tracemalloc.get_traced_memory()[0]
         for pid in ids:
-            r = client.post(f"/api/participants/{pid}/answer", json={"rating": 1},
-                            headers={"X-Participant-Token": "t"})
+            r = client.post(f"/api/participants/{pid}/answer", json={"rating": 1}, headers={"X-Participant-Token": "t"})
             assert r.status_code == 404
         gc.collect()
         grown = tracemalloc.get_traced_memory()[0] - before
@@ -76,8 +75,10 @@ def test_a_schema_1_database_gets_resume_codes(tmp_path):
     for statement in filter(str.strip, sdb.MIGRATIONS[1].split(";")):
         conn.execute(statement)
     conn.execute("INSERT INTO meta VALUES ('schema_version', '1')")
-    conn.execute("INSERT INTO participants (id, token_sha256, number, method_order, seed, created_at) "
-                 "VALUES ('p1', 'h', 1, 'language,comparison', 1, 0)")
+    conn.execute(
+        "INSERT INTO participants (id, token_sha256, number, method_order, seed, created_at) "
+        "VALUES ('p1', 'h', 1, 'language,comparison', 1, 0)"
+    )
     conn.close()
     sdb.init_db(path, {})
     conn = sdb.connect(path)

@@ -22,8 +22,9 @@ N, HORIZON = 6, 30
 
 
 def langpref(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "langpref", *args], capture_output=True, text=True, timeout=300,
-                          check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "langpref", *args], capture_output=True, text=True, timeout=300, check=False
+    )
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -38,8 +39,20 @@ def installed() -> None:
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("plugin") / "reach"
-    proc = langpref("generate", "--env", TASK, "--out", str(out), "--num-trajectories", str(N),
-                    "--horizon", str(HORIZON), "--workers", "1", "--json")
+    proc = langpref(
+        "generate",
+        "--env",
+        TASK,
+        "--out",
+        str(out),
+        "--num-trajectories",
+        str(N),
+        "--horizon",
+        str(HORIZON),
+        "--workers",
+        "1",
+        "--json",
+    )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["env"] == TASK and summary["num_trajectories"] == N and summary["horizon"] == HORIZON

@@ -15,16 +15,28 @@ from langpref.tasks.base import ObsField, Task
 
 
 def _task(name: str, path: Path) -> Task:
-    return Task(name=name, features=("reach",), feature_descriptions=("how far it reaches",),
-                obs_layout=(ObsField("observation", 0, 3),), action_dim=2, description="A robot reaches.",
-                utterances=path, source="recorded")
+    return Task(
+        name=name,
+        features=("reach",),
+        feature_descriptions=("how far it reaches",),
+        obs_layout=(ObsField("observation", 0, 3),),
+        action_dim=2,
+        description="A robot reaches.",
+        utterances=path,
+        source="recorded",
+    )
 
 
 def test_built_ins_are_the_design_contract():
     assert task_names()[:2] == ("metaworld", "robosuite")
     assert get_task("metaworld").features == ("height", "speed", "distance_to_button")
-    assert get_task("robosuite").features == ("height", "speed", "distance_to_cube", "distance_to_bottle",
-                                              "lift_success")
+    assert get_task("robosuite").features == (
+        "height",
+        "speed",
+        "distance_to_cube",
+        "distance_to_bottle",
+        "lift_success",
+    )
     for name in ("metaworld", "robosuite"):
         task = get_task(name)
         assert task.simulator is not None and len(task.feature_descriptions) == len(task.features)
@@ -66,8 +78,11 @@ def test_plugins_load_and_a_broken_one_is_skipped(monkeypatch, tmp_path):
     def broken():
         raise ImportError("no module named fancy_sim")
 
-    eps = [_EntryPoint("broken", broken), _EntryPoint("good", lambda: lambda: good),
-           _EntryPoint("not-a-task", lambda: 42)]
+    eps = [
+        _EntryPoint("broken", broken),
+        _EntryPoint("good", lambda: lambda: good),
+        _EntryPoint("not-a-task", lambda: 42),
+    ]
     monkeypatch.setattr(tasks, "entry_points", lambda group: eps if group == "langpref.tasks" else [])
     monkeypatch.setattr(tasks, "_plugins_loaded", False)
     monkeypatch.setattr(tasks, "_registry", {})

@@ -167,8 +167,9 @@ def _prepare_out(cfg: GenerateConfig) -> None:
         shutil.rmtree(out)
     if out.exists() and any(out.iterdir()):
         if not stamp.exists() or json.loads(stamp.read_text()) != cfg.identity():
-            raise LangprefError(f"{out} exists and is not an interrupted run of the same generation; "
-                                "choose another --out")
+            raise LangprefError(
+                f"{out} exists and is not an interrupted run of the same generation; choose another --out"
+            )
     out.mkdir(parents=True, exist_ok=True)
     stamp.write_text(json.dumps(cfg.identity()) + "\n")
 
@@ -178,8 +179,15 @@ def _finished(cfg: GenerateConfig, index: int) -> tuple[np.ndarray, bool] | None
     if not trajectory_path(cfg.out, index).exists():
         return None
     task = get_task(cfg.env)
-    meta = DatasetMeta(cfg.env, cfg.horizon, [asdict(f) for f in task.obs_layout], task.action_dim,
-                       list(task.features), {}, cfg.num_trajectories)
+    meta = DatasetMeta(
+        cfg.env,
+        cfg.horizon,
+        [asdict(f) for f in task.obs_layout],
+        task.action_dim,
+        list(task.features),
+        {},
+        cfg.num_trajectories,
+    )
     try:
         traj = load_trajectory(cfg.out, index, meta)
     except LangprefError:
@@ -205,8 +213,16 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
             features[i], success[i] = done
     start = time.time()
     bar = tqdm(total=n, initial=n - len(jobs), desc=f"generate {cfg.env}", unit="traj", dynamic_ncols=True)
-    results = run_jobs(_rollout_job, jobs, setup=make_worker_env, setup_args=(cfg.env, cfg.horizon),
-                       backend=cfg.backend, workers=cfg.workers, ray_address=cfg.ray_address, chunk=4)
+    results = run_jobs(
+        _rollout_job,
+        jobs,
+        setup=make_worker_env,
+        setup_args=(cfg.env, cfg.horizon),
+        backend=cfg.backend,
+        workers=cfg.workers,
+        ray_address=cfg.ray_address,
+        chunk=4,
+    )
     for traj in results:
         save_trajectory(cfg.out, traj)  # one file per trajectory, written as it arrives: a rerun skips it
         features[traj.index], success[traj.index] = traj.features, traj.success
@@ -222,11 +238,24 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
         feature_names=list(task.features),
         splits=assign_splits(cfg.env, n, cfg.seed),
         num_trajectories=n,
-        config={**cfg.identity(), "generator": "latin-hypercube waypoint controllers", "wall_s": round(wall, 1),
-                "workers": cfg.workers, "backend": cfg.backend,
-                "success_rate": float(success.mean())},
+        config={
+            **cfg.identity(),
+            "generator": "latin-hypercube waypoint controllers",
+            "wall_s": round(wall, 1),
+            "workers": cfg.workers,
+            "backend": cfg.backend,
+            "success_rate": float(success.mean()),
+        },
     )
     write_meta(cfg.out, meta, features)
-    return {"out": str(cfg.out), "env": cfg.env, "num_trajectories": n, "horizon": cfg.horizon,
-            "success_rate": float(success.mean()), "wall_s": wall, "workers": cfg.workers,
-            "backend": cfg.backend, "steps_per_s": len(jobs) * cfg.horizon / wall if jobs else None}
+    return {
+        "out": str(cfg.out),
+        "env": cfg.env,
+        "num_trajectories": n,
+        "horizon": cfg.horizon,
+        "success_rate": float(success.mean()),
+        "wall_s": wall,
+        "workers": cfg.workers,
+        "backend": cfg.backend,
+        "steps_per_s": len(jobs) * cfg.horizon / wall if jobs else None,
+    }

@@ -83,22 +83,28 @@ def _step_features(ep: RecordedEpisode, task: TaskFile, fn: Any, where: str) -> 
         try:
             out = fn(ep.observations.copy(), ep.actions.copy())
         except Exception as exc:
-            raise LangprefError(f"{where}: the feature function {task.features_from} failed: "
-                                f"{type(exc).__name__}: {exc}") from None
+            raise LangprefError(
+                f"{where}: the feature function {task.features_from} failed: {type(exc).__name__}: {exc}"
+            ) from None
         out = np.asarray(out, dtype=np.float64)
         if out.shape != (steps, n_feat):
-            raise LangprefError(f"{where}: the feature function {task.features_from} returned shape {out.shape}, "
-                                f"expected ({steps}, {n_feat}): one row per step, one column per feature")
+            raise LangprefError(
+                f"{where}: the feature function {task.features_from} returned shape {out.shape}, "
+                f"expected ({steps}, {n_feat}): one row per step, one column per feature"
+            )
     elif ep.features is not None:
         out = np.asarray(ep.features, dtype=np.float64)
         if out.shape == (n_feat,):
             out = np.broadcast_to(out, (steps, n_feat))  # per-episode features: their time mean is themselves
         elif out.shape != (steps, n_feat):
-            raise LangprefError(f"{where}: 'features' has shape {out.shape}, expected ({steps}, {n_feat}) per step "
-                                f"or ({n_feat},) per episode, in the task file's order ({', '.join(task.features)})")
+            raise LangprefError(
+                f"{where}: 'features' has shape {out.shape}, expected ({steps}, {n_feat}) per step "
+                f"or ({n_feat},) per episode, in the task file's order ({', '.join(task.features)})"
+            )
     else:
-        raise LangprefError(f"{where}: no features: give 'features' in every episode or features_from in the task "
-                            f"file {task.path}")
+        raise LangprefError(
+            f"{where}: no features: give 'features' in every episode or features_from in the task file {task.path}"
+        )
     if not np.isfinite(out).all():
         raise LangprefError(f"{where}: the features hold NaN or infinite values")
     return out.astype(np.float32)
@@ -133,8 +139,7 @@ def _prepare(cfg: ImportConfig) -> Path:
     return tmp
 
 
-def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], progress: bool = True
-                     ) -> dict[str, Any]:
+def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """Import the recording `cfg.src` as a dataset of `task`, storing `bank` (split, checked) as its bank."""
     start = time.time()
     tmp = _prepare(cfg)
@@ -145,19 +150,30 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         fn = task.step_features()
         obs_dim = action_dim = None
         lengths, features, success, videos, wheres = [], np.zeros((n, len(task.features))), [], [], []
-        for i, load in enumerate(tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress,
-                                      dynamic_ncols=True)):
+        for i, load in enumerate(
+            tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress, dynamic_ncols=True)
+        ):
             where, ep = load()
             if len(ep.actions) < 2:
                 raise LangprefError(f"{where}: the episode has {len(ep.actions)} step(s); it needs at least 2")
             if obs_dim is None:
                 obs_dim, action_dim = ep.observations.shape[1], ep.actions.shape[1]
             elif (ep.observations.shape[1], ep.actions.shape[1]) != (obs_dim, action_dim):
-                raise LangprefError(f"{where}: observations/actions have {ep.observations.shape[1]}/"
-                                    f"{ep.actions.shape[1]} dims, earlier episodes {obs_dim}/{action_dim}")
-            traj = Trajectory(index=i, observations=ep.observations, actions=ep.actions,
-                              step_features=_step_features(ep, task, fn, where), qpos=None, qvel=None,
-                              success=bool(ep.success), seed=None, source=ep.name)
+                raise LangprefError(
+                    f"{where}: observations/actions have {ep.observations.shape[1]}/"
+                    f"{ep.actions.shape[1]} dims, earlier episodes {obs_dim}/{action_dim}"
+                )
+            traj = Trajectory(
+                index=i,
+                observations=ep.observations,
+                actions=ep.actions,
+                step_features=_step_features(ep, task, fn, where),
+                qpos=None,
+                qvel=None,
+                success=bool(ep.success),
+                seed=None,
+                source=ep.name,
+            )
             save_trajectory(tmp, traj)
             lengths.append(traj.horizon)
             features[i] = traj.features
@@ -167,25 +183,41 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         with_video = [v is not None for v in videos]
         if any(with_video) and not all(with_video):
             missing = with_video.index(False)
-            raise LangprefError(f"episode {wheres[missing]} has no video while others have one; give every "
-                                "episode its video (NAME.mp4 or NAME.webm) or none")
+            raise LangprefError(
+                f"episode {wheres[missing]} has no video while others have one; give every "
+                "episode its video (NAME.mp4 or NAME.webm) or none"
+            )
         if all(with_video):
             from langpref.dataset.video import write_clip
 
-            for i, clip in enumerate(tqdm(videos, desc="videos", unit="video", disable=not progress,
-                                          dynamic_ncols=True)):
+            for i, clip in enumerate(
+                tqdm(videos, desc="videos", unit="video", disable=not progress, dynamic_ncols=True)
+            ):
                 write_clip(clip, video_path(tmp, i))
         splits = shuffle_into_splits(n, counts, cfg.seed)
         task_obj = task.task(obs_dim, action_dim, tmp / "utterances.json")
         save_task(task_obj, tmp, bank)
         horizon = max(lengths)
         meta = DatasetMeta(
-            env=task.name, horizon=horizon, obs_layout=[asdict(f) for f in task_obj.obs_layout],
-            action_dim=action_dim, feature_names=list(task.features), splits=splits, num_trajectories=n,
-            config={"source": str(cfg.src), "layout": layout, "task_file": str(task.path), "seed": cfg.seed,
-                    "splits": list(cfg.splits), "features_from": task.features_from or "recording",
-                    "success_known": all(s is not None for s in success)},
-            lengths=None if min(lengths) == horizon else lengths, videos=all(with_video))
+            env=task.name,
+            horizon=horizon,
+            obs_layout=[asdict(f) for f in task_obj.obs_layout],
+            action_dim=action_dim,
+            feature_names=list(task.features),
+            splits=splits,
+            num_trajectories=n,
+            config={
+                "source": str(cfg.src),
+                "layout": layout,
+                "task_file": str(task.path),
+                "seed": cfg.seed,
+                "splits": list(cfg.splits),
+                "features_from": task.features_from or "recording",
+                "success_known": all(s is not None for s in success),
+            },
+            lengths=None if min(lengths) == horizon else lengths,
+            videos=all(with_video),
+        )
         write_meta(tmp, meta, features)
         out = Path(cfg.out)
         if out.exists():
@@ -195,7 +227,16 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     wall = time.time() - start
-    return {"out": str(cfg.out), "task": task.name, "layout": layout, "num_trajectories": n,
-            "splits": {k: len(v) for k, v in splits.items()}, "horizon": horizon, "min_length": min(lengths),
-            "videos": meta.videos, "features_from": meta.config["features_from"], "wall_s": wall,
-            "episodes_per_s": n / wall if wall > 0 else None}
+    return {
+        "out": str(cfg.out),
+        "task": task.name,
+        "layout": layout,
+        "num_trajectories": n,
+        "splits": {k: len(v) for k, v in splits.items()},
+        "horizon": horizon,
+        "min_length": min(lengths),
+        "videos": meta.videos,
+        "features_from": meta.config["features_from"],
+        "wall_s": wall,
+        "episodes_per_s": n / wall if wall > 0 else None,
+    }

@@ -31,8 +31,9 @@ def describe(root: str | Path) -> dict[str, Any]:
         },
         "feature_names": ds.feature_names,
         "feature_correlation": [[round(float(v), 4) for v in row] for row in corr],
-        "max_abs_off_diagonal_correlation": (float(np.max(np.abs(corr - np.diag(np.diag(corr))))) if len(corr) > 1
-                                             else 0.0),
+        "max_abs_off_diagonal_correlation": (
+            float(np.max(np.abs(corr - np.diag(np.diag(corr))))) if len(corr) > 1 else 0.0
+        ),
     }
 
 

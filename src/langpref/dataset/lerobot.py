@@ -37,11 +37,7 @@ _BOOKKEEPING = {"timestamp", "frame_index", "episode_index", "index", "task_inde
 
 
 def read_lerobot(
-    src: Path,
-    *,
-    state_key: str = "observation.state",
-    action_key: str = "action",
-    camera: str | None = None,
+    src: Path, *, state_key: str = "observation.state", action_key: str = "action", camera: str | None = None
 ) -> list[RecordedEpisode]:
     """Every episode of the LeRobotDataset v3 at `src`, in episode order.
 
@@ -198,11 +194,7 @@ def _read_parquet(path: Path, columns: list[str] | None = None) -> pa.Table:
 
 
 def _read_frames(
-    src: Path,
-    data_template: str,
-    episodes: list[dict[str, Any]],
-    columns: list[str],
-    features: dict[str, Any],
+    src: Path, data_template: str, episodes: list[dict[str, Any]], columns: list[str], features: dict[str, Any]
 ) -> dict[int, dict[str, np.ndarray]]:
     """{episode_index: {column: (T, D) array}} for the listed episodes, rows in frame_index order."""
     by_file: dict[tuple[int, int], list[dict[str, Any]]] = {}
@@ -264,9 +256,7 @@ def _episode_clip(src: Path, template: str, video_key: str, episode: dict[str, A
     """The episode's span of its camera's video file, which must exist."""
     prefix = f"videos/{video_key}/"
     path = src / template.format(
-        video_key=video_key,
-        chunk_index=episode[prefix + "chunk_index"],
-        file_index=episode[prefix + "file_index"],
+        video_key=video_key, chunk_index=episode[prefix + "chunk_index"], file_index=episode[prefix + "file_index"]
     )
     if not path.is_file():
         raise LangprefError(f"{path}: video file not found (camera '{video_key}', episode {episode['episode_index']})")

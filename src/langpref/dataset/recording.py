@@ -42,8 +42,10 @@ def _npz_arrays(path: Path) -> dict[str, np.ndarray]:
 
 def _matrix(data: dict[str, np.ndarray], key: str, path: Path) -> np.ndarray:
     if key not in data:
-        raise LangprefError(f"{path}: missing key {key!r} (an episode has 'observations' (T, obs_dim) and "
-                            f"'actions' (T, A); it has {', '.join(sorted(data)) or 'nothing'})")
+        raise LangprefError(
+            f"{path}: missing key {key!r} (an episode has 'observations' (T, obs_dim) and "
+            f"'actions' (T, A); it has {', '.join(sorted(data)) or 'nothing'})"
+        )
     value = data[key]
     if value.ndim != 2 or not np.issubdtype(value.dtype, np.number):
         raise LangprefError(f"{path}: {key!r} must be a 2-D numeric array (T, dim), got {value.dtype} {value.shape}")
@@ -65,15 +67,21 @@ def read_plain_episode(path: Path) -> RecordedEpisode:
     if success is not None and success.size != 1:
         raise LangprefError(f"{path}: 'success' must be one boolean, got shape {success.shape}")
     videos = [path.with_suffix(s) for s in VIDEO_SUFFIXES if path.with_suffix(s).is_file()]
-    return RecordedEpisode(name=path.stem, observations=obs, actions=act, features=features,
-                           success=None if success is None else bool(success.reshape(())),
-                           video=VideoClip(videos[0]) if videos else None)
+    return RecordedEpisode(
+        name=path.stem,
+        observations=obs,
+        actions=act,
+        features=features,
+        success=None if success is None else bool(success.reshape(())),
+        video=VideoClip(videos[0]) if videos else None,
+    )
 
 
 def plain_episode_files(src: Path) -> list[Path]:
     """The episodes of a plain recording folder, in name order (other files in it are ignored)."""
     files = sorted(p for p in src.iterdir() if p.suffix == ".npz" and p.is_file() and not p.name.startswith("."))
     if not files:
-        raise LangprefError(f"{src}: no episodes (NAME.npz files) in the folder, and it is not a LeRobotDataset "
-                            "(no meta/info.json)")
+        raise LangprefError(
+            f"{src}: no episodes (NAME.npz files) in the folder, and it is not a LeRobotDataset (no meta/info.json)"
+        )
     return files

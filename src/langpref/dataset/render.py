@@ -15,8 +15,9 @@ from langpref.tasks import make_env
 from langpref.tasks.render import VIDEO_CODECS, render_frames, write_video
 
 
-def replay_video(ds: Dataset, index: int, out: Path, env: Any, width: int = 320, height: int = 240, fps: int = 40,
-                 stride: int = 1) -> Path:
+def replay_video(
+    ds: Dataset, index: int, out: Path, env: Any, width: int = 320, height: int = 240, fps: int = 40, stride: int = 1
+) -> Path:
     """Render trajectory `index` of a simulated dataset in a live `env` of its task (kept by the caller)."""
     traj = ds.load(index)
     if traj.qpos is None or traj.qvel is None:
@@ -36,8 +37,15 @@ def recorded_video(ds: Dataset, index: int, out: Path) -> Path:
     return write_clip(VideoClip(src), out)
 
 
-def render_trajectory(data_dir: str | Path, index: int, out: str | Path, width: int = 320, height: int = 240,
-                      fps: int = 40, stride: int = 1) -> Path:
+def render_trajectory(
+    data_dir: str | Path,
+    index: int,
+    out: str | Path,
+    width: int = 320,
+    height: int = 240,
+    fps: int = 40,
+    stride: int = 1,
+) -> Path:
     """A .mp4 (H.264) or .webm (VP9) video of trajectory `index` of a dataset."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")

@@ -92,7 +92,7 @@ def shuffle_into_splits(n: int, sizes: dict[str, int], seed: int) -> dict[str, l
     order = np.random.default_rng([seed, 1]).permutation(n)
     out, start = {}, 0
     for name in SPLITS:
-        out[name] = sorted(int(i) for i in order[start:start + sizes[name]])
+        out[name] = sorted(int(i) for i in order[start : start + sizes[name]])
         start += sizes[name]
     return out
 
@@ -130,8 +130,9 @@ def write_meta(root: Path, meta: DatasetMeta, features: np.ndarray) -> None:
 def _read_meta(root: Path) -> DatasetMeta:
     path = root / "meta.json"
     if not root.exists():
-        raise LangprefError(f"dataset {root} does not exist: "
-                            f"create one with `langpref generate --env ENV --out {root}`")
+        raise LangprefError(
+            f"dataset {root} does not exist: create one with `langpref generate --env ENV --out {root}`"
+        )
     if not path.is_file():
         raise LangprefError(f"{root} is not a langpref dataset (no meta.json); create one with `langpref generate`")
     try:
@@ -210,8 +211,9 @@ class Dataset:
 
 def _stack(arrays: list[np.ndarray]) -> np.ndarray:
     horizon = max(len(a) for a in arrays)
-    return np.stack([a if len(a) == horizon else np.concatenate([a, np.repeat(a[-1:], horizon - len(a), axis=0)])
-                     for a in arrays]).astype(np.float32)
+    return np.stack(
+        [a if len(a) == horizon else np.concatenate([a, np.repeat(a[-1:], horizon - len(a), axis=0)]) for a in arrays]
+    ).astype(np.float32)
 
 
 def video_path(root: Path, index: int) -> Path:

@@ -35,8 +35,9 @@ PAPER = {  # Appendix C, Table "Test Accuracy of training with frozen language m
 }
 
 
-def run_alignment_experiment(env: str, data_dir: str | Path, out_dir: str | Path, *, config=None,
-                             force: bool = False, progress: bool = True) -> dict[str, Any]:
+def run_alignment_experiment(
+    env: str, data_dir: str | Path, out_dir: str | Path, *, config=None, force: bool = False, progress: bool = True
+) -> dict[str, Any]:
     """Train both models on `data_dir`, evaluate them on its test split, write `alignment.{json,md}` into `out_dir`.
 
     `config` is a `TrainConfig` to start from (data/out/freeze_language are set here); the default is the default
@@ -55,8 +56,7 @@ def run_alignment_experiment(env: str, data_dir: str | Path, out_dir: str | Path
     dataset = load_dataset(data_dir, env=env)
     out_dir = Path(out_dir)
     cofinetuned, frozen = out_dir / "cofinetuned", out_dir / "frozen"
-    cfg = replace(config or TrainConfig(), data=str(data_dir), out=str(cofinetuned), freeze_language=False,
-                  force=force)
+    cfg = replace(config or TrainConfig(), data=str(data_dir), out=str(cofinetuned), freeze_language=False, force=force)
     t0 = time.perf_counter()
     result = train(cfg, stage1_out=frozen, progress=progress)
     train_s = time.perf_counter() - t0
@@ -88,8 +88,9 @@ def alignment_table(summaries: list[dict[str, Any]]) -> str:
     sep = "|---|" + "---|---|" * len(summaries)
     lines = [head, sep]
     for key, label in (("cofinetune", "Co-finetune"), ("frozen", "Frozen language model")):
-        cells = " | ".join(f"{s[key]['accuracy']:.3f} | " + (f"{s['paper'][key]:.3f}" if s['paper'] else "-")
-                           for s in summaries)
+        cells = " | ".join(
+            f"{s[key]['accuracy']:.3f} | " + (f"{s['paper'][key]:.3f}" if s["paper"] else "-") for s in summaries
+        )
         lines.append(f"| {label} | {cells} |")
     per = []
     for s in summaries:

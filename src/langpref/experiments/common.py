@@ -29,8 +29,9 @@ class RunCache:
 
     def __init__(self, path: Path, config: dict[str, Any], force: bool = False):
         self.path = Path(path)
-        self.key = hashlib.sha256(json.dumps(_unset_dropped(config), sort_keys=True, default=str).encode()
-                                  ).hexdigest()[:16]
+        self.key = hashlib.sha256(json.dumps(_unset_dropped(config), sort_keys=True, default=str).encode()).hexdigest()[
+            :16
+        ]
         self.runs: dict[str, Any] = {}
         if self.path.is_file() and not force:
             try:
@@ -38,8 +39,10 @@ class RunCache:
             except (json.JSONDecodeError, UnicodeDecodeError):
                 raise LangprefError(f"{self.path} is corrupt; delete it or pass --force to start over") from None
             if saved.get("config_key") != self.key:
-                raise LangprefError(f"{self.path} holds runs made with another configuration; pass --force to start "
-                                    "over or choose another --out")
+                raise LangprefError(
+                    f"{self.path} holds runs made with another configuration; pass --force to start "
+                    "over or choose another --out"
+                )
             self.runs = saved.get("runs", {})
 
     def __contains__(self, name: str) -> bool:
@@ -65,15 +68,22 @@ class SweepConfig:
     """A running Ray cluster to join; default a local instance."""
 
 
-def worker_space(data: Path, model: Path | None, env: str, perfect: bool, phrasings: str | None = None,
-                 feature_scale: str = "standardised"):
+def worker_space(
+    data: Path,
+    model: Path | None,
+    env: str,
+    perfect: bool,
+    phrasings: str | None = None,
+    feature_scale: str = "standardised",
+):
     from langpref.feedback.space import load_space
 
     return load_space(data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=feature_scale)
 
 
-def run_sweep(job_fn, todo: list, space, space_args: tuple, cache: RunCache, sweep: SweepConfig, desc: str,
-              progress: bool) -> None:
+def run_sweep(
+    job_fn, todo: list, space, space_args: tuple, cache: RunCache, sweep: SweepConfig, desc: str, progress: bool
+) -> None:
     """Run every job of `todo` and store each result in `cache` as it finishes (a rerun skips what is there).
 
     In-process runs use `space` as it is; worker processes and Ray tasks rebuild it from `space_args` (data, model,
@@ -86,14 +96,28 @@ def run_sweep(job_fn, todo: list, space, space_args: tuple, cache: RunCache, swe
     if sweep.backend == "local" and sweep.workers <= 1:
         results = (job_fn(space, job) for job in todo)
     else:
-        results = run_jobs(job_fn, todo, setup=worker_space, setup_args=space_args, backend=sweep.backend,
-                           workers=sweep.workers, ray_address=sweep.ray_address)
+        results = run_jobs(
+            job_fn,
+            todo,
+            setup=worker_space,
+            setup_args=space_args,
+            backend=sweep.backend,
+            workers=sweep.workers,
+            ray_address=sweep.ray_address,
+        )
     for key, value in tqdm(results, total=len(todo), desc=desc, disable=not progress, file=sys.stderr):
         cache.put(key, value)
 
 
-def default_paths(kind: str, env: str, data: str | Path | None, model: str | Path | None, out: str | Path | None,
-                  perfect: bool, variant: str = "") -> tuple[Path, Path | None, Path]:
+def default_paths(
+    kind: str,
+    env: str,
+    data: str | Path | None,
+    model: str | Path | None,
+    out: str | Path | None,
+    perfect: bool,
+    variant: str = "",
+) -> tuple[Path, Path | None, Path]:
     """data/ENV, the co-finetuned model of `langpref experiment alignment` (results/alignment/ENV/cofinetuned) and
     results/KIND/ENV (ENV-perfect for the oracle space, then -VARIANT if given, e.g. ENV-mlp) unless given."""
     data = Path(data) if data else Path("data") / env
@@ -140,8 +164,9 @@ def title_suffix(perfect: bool, human) -> str:
     if human.phrasings:
         parts.append(f"phrasings: {human.phrasings}")
     elif human.phrasing_split != "test":
-        parts.append("all bank phrasings" if human.phrasing_split == "all"
-                     else f"bank {human.phrasing_split} phrasings")
+        parts.append(
+            "all bank phrasings" if human.phrasing_split == "all" else f"bank {human.phrasing_split} phrasings"
+        )
     if human.feature_scale != "standardised":
         parts.append(f"{human.feature_scale} feature scale")
     if human.direction != "reward":

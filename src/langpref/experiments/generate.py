@@ -25,8 +25,12 @@ import numpy as np
 
 from langpref.experiments.common import RunCache, SweepConfig, command_line, default_paths, figure_link
 
-CURVES = {"paper": ("paper", "test"), "paper-generated": ("paper", "generated"),
-          "history": ("history", "test"), "history-generated": ("history", "generated")}
+CURVES = {
+    "paper": ("paper", "test"),
+    "paper-generated": ("paper", "generated"),
+    "history": ("history", "test"),
+    "history-generated": ("history", "generated"),
+}
 """name: (strategy, candidates)."""
 REWARD_RUNS = {"humans": 10, "seeds": 3, "queries": 40}
 """The reward comparison's size: 10 humans x 3 seeds, Q = 40 language queries (the targets of issue 18)."""
@@ -75,9 +79,18 @@ def _plot_reward(picked: np.ndarray, generated: np.ndarray, out: Path, title: st
     return out
 
 
-def run_generate_experiment(env: str, data: str | Path | None = None, model: str | Path | None = None,
-                            out: str | Path | None = None, *, perfect: bool = False, config=None, force: bool = False,
-                            progress: bool = True, sweep: SweepConfig | None = None) -> dict[str, Any]:
+def run_generate_experiment(
+    env: str,
+    data: str | Path | None = None,
+    model: str | Path | None = None,
+    out: str | Path | None = None,
+    *,
+    perfect: bool = False,
+    config=None,
+    force: bool = False,
+    progress: bool = True,
+    sweep: SweepConfig | None = None,
+) -> dict[str, Any]:
     """Both comparisons (module docstring) with `config` (an `ImproveConfig`: seeds, iterations, the human)."""
     import sys
 
@@ -95,16 +108,31 @@ def run_generate_experiment(env: str, data: str | Path | None = None, model: str
     space, generation = _worker(*args)
     cfgs = {name: replace(base, strategy=s, candidate_split=c) for name, (s, c) in CURVES.items()}
     rcfg = LearnRewardConfig(feedback="language", human=base.human, seed=base.seed, **REWARD_RUNS)
-    cache = RunCache(out / "runs.json", {"space": space.description, "propose": asdict(generation.cfg),
-                                         "reward": asdict(rcfg), **{n: asdict(c) for n, c in cfgs.items()}}, force)
+    cache = RunCache(
+        out / "runs.json",
+        {
+            "space": space.description,
+            "propose": asdict(generation.cfg),
+            "reward": asdict(rcfg),
+            **{n: asdict(c) for n, c in cfgs.items()},
+        },
+        force,
+    )
     todo = [(f"{n}/{s}", c, (c.seed, s)) for n, c in cfgs.items() for s in range(c.seeds)]
     todo += [(f"reward/{h}/{s}", rcfg, (rcfg.seed, h, s)) for h in range(rcfg.humans) for s in range(rcfg.seeds)]
     todo = [j for j in todo if j[0] not in cache]
     if sweep.backend == "local" and sweep.workers <= 1:
         results = (_job((space, generation), j) for j in todo)
     else:
-        results = run_jobs(_job, todo, setup=_worker, setup_args=args, backend=sweep.backend, workers=sweep.workers,
-                           ray_address=sweep.ray_address)
+        results = run_jobs(
+            _job,
+            todo,
+            setup=_worker,
+            setup_args=args,
+            backend=sweep.backend,
+            workers=sweep.workers,
+            ray_address=sweep.ray_address,
+        )
     for key, value in tqdm(results, total=len(todo), desc=f"generate {env}", disable=not progress, file=sys.stderr):
         cache.put(key, value)
     improve = {}
@@ -116,25 +144,46 @@ def run_generate_experiment(env: str, data: str | Path | None = None, model: str
     made = np.array([c.optimized_true_reward for c in curves])
     final = {n: r["curve"][-1] for n, r in improve.items()}
     summary = {
-        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
-        "space": space.description, "seeds": base.seeds, "iterations": base.iterations, "improve": improve,
-        "reward": {"true_reward_of_best": picked.tolist(), "optimized_true_reward": made.tolist(),
-                   "queries": rcfg.queries, "runs": len(curves),
-                   "share_optimized_above_best_test": float((made > 1.0).mean()),
-                   "share_optimized_above_picked": float((made > picked).mean())},
-        "targets": {"generated_above_history_on_dataset": {n: final[n] > final["history"]
-                                                           for n in ("paper-generated", "history-generated")},
-                    "generated_above_1": {n: final[n] > 1.0 for n in ("paper-generated", "history-generated")},
-                    "optimum_beats_best_test_for_60pct": bool((made > 1.0).mean() >= 0.6)},
+        "env": env,
+        "data": str(data),
+        "model": str(model) if model else None,
+        "perfect": perfect,
+        "space": space.description,
+        "seeds": base.seeds,
+        "iterations": base.iterations,
+        "improve": improve,
+        "reward": {
+            "true_reward_of_best": picked.tolist(),
+            "optimized_true_reward": made.tolist(),
+            "queries": rcfg.queries,
+            "runs": len(curves),
+            "share_optimized_above_best_test": float((made > 1.0).mean()),
+            "share_optimized_above_picked": float((made > picked).mean()),
+        },
+        "targets": {
+            "generated_above_history_on_dataset": {
+                n: final[n] > final["history"] for n in ("paper-generated", "history-generated")
+            },
+            "generated_above_1": {n: final[n] > 1.0 for n in ("paper-generated", "history-generated")},
+            "optimum_beats_best_test_for_60pct": bool((made > 1.0).mean() >= 0.6),
+        },
         "propose": asdict(generation.cfg),
-        "command": command_line("generate", env, data, model, out, f" --seeds {base.seeds}"
-                                + (f" --workers {sweep.workers}" if sweep.workers > 1 else "")),
+        "command": command_line(
+            "generate",
+            env,
+            data,
+            model,
+            out,
+            f" --seeds {base.seeds}" + (f" --workers {sweep.workers}" if sweep.workers > 1 else ""),
+        ),
         "date": datetime.date.today().isoformat(),
     }
-    summary["figure"] = str(plot_improvement(improve, out / "generate.png",
-                                             f"Improvement, dataset vs generated, {env}"))
-    summary["reward_figure"] = str(_plot_reward(picked, made, out / "generate-reward.png",
-                                                f"r_xi after {rcfg.queries} queries, {env}"))
+    summary["figure"] = str(
+        plot_improvement(improve, out / "generate.png", f"Improvement, dataset vs generated, {env}")
+    )
+    summary["reward_figure"] = str(
+        _plot_reward(picked, made, out / "generate-reward.png", f"r_xi after {rcfg.queries} queries, {env}")
+    )
     (out / "generate.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "generate.md").write_text(generate_markdown(summary))
     return summary
@@ -143,27 +192,38 @@ def run_generate_experiment(env: str, data: str | Path | None = None, model: str
 def generate_markdown(s: dict[str, Any]) -> str:
     n = s["iterations"]
     at = sorted({0, 1, n // 3, 2 * n // 3, n})
-    lines = [f"### Beyond the fixed set: generated trajectories, {s['env']}", "",
-             f"`{s['command']}` ({s['date']}; {s['space']}; {s['seeds']} seeds; search: {s['propose']}). Normalised "
-             "true reward (0 = worst, 1 = best trajectory of the test split; above 1 is better than any of them).", "",
-             "| curve | " + " | ".join(f"it. {i}" for i in at) + " | generation step p50 / p95 (s) |",
-             "|---|" + "---|" * (len(at) + 1)]
+    lines = [
+        f"### Beyond the fixed set: generated trajectories, {s['env']}",
+        "",
+        f"`{s['command']}` ({s['date']}; {s['space']}; {s['seeds']} seeds; search: {s['propose']}). Normalised "
+        "true reward (0 = worst, 1 = best trajectory of the test split; above 1 is better than any of them).",
+        "",
+        "| curve | " + " | ".join(f"it. {i}" for i in at) + " | generation step p50 / p95 (s) |",
+        "|---|" + "---|" * (len(at) + 1),
+    ]
     for name, r in s["improve"].items():
         lat = f"{r['step_s_p50']:.2f} / {r['step_s_p95']:.2f}" if r.get("step_s_p50") is not None else "-"
         lines.append(f"| {name} | " + " | ".join(f"{r['curve'][i]:.3f}" for i in at) + f" | {lat} |")
     rw = s["reward"]
-    lines += ["", f"After {rw['queries']} language queries ({rw['runs']} runs): the test trajectory r_xi ranks first "
-              f"scores {np.mean(rw['true_reward_of_best']):.3f} on average, r_xi's generated optimum "
-              f"{np.mean(rw['optimized_true_reward']):.3f}; the optimum beats the best test trajectory in "
-              f"{rw['share_optimized_above_best_test']:.0%} of runs and the trajectory r_xi picks in "
-              f"{rw['share_optimized_above_picked']:.0%}.", "", f"Targets: {json.dumps(s['targets'])}", "",
-              f"![generated {s['env']}]({figure_link(s['figure'])}) "
-              f"![generated optimum {s['env']}]({figure_link(s['reward_figure'])})"]
+    lines += [
+        "",
+        f"After {rw['queries']} language queries ({rw['runs']} runs): the test trajectory r_xi ranks first "
+        f"scores {np.mean(rw['true_reward_of_best']):.3f} on average, r_xi's generated optimum "
+        f"{np.mean(rw['optimized_true_reward']):.3f}; the optimum beats the best test trajectory in "
+        f"{rw['share_optimized_above_best_test']:.0%} of runs and the trajectory r_xi picks in "
+        f"{rw['share_optimized_above_picked']:.0%}.",
+        "",
+        f"Targets: {json.dumps(s['targets'])}",
+        "",
+        f"![generated {s['env']}]({figure_link(s['figure'])}) "
+        f"![generated optimum {s['env']}]({figure_link(s['reward_figure'])})",
+    ]
     return "\n".join(lines) + "\n"
 
 
-def step_latency(data: str | Path, model: str | Path, horizon: int | None = None, steps: int = 20,
-                 seed: int = 0) -> dict[str, Any]:
+def step_latency(
+    data: str | Path, model: str | Path, horizon: int | None = None, steps: int = 20, seed: int = 0
+) -> dict[str, Any]:
     """Wall time of one generation step as Study 1 waits for it (Eq. 4's objective for a test phrasing, from a
     random dataset trajectory), `steps` times, at `horizon` (default the dataset's): p50, p95 and max in seconds.
     The simulator is started before the first step, as a server does at start-up."""
@@ -182,5 +242,12 @@ def step_latency(data: str | Path, model: str | Path, horizon: int | None = None
         objective = lambda P, c=cur, p=psi: cosine_objective(P, space.phi[c], p)  # noqa: E731
         times.append(proposer.propose(objective, gen.units[cur], (k,)).wall_s)
     t = np.array(times)
-    return {"env": gen.env, "horizon": horizon or gen.horizon, "steps": steps, "rollouts": gen.cfg.rollouts,
-            "p50_s": float(np.percentile(t, 50)), "p95_s": float(np.percentile(t, 95)), "max_s": float(t.max())}
+    return {
+        "env": gen.env,
+        "horizon": horizon or gen.horizon,
+        "steps": steps,
+        "rollouts": gen.cfg.rollouts,
+        "p50_s": float(np.percentile(t, 50)),
+        "p95_s": float(np.percentile(t, 95)),
+        "max_s": float(t.max()),
+    }

@@ -27,9 +27,11 @@ from langpref.experiments.common import (
     title_suffix,
 )
 
-PAPER_FIG4 = ("Fig. 4 (no numbers printed): in both envs the true reward rises consistently over 15 iterations but "
-              "stays below the dashed average optimum, because each step uses only the last feedback and can loop "
-              "between good, non-optimal trajectories.")
+PAPER_FIG4 = (
+    "Fig. 4 (no numbers printed): in both envs the true reward rises consistently over 15 iterations but "
+    "stays below the dashed average optimum, because each step uses only the last feedback and can loop "
+    "between good, non-optimal trajectories."
+)
 
 
 CURVES: dict[str, dict[str, str]] = {
@@ -38,8 +40,11 @@ CURVES: dict[str, dict[str, str]] = {
     "history": {"strategy": "history"},
 }
 """The curves of the experiment: name -> the `ImproveConfig` fields that make it."""
-CURVE_LABELS = {"paper": "Eq. 4, cosine of the difference", "paper-printed": "Eq. 4 as printed",
-                "history": "feedback history"}
+CURVE_LABELS = {
+    "paper": "Eq. 4, cosine of the difference",
+    "paper-printed": "Eq. 4 as printed",
+    "history": "feedback history",
+}
 
 
 def _improvement_job(space, job) -> tuple[str, dict]:
@@ -74,10 +79,18 @@ def improve_markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_improve_experiment(env: str, data: str | Path | None = None, model: str | Path | None = None,
-                           out: str | Path | None = None, *, perfect: bool = False, config=None,
-                           force: bool = False,
-                           progress: bool = True, sweep: SweepConfig | None = None) -> dict[str, Any]:
+def run_improve_experiment(
+    env: str,
+    data: str | Path | None = None,
+    model: str | Path | None = None,
+    out: str | Path | None = None,
+    *,
+    perfect: bool = False,
+    config=None,
+    force: bool = False,
+    progress: bool = True,
+    sweep: SweepConfig | None = None,
+) -> dict[str, Any]:
     """Every curve of `CURVES` with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and
     markdown."""
     from langpref.feedback.space import load_space
@@ -87,28 +100,55 @@ def run_improve_experiment(env: str, data: str | Path | None = None, model: str 
     base = config or ImproveConfig()
     phrasings = base.human.phrasings
     data, model, out = default_paths("improve", env, data, model, out, perfect, "-".join(phrasing_variant(base.human)))
-    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings,
-                       feature_scale=base.human.feature_scale)
+    space = load_space(
+        data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=base.human.feature_scale
+    )
     cfgs = {name: replace(base, **fields) for name, fields in CURVES.items()}
-    cache = RunCache(out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}},
-                     force=force)
+    cache = RunCache(
+        out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}}, force=force
+    )
     for cfg in cfgs.values():
         cfg.validate()
-    todo = [(f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds)
-            if f"{name}/{s}" not in cache]
-    run_sweep(_improvement_job, todo, space, (data, model, env, perfect, phrasings, base.human.feature_scale), cache,
-              sweep or SweepConfig(),
-              f"improve {env}", progress)
-    results = {name: {**summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
-                      "config": asdict(cfg)} for name, cfg in cfgs.items()}
-    figure = plot_improvement({f"{n} ({CURVE_LABELS[n]})": r for n, r in results.items()}, out / "improve.png",
-                              f"Iterative improvement, {env}" + title_suffix(perfect, base.human))
+    todo = [
+        (f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds) if f"{name}/{s}" not in cache
+    ]
+    run_sweep(
+        _improvement_job,
+        todo,
+        space,
+        (data, model, env, perfect, phrasings, base.human.feature_scale),
+        cache,
+        sweep or SweepConfig(),
+        f"improve {env}",
+        progress,
+    )
+    results = {
+        name: {
+            **summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
+            "config": asdict(cfg),
+        }
+        for name, cfg in cfgs.items()
+    }
+    figure = plot_improvement(
+        {f"{n} ({CURVE_LABELS[n]})": r for n, r in results.items()},
+        out / "improve.png",
+        f"Iterative improvement, {env}" + title_suffix(perfect, base.human),
+    )
     summary = {
-        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": perfect,
-        "space": space.description, "seeds": base.seeds, "iterations": base.iterations,
-        "candidate_split": base.candidate_split, "strategies": results, "figure": str(figure),
-        "paper": PAPER_FIG4, "command": command_line("improve", env, data, model, out,
-                                                         cli_flags(base, ImproveConfig(), ("seeds", "iterations"))),
+        "env": env,
+        "data": str(data),
+        "model": str(model) if model else None,
+        "perfect": perfect,
+        "space": space.description,
+        "seeds": base.seeds,
+        "iterations": base.iterations,
+        "candidate_split": base.candidate_split,
+        "strategies": results,
+        "figure": str(figure),
+        "paper": PAPER_FIG4,
+        "command": command_line(
+            "improve", env, data, model, out, cli_flags(base, ImproveConfig(), ("seeds", "iterations"))
+        ),
         "date": datetime.date.today().isoformat(),
     }
     (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -34,10 +34,12 @@ from langpref.experiments.common import (
     title_suffix,
 )
 
-PAPER_FIG5 = ("Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
-              "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
-              "fewer queries with language, especially in Meta-World.")
-PAPER_FIG6 = ("Fig. 6 (no numbers printed): L_Explicit + L_Implicit beats each alone on both metrics.")
+PAPER_FIG5 = (
+    "Fig. 5 (no numbers printed): the cross-entropy of language feedback falls faster than that of "
+    "comparisons in both envs, and the true reward of the learned reward's best trajectory reaches 1 in "
+    "fewer queries with language, especially in Meta-World."
+)
+PAPER_FIG6 = "Fig. 6 (no numbers printed): L_Explicit + L_Implicit beats each alone on both metrics."
 
 
 def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
@@ -50,8 +52,10 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for ax, key, label in ((axes[0], "cross_entropy", "(a) cross-entropy CE(P_w, P_xi)"),
-                           (axes[1], "true_reward_of_best", "(b) true reward of the best test trajectory")):
+    for ax, key, label in (
+        (axes[0], "cross_entropy", "(a) cross-entropy CE(P_w, P_xi)"),
+        (axes[1], "true_reward_of_best", "(b) true reward of the best test trajectory"),
+    ):
         for name, res in results.items():
             mean, std = np.array(res[key]), np.array(res[f"{key}_std"])
             x = np.arange(len(mean))
@@ -68,9 +72,19 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
     return out
 
 
-def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out, perfect: bool, force: bool,
-                 progress: bool, sweep: SweepConfig | None, named_for=None
-                 ) -> tuple[dict[str, dict], dict[str, dict], Any, Path, Path | None, Path]:
+def _run_methods(
+    kind: str,
+    env: str,
+    methods: dict[str, Any],
+    data,
+    model,
+    out,
+    perfect: bool,
+    force: bool,
+    progress: bool,
+    sweep: SweepConfig | None,
+    named_for=None,
+) -> tuple[dict[str, dict], dict[str, dict], Any, Path, Path | None, Path]:
     """Run every (method, human, seed) not yet in the cache; the summary of each method and every run's curves
     (keyed METHOD/HUMAN/SEED). The default output directory is named for the human `named_for` (default the
     methods')."""
@@ -81,19 +95,33 @@ def _run_methods(kind: str, env: str, methods: dict[str, Any], data, model, out,
     phrasings = human.phrasings
     variant = "-".join(sorted(reward_models) + phrasing_variant(named_for or human))
     data, model, out = default_paths(kind, env, data, model, out, perfect, variant)
-    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings,
-                       feature_scale=human.feature_scale)
-    cache = RunCache(out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}},
-                     force=force)
+    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=human.feature_scale)
+    cache = RunCache(
+        out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}}, force=force
+    )
     for cfg in methods.values():
         cfg.validate()
-    todo = [(f"{name}/{h}/{s}", cfg, h, s) for name, cfg in methods.items() for h in range(cfg.humans)
-            for s in range(cfg.seeds) if f"{name}/{h}/{s}" not in cache]
-    run_sweep(_reward_job, todo, space, (data, model, env, perfect, phrasings, human.feature_scale), cache,
-              sweep or SweepConfig(),
-              f"{kind} {env}", progress)
-    results = {name: {**_summary(cache.runs, name, cfg.humans, cfg.seeds), "config": asdict(cfg)}
-               for name, cfg in methods.items()}
+    todo = [
+        (f"{name}/{h}/{s}", cfg, h, s)
+        for name, cfg in methods.items()
+        for h in range(cfg.humans)
+        for s in range(cfg.seeds)
+        if f"{name}/{h}/{s}" not in cache
+    ]
+    run_sweep(
+        _reward_job,
+        todo,
+        space,
+        (data, model, env, perfect, phrasings, human.feature_scale),
+        cache,
+        sweep or SweepConfig(),
+        f"{kind} {env}",
+        progress,
+    )
+    results = {
+        name: {**_summary(cache.runs, name, cfg.humans, cfg.seeds), "config": asdict(cfg)}
+        for name, cfg in methods.items()
+    }
     return results, cache.runs, space, data, model, out
 
 
@@ -121,18 +149,26 @@ def _summary(runs: dict[str, dict], name: str, humans: int, seeds: int) -> dict[
     curves = {h: [Curves(**runs[f"{name}/{h}/{s}"]) for s in range(seeds)] for h in range(humans)}
     out = summarise([c for h in range(humans) for c in curves[h]])
     reached = queries_to(out["true_reward_of_best"])
-    out.update({
-        "mean_cross_entropy_1_to_q": float(np.mean(out["cross_entropy"][1:])),
-        f"queries_to_{THRESHOLD:g}_first_touch": reached["first_touch"],
-        f"queries_to_{THRESHOLD:g}_stays": reached["stays"],
-        "per_human": {str(h): {"cross_entropy": np.mean([c.cross_entropy for c in cs], axis=0).tolist(),
-                               "true_reward_of_best": np.mean([c.true_reward_of_best for c in cs], axis=0).tolist(),
-                               "auc_true_reward": float(np.mean([c.true_reward_of_best for c in cs])),
-                               "mean_cross_entropy_1_to_q": float(np.mean([c.cross_entropy[1:] for c in cs])),
-                               **{f"queries_to_{THRESHOLD:g}_{k}": v for k, v in queries_to(
-                                   np.mean([c.true_reward_of_best for c in cs], axis=0)).items()}}
-                      for h, cs in curves.items()},
-    })
+    out.update(
+        {
+            "mean_cross_entropy_1_to_q": float(np.mean(out["cross_entropy"][1:])),
+            f"queries_to_{THRESHOLD:g}_first_touch": reached["first_touch"],
+            f"queries_to_{THRESHOLD:g}_stays": reached["stays"],
+            "per_human": {
+                str(h): {
+                    "cross_entropy": np.mean([c.cross_entropy for c in cs], axis=0).tolist(),
+                    "true_reward_of_best": np.mean([c.true_reward_of_best for c in cs], axis=0).tolist(),
+                    "auc_true_reward": float(np.mean([c.true_reward_of_best for c in cs])),
+                    "mean_cross_entropy_1_to_q": float(np.mean([c.cross_entropy[1:] for c in cs])),
+                    **{
+                        f"queries_to_{THRESHOLD:g}_{k}": v
+                        for k, v in queries_to(np.mean([c.true_reward_of_best for c in cs], axis=0)).items()
+                    },
+                }
+                for h, cs in curves.items()
+            },
+        }
+    )
     return out
 
 
@@ -158,8 +194,11 @@ def paired_difference(a: np.ndarray, b: np.ndarray, confidence: float = 0.95) ->
     d = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
     n = len(d)
     mean = d.mean(axis=0)
-    half = (stats.t.ppf(0.5 + confidence / 2, n - 1) * d.std(axis=0, ddof=1) / np.sqrt(n) if n > 1
-            else np.full_like(mean, np.inf))
+    half = (
+        stats.t.ppf(0.5 + confidence / 2, n - 1) * d.std(axis=0, ddof=1) / np.sqrt(n)
+        if n > 1
+        else np.full_like(mean, np.inf)
+    )
     return {"mean": mean.tolist(), "low": (mean - half).tolist(), "high": (mean + half).tolist()}
 
 
@@ -167,21 +206,31 @@ def _ce_difference_line(diff: dict[str, list]) -> str:
     mean, low, high = (np.array(diff[k][1:]) for k in ("mean", "low", "high"))
     q = len(mean)
     worst = int(np.argmax(mean)) + 1
-    return (f"Language minus comparison CE, paired by human and seed, 95% t-interval per query count: language "
-            f"significantly lower at {int((high < 0).sum())} of {q}, comparisons significantly lower at "
-            f"{int((low > 0).sum())} of {q}; most in comparisons' favour at q = {worst} "
-            f"({mean[worst - 1]:+.3f}, interval {low[worst - 1]:+.3f} to {high[worst - 1]:+.3f}).")
+    return (
+        f"Language minus comparison CE, paired by human and seed, 95% t-interval per query count: language "
+        f"significantly lower at {int((high < 0).sum())} of {q}, comparisons significantly lower at "
+        f"{int((low > 0).sum())} of {q}; most in comparisons' favour at q = {worst} "
+        f"({mean[worst - 1]:+.3f}, interval {low[worst - 1]:+.3f} to {high[worst - 1]:+.3f})."
+    )
 
 
 def _table(results: dict[str, dict], at: list[int]) -> list[str]:
-    lines = ["| method | " + " | ".join(f"CE q={q}" for q in at) + " | mean CE 1..Q | "
-             + " | ".join(f"best q={q}" for q in at) + " | AUC best | queries to 0.95 (first touch) | "
-             "queries to 0.95 (stays) |", "|---|" + "---|" * (2 * len(at) + 4)]
+    lines = [
+        "| method | "
+        + " | ".join(f"CE q={q}" for q in at)
+        + " | mean CE 1..Q | "
+        + " | ".join(f"best q={q}" for q in at)
+        + " | AUC best | queries to 0.95 (first touch) | "
+        "queries to 0.95 (stays) |",
+        "|---|" + "---|" * (2 * len(at) + 4),
+    ]
     for name, r in results.items():
         ce = " | ".join(f"{r['cross_entropy'][q]:.3f}" for q in at)
         best = " | ".join(f"{r['true_reward_of_best'][q]:.3f}" for q in at)
-        lines.append(f"| {name} | {ce} | {_mean_ce(r):.3f} | {best} | {r['auc_true_reward']:.3f} | "
-                     f"{_reached(r, 'first_touch')} | {_reached(r, 'stays')} |")
+        lines.append(
+            f"| {name} | {ce} | {_mean_ce(r):.3f} | {best} | {r['auc_true_reward']:.3f} | "
+            f"{_reached(r, 'first_touch')} | {_reached(r, 'stays')} |"
+        )
     return lines
 
 
@@ -196,12 +245,18 @@ def _per_human_table(results: dict[str, dict]) -> list[str]:
     humans = list(next(iter(results.values())).get("per_human", {}))
     if not humans:
         return []
-    lines = ["Per synthetic human (mean over its seeds): AUC best / mean CE 1..Q / queries to 0.95 (first touch, "
-             "stays).", "", "| method | " + " | ".join(f"human {h}" for h in humans) + " |",
-             "|---|" + "---|" * len(humans)]
+    lines = [
+        "Per synthetic human (mean over its seeds): AUC best / mean CE 1..Q / queries to 0.95 (first touch, stays).",
+        "",
+        "| method | " + " | ".join(f"human {h}" for h in humans) + " |",
+        "|---|" + "---|" * len(humans),
+    ]
     for name, r in results.items():
-        cells = [f"{p['auc_true_reward']:.3f} / {p['mean_cross_entropy_1_to_q']:.3f} / {_reached(p, 'first_touch')}, "
-                 f"{_reached(p, 'stays')}" for p in (r["per_human"][h] for h in humans)]
+        cells = [
+            f"{p['auc_true_reward']:.3f} / {p['mean_cross_entropy_1_to_q']:.3f} / {_reached(p, 'first_touch')}, "
+            f"{_reached(p, 'stays')}"
+            for p in (r["per_human"][h] for h in humans)
+        ]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return lines
 
@@ -209,19 +264,26 @@ def _per_human_table(results: dict[str, dict]) -> list[str]:
 def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
     q = len(next(iter(summary["methods"].values()))["cross_entropy"]) - 1
     at = sorted({x for x in (0, 1, 5, 10, q // 2, q) if x <= q})
-    lines = [f"### {title}, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""), "",
-             f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-             f"{summary['seeds']} seeds, Q = {q}; metrics on the test split). CE: cross-entropy to the human's P_w "
-             "over all test pairs; best: normalised true reward of the test trajectory r_xi ranks first; AUC: the "
-             "mean of the best curve over query counts 0..Q; queries to 0.95: the first query count at which the mean "
-             "best curve reaches 0.95 (first touch), and the first from which it stays at or above 0.95 up to Q "
-             "(stays).", ""]
+    lines = [
+        f"### {title}, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
+        "",
+        f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
+        f"{summary['seeds']} seeds, Q = {q}; metrics on the test split). CE: cross-entropy to the human's P_w "
+        "over all test pairs; best: normalised true reward of the test trajectory r_xi ranks first; AUC: the "
+        "mean of the best curve over query counts 0..Q; queries to 0.95: the first query count at which the mean "
+        "best curve reaches 0.95 (first touch), and the first from which it stays at or above 0.95 up to Q "
+        "(stays).",
+        "",
+    ]
     lines += _table(summary["methods"], at)
     lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
     if "ce_language_lower" in summary:
         c = summary["ce_language_lower"]
-        lines += ["", f"Mean cross-entropy: language lower than comparisons at {c['lower']} of {c['of']} query counts "
-                  f"(1..Q), higher at {c['higher']}."]
+        lines += [
+            "",
+            f"Mean cross-entropy: language lower than comparisons at {c['lower']} of {c['of']} query counts "
+            f"(1..Q), higher at {c['higher']}.",
+        ]
     if "ce_difference" in summary:
         lines += ["", _ce_difference_line(summary["ce_difference"])]
     per_human = _per_human_table(summary["methods"])
@@ -243,8 +305,15 @@ def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, 
     """The summary of an experiment (what every kind records, then `fields`), written as KIND.json and, through
     `markdown(summary)`, KIND.md."""
     summary = {
-        "env": env, "data": str(data), "model": str(model) if model else None, "perfect": model is None,
-        "space": space.description, "humans": base.humans, "seeds": base.seeds, "queries": base.queries, **fields,
+        "env": env,
+        "data": str(data),
+        "model": str(model) if model else None,
+        "perfect": model is None,
+        "space": space.description,
+        "humans": base.humans,
+        "seeds": base.seeds,
+        "queries": base.queries,
+        **fields,
         "command": command_line(kind, env, data, model, out, _cli_flags(base)),
         "date": datetime.date.today().isoformat(),
     }
@@ -253,68 +322,117 @@ def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, 
     return summary
 
 
-def _finish(kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets,
-            **extra: Any) -> dict[str, Any]:
-    figure = plot_reward_curves(results, out / f"{kind}.png",
-                                f"{title}, {env}" + title_suffix(model is None, base.human))
+def _finish(
+    kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets, **extra: Any
+) -> dict[str, Any]:
+    figure = plot_reward_curves(
+        results, out / f"{kind}.png", f"{title}, {env}" + title_suffix(model is None, base.human)
+    )
     fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}
     return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper))
 
 
-def run_reward_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
-                          force: bool = False, progress: bool = True, sweep: SweepConfig | None = None
-                          ) -> dict[str, Any]:
+def run_reward_experiment(
+    env: str,
+    data=None,
+    model=None,
+    out=None,
+    *,
+    perfect: bool = False,
+    config=None,
+    force: bool = False,
+    progress: bool = True,
+    sweep: SweepConfig | None = None,
+) -> dict[str, Any]:
     """Language (L_Explicit + L_Implicit) vs comparisons with the paper's settings (or `config`, a
     `LearnRewardConfig` whose feedback is replaced); writes reward.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
 
     base = config or LearnRewardConfig()
     methods = {"language": replace(base, feedback="language"), "comparison": replace(base, feedback="comparison")}
-    results, runs, space, data, model, out = _run_methods("reward", env, methods, data, model, out, perfect,
-                                                          force, progress, sweep)
+    results, runs, space, data, model, out = _run_methods(
+        "reward", env, methods, data, model, out, perfect, force, progress, sweep
+    )
     lang, comp = results["language"], results["comparison"]
     lq, cq = lang["queries_to_0.95"], comp["queries_to_0.95"]
     targets = {
         "language CE < comparison CE at every query count 1..Q": bool(
-            np.all(np.array(lang["cross_entropy"][1:]) < np.array(comp["cross_entropy"][1:]))),
+            np.all(np.array(lang["cross_entropy"][1:]) < np.array(comp["cross_entropy"][1:]))
+        ),
         "language AUC of true reward > comparison": lang["auc_true_reward"] > comp["auc_true_reward"],
         "language reaches 0.95 in fewer queries": lq is not None and (cq is None or lq < cq),
     }
     keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
     ce = {m: np.array([runs[f"{m}/{k}"]["cross_entropy"] for k in keys]) for m in methods}
-    return _finish("reward", "Reward learning: language vs comparisons", PAPER_FIG5, env, results, space, data,
-                   model, out, base, targets, ce_difference=paired_difference(ce["language"], ce["comparison"]),
-                   ce_language_lower=ce_lower_count(lang, comp))
+    return _finish(
+        "reward",
+        "Reward learning: language vs comparisons",
+        PAPER_FIG5,
+        env,
+        results,
+        space,
+        data,
+        model,
+        out,
+        base,
+        targets,
+        ce_difference=paired_difference(ce["language"], ce["comparison"]),
+        ce_language_lower=ce_lower_count(lang, comp),
+    )
 
 
-def run_ablation_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
-                            force: bool = False, progress: bool = True, sweep: SweepConfig | None = None
-                          ) -> dict[str, Any]:
+def run_ablation_experiment(
+    env: str,
+    data=None,
+    model=None,
+    out=None,
+    *,
+    perfect: bool = False,
+    config=None,
+    force: bool = False,
+    progress: bool = True,
+    sweep: SweepConfig | None = None,
+) -> dict[str, Any]:
     """Language feedback with L_Explicit + L_Implicit, L_Explicit alone and L_Implicit alone; writes
     ablation.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
 
     base = replace(config or LearnRewardConfig(), feedback="language")
-    methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit",
-                                                                                         "implicit")}
-    results, _, space, data, model, out = _run_methods("ablation", env, methods, data, model, out, perfect, force,
-                                                       progress, sweep)
+    methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit", "implicit")}
+    results, _, space, data, model, out = _run_methods(
+        "ablation", env, methods, data, model, out, perfect, force, progress, sweep
+    )
     b, e, i = results["both"], results["explicit"], results["implicit"]
     targets = {
-        "both has a higher AUC of true reward than explicit and implicit alone":
-            b["auc_true_reward"] > max(e["auc_true_reward"], i["auc_true_reward"]),
-        "both has a lower mean cross-entropy (AUC) than explicit and implicit alone":
-            b["auc_cross_entropy"] < min(e["auc_cross_entropy"], i["auc_cross_entropy"]),
+        "both has a higher AUC of true reward than explicit and implicit alone": b["auc_true_reward"]
+        > max(e["auc_true_reward"], i["auc_true_reward"]),
+        "both has a lower mean cross-entropy (AUC) than explicit and implicit alone": b["auc_cross_entropy"]
+        < min(e["auc_cross_entropy"], i["auc_cross_entropy"]),
     }
-    return _finish("ablation", "Ablation of the language reward loss", PAPER_FIG6, env, results, space, data, model,
-                   out, base, targets)
+    return _finish(
+        "ablation",
+        "Ablation of the language reward loss",
+        PAPER_FIG6,
+        env,
+        results,
+        space,
+        data,
+        model,
+        out,
+        base,
+        targets,
+    )
 
 
 PRIOR_GRID = (0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 PRIOR_SEED = 1
 """Seed of the prior experiment's humans and runs: the reward and ablation experiments use seed 0."""
-PRIOR_METHODS = {"language": ("language", "both"), "comparison": ("comparison", "both"),
-                 "explicit": ("language", "explicit"), "implicit": ("language", "implicit")}
+PRIOR_METHODS = {
+    "language": ("language", "both"),
+    "comparison": ("comparison", "both"),
+    "explicit": ("language", "explicit"),
+    "implicit": ("language", "implicit"),
+}
 
 
 def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Path, title: str = "") -> Path:
@@ -356,9 +474,19 @@ def _mean_ce(result: dict) -> float:
     return float(np.mean(result["cross_entropy"][1:]))
 
 
-def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: bool = False, config=None,
-                         force: bool = False, progress: bool = True, sweep: SweepConfig | None = None,
-                         grid: tuple[float, ...] = PRIOR_GRID) -> dict[str, Any]:
+def run_prior_experiment(
+    env: str,
+    data=None,
+    model=None,
+    out=None,
+    *,
+    perfect: bool = False,
+    config=None,
+    force: bool = False,
+    progress: bool = True,
+    sweep: SweepConfig | None = None,
+    grid: tuple[float, ...] = PRIOR_GRID,
+) -> dict[str, Any]:
     """Each method (language with both losses, comparisons, either language loss alone) at every weight decay of
     `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet, and
     whose language human speaks the bank's val phrasings (`prior_human`): nothing of the test split takes part in
@@ -369,32 +497,47 @@ def run_prior_experiment(env: str, data=None, model=None, out=None, *, perfect: 
     given = config or LearnRewardConfig()
     base = replace(given, eval_split="val", seed=PRIOR_SEED, human=prior_human(given.human))
     reward_model = base.reward.model
-    methods = {_prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss,
-                                                                                weight_decay=wd))
-               for name, (fb, loss) in PRIOR_METHODS.items() for wd in grid}
-    results, _, space, data, model, out = _run_methods("prior", env, methods, data, model, out, perfect, force,
-                                                       progress, sweep, named_for=given.human)
+    methods = {
+        _prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss, weight_decay=wd))
+        for name, (fb, loss) in PRIOR_METHODS.items()
+        for wd in grid
+    }
+    results, _, space, data, model, out = _run_methods(
+        "prior", env, methods, data, model, out, perfect, force, progress, sweep, named_for=given.human
+    )
     picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
     title = f"L2 prior strength, {env}, {reward_model} reward" + title_suffix(model is None, base.human)
     figure = plot_prior(results, grid, out / "prior.png", title)
-    fields = {"seed": PRIOR_SEED, "eval_split": "val", "phrasings": base.human.phrase_source, "grid": list(grid),
-              "reward_model": reward_model,
-              "default": DEFAULT_WEIGHT_DECAY[reward_model], "picks": picks, "methods": results,
-              "figure": str(figure)}
+    fields = {
+        "seed": PRIOR_SEED,
+        "eval_split": "val",
+        "phrasings": base.human.phrase_source,
+        "grid": list(grid),
+        "reward_model": reward_model,
+        "default": DEFAULT_WEIGHT_DECAY[reward_model],
+        "picks": picks,
+        "methods": results,
+        "figure": str(figure),
+    }
     return _save("prior", env, data, model, out, space, base, fields, _prior_markdown)
 
 
 def _prior_markdown(summary: dict[str, Any]) -> str:
     grid, results = summary["grid"], summary["methods"]
-    lines = [f"### L2 prior strength, {summary['env']}" + ("" if summary["reward_model"] == "linear" else
-                                                           f", {summary['reward_model']} reward")
-             + (" (perfect latent space, oracle)" if summary["perfect"] else ""), "",
-             f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-             f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments', the "
-             f"language human speaking {summary.get('phrasings', 'test')} phrasings; metrics on the val split). Mean "
-             "cross-entropy over queries 1..Q for each weight decay; the lowest of each method in bold. "
-             f"The default for the {summary['reward_model']} reward is {summary['default']:g}.", "",
-             "| method | " + " | ".join(f"wd {wd:g}" for wd in grid) + " | pick |", "|---|" + "---|" * (len(grid) + 1)]
+    lines = [
+        f"### L2 prior strength, {summary['env']}"
+        + ("" if summary["reward_model"] == "linear" else f", {summary['reward_model']} reward")
+        + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
+        "",
+        f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
+        f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments', the "
+        f"language human speaking {summary.get('phrasings', 'test')} phrasings; metrics on the val split). Mean "
+        "cross-entropy over queries 1..Q for each weight decay; the lowest of each method in bold. "
+        f"The default for the {summary['reward_model']} reward is {summary['default']:g}.",
+        "",
+        "| method | " + " | ".join(f"wd {wd:g}" for wd in grid) + " | pick |",
+        "|---|" + "---|" * (len(grid) + 1),
+    ]
     for name, pick in summary["picks"].items():
         cells = [f"{_mean_ce(results[_prior_key(name, wd)]):.3f}" for wd in grid]
         cells = [f"**{c}**" if wd == pick else c for c, wd in zip(cells, grid)]

@@ -77,14 +77,19 @@ class ComparisonHuman:
         return ComparisonAnswer(query, 0 if prefers_a else 1)
 
 
-def make_human(w: np.ndarray, space: LatentSpace, candidates: Sequence[int], cfg: HumanConfig,
-               rng: np.random.Generator) -> ComparisonHuman:
+def make_human(
+    w: np.ndarray, space: LatentSpace, candidates: Sequence[int], cfg: HumanConfig, rng: np.random.Generator
+) -> ComparisonHuman:
     """The Eq. 11 human of rationality `cfg.rationality` (it compares any two trajectories: no candidate set)."""
     return ComparisonHuman(w, space.theta, cfg.rationality, rng)
 
 
-def comparison_pairs(space: LatentSpace, answer: ComparisonAnswer, cfg: RewardConfig | None = None,
-                     rng: np.random.Generator | None = None) -> PairBatch:
+def comparison_pairs(
+    space: LatentSpace,
+    answer: ComparisonAnswer,
+    cfg: RewardConfig | None = None,
+    rng: np.random.Generator | None = None,
+) -> PairBatch:
     """The one Bradley-Terry pair of a comparison: preferred beats rejected (`cfg` and `rng` are not needed)."""
     return PairBatch(space.phi[[answer.preferred]], space.phi[[answer.rejected]], np.ones(1))
 
@@ -107,7 +112,19 @@ def from_record(row: Mapping[str, Any]) -> ComparisonAnswer:
     return ComparisonAnswer(ComparisonQuery(int(row["a"]), int(row["b"])), int(row["choice"]))
 
 
-COMPARISON = register_kind(FeedbackKind(
-    name="comparison", query=ComparisonQuery, answer=ComparisonAnswer, shows=2, make_human=make_human,
-    pairs=comparison_pairs, answer_key="choice", parse=parse, value=lambda answer: answer.choice,
-    table="comparisons", to_record=to_record, from_record=from_record))
+COMPARISON = register_kind(
+    FeedbackKind(
+        name="comparison",
+        query=ComparisonQuery,
+        answer=ComparisonAnswer,
+        shows=2,
+        make_human=make_human,
+        pairs=comparison_pairs,
+        answer_key="choice",
+        parse=parse,
+        value=lambda answer: answer.choice,
+        table="comparisons",
+        to_record=to_record,
+        from_record=from_record,
+    )
+)

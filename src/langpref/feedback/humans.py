@@ -102,13 +102,16 @@ class HumanConfig:
         if not self.rationality >= 0:
             raise LangprefError(f"the comparison human's rationality must be >= 0, got {self.rationality}")
         if self.feature_scale not in FEATURE_SCALES:
-            raise LangprefError(f"unknown feature scale {self.feature_scale!r}: choose one of "
-                                f"{', '.join(FEATURE_SCALES)}")
+            raise LangprefError(
+                f"unknown feature scale {self.feature_scale!r}: choose one of {', '.join(FEATURE_SCALES)}"
+            )
         if self.direction not in DIRECTION_RULES:
-            raise LangprefError(f"unknown direction rule {self.direction!r}: choose one of "
-                                f"{', '.join(DIRECTION_RULES)}")
+            raise LangprefError(
+                f"unknown direction rule {self.direction!r}: choose one of {', '.join(DIRECTION_RULES)}"
+            )
 
     def variant(self) -> list[str]:
         """What sets these humans apart from the default ones, for an output's name (none for the defaults)."""
         return ([] if self.feature_scale == "standardised" else [f"{self.feature_scale}-scale"]) + (
-            [] if self.direction == "reward" else [self.direction])
+            [] if self.direction == "reward" else [self.direction]
+        )

@@ -67,8 +67,17 @@ class LanguageAnswer:
 class LanguageHuman:
     """Answers language queries about trajectories with Eq. 10, relative to the best of its candidate set."""
 
-    def __init__(self, w: np.ndarray, theta: np.ndarray, phrases: PhraseTable, candidates: Sequence[int],
-                 feature_names: Sequence[str], temperature: float = 1.0, seed: Seed = 0, direction: str = "reward"):
+    def __init__(
+        self,
+        w: np.ndarray,
+        theta: np.ndarray,
+        phrases: PhraseTable,
+        candidates: Sequence[int],
+        feature_names: Sequence[str],
+        temperature: float = 1.0,
+        seed: Seed = 0,
+        direction: str = "reward",
+    ):
         self.w = np.asarray(w, dtype=np.float64)
         self.theta = np.asarray(theta, dtype=np.float64)
         if self.theta.shape[1] != len(self.w):
@@ -104,17 +113,28 @@ class LanguageHuman:
         direction = self.direction(feature, query.shown)
         rows = self.phrases.rows(feature, direction)
         if len(rows) == 0:
-            raise LangprefError(f"the phrasings this human speaks from have none of {self.feature_names[feature]}/"
-                                f"{DIRECTIONS[direction]}")
+            raise LangprefError(
+                f"the phrasings this human speaks from have none of {self.feature_names[feature]}/"
+                f"{DIRECTIONS[direction]}"
+            )
         row = int(rows[self.rng.integers(len(rows))])
         return LanguageAnswer(query, self.phrases.texts[row], self.feature_names[feature], DIRECTIONS[direction])
 
 
-def make_human(w: np.ndarray, space: LatentSpace, candidates: Sequence[int], cfg: HumanConfig,
-               rng: np.random.Generator) -> LanguageHuman:
+def make_human(
+    w: np.ndarray, space: LatentSpace, candidates: Sequence[int], cfg: HumanConfig, rng: np.random.Generator
+) -> LanguageHuman:
     """The Eq. 10 human speaking the phrasings `cfg` names, tau* the best of `candidates`."""
-    return LanguageHuman(w, space.theta, space.table(cfg.phrase_source), candidates, space.feature_names,
-                         cfg.temperature, rng, direction=cfg.direction)
+    return LanguageHuman(
+        w,
+        space.theta,
+        space.table(cfg.phrase_source),
+        candidates,
+        space.feature_names,
+        cfg.temperature,
+        rng,
+        direction=cfg.direction,
+    )
 
 
 # ---- likelihood -----------------------------------------------------------------------------------------------
@@ -133,8 +153,9 @@ def read_meaning(space: LatentSpace, psi: np.ndarray, split: str = "train") -> i
     return int(groups[np.argmax(protos @ (psi / max(float(np.linalg.norm(psi)), 1e-12)))])
 
 
-def language_pairs(space: LatentSpace, answer: LanguageAnswer, cfg: RewardConfig,
-                   rng: np.random.Generator) -> PairBatch:
+def language_pairs(
+    space: LatentSpace, answer: LanguageAnswer, cfg: RewardConfig, rng: np.random.Generator
+) -> PairBatch:
     """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read)."""
     phi = space.phi[answer.query.shown]
     psi = space.psi_of(answer.text)
@@ -169,7 +190,7 @@ def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
         raise LangprefError("'feedback' must be text")
     text = value.strip()
     if not text:
-        raise LangprefError("Please type your feedback before continuing (for example: \"Move faster.\").")
+        raise LangprefError('Please type your feedback before continuing (for example: "Move faster.").')
     if len(text) > MAX_FEEDBACK:
         raise LangprefError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
     return LanguageAnswer(query, text)
@@ -183,7 +204,19 @@ def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
     return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
 
 
-LANGUAGE = register_kind(FeedbackKind(
-    name="language", query=LanguageQuery, answer=LanguageAnswer, shows=1, make_human=make_human, pairs=language_pairs,
-    answer_key="feedback", parse=parse, value=lambda answer: answer.text, table="feedback", to_record=to_record,
-    from_record=from_record))
+LANGUAGE = register_kind(
+    FeedbackKind(
+        name="language",
+        query=LanguageQuery,
+        answer=LanguageAnswer,
+        shows=1,
+        make_human=make_human,
+        pairs=language_pairs,
+        answer_key="feedback",
+        parse=parse,
+        value=lambda answer: answer.text,
+        table="feedback",
+        to_record=to_record,
+        from_record=from_record,
+    )
+)

@@ -58,8 +58,9 @@ def pair_arrays(learner: RewardLearner) -> tuple[np.ndarray, np.ndarray]:
     """(differences d_j = winner - loser (P, D), raw weights (P,)) of every pair the learner has."""
     if not learner.batches:
         return np.zeros((0, learner.params[0].shape[0])), np.zeros(0)
-    d = np.concatenate([np.asarray(b.winners, dtype=np.float64) - np.asarray(b.losers, dtype=np.float64)
-                        for b in learner.batches])
+    d = np.concatenate(
+        [np.asarray(b.winners, dtype=np.float64) - np.asarray(b.losers, dtype=np.float64) for b in learner.batches]
+    )
     return d, np.concatenate([np.asarray(b.weights, dtype=np.float64) for b in learner.batches])
 
 
@@ -77,15 +78,19 @@ def loss_hessian(xi: np.ndarray, d: np.ndarray, weights: np.ndarray, weight_deca
 def laplace_posterior(learner: RewardLearner) -> LaplacePosterior:
     """The Laplace approximation of the linear learner's posterior at its current fit (call `fit` first)."""
     if learner.cfg.model != "linear":
-        raise LangprefError(f"active query selection needs the linear reward model (a Laplace posterior); the "
-                            f"{learner.cfg.model} reward only works with --query-selection random")
+        raise LangprefError(
+            f"active query selection needs the linear reward model (a Laplace posterior); the "
+            f"{learner.cfg.model} reward only works with --query-selection random"
+        )
     xi = learner.params[0].detach().numpy().astype(np.float64, copy=True)
     d, weights = pair_arrays(learner)
     total = float(weights.sum()) if len(weights) else 0.0
     wd = float(learner.cfg.weight_decay)
     if total <= 0 and wd <= 0:
-        raise LangprefError("with weight_decay 0 and no answer yet the reward's posterior is improper; use a prior "
-                            "(weight_decay > 0) for active query selection")
+        raise LangprefError(
+            "with weight_decay 0 and no answer yet the reward's posterior is improper; use a prior "
+            "(weight_decay > 0) for active query selection"
+        )
     precision = (total * loss_hessian(xi, d, weights, wd)) if total > 0 else wd * np.eye(len(xi))
     precision = 0.5 * (precision + precision.T)
     # the covariance's Cholesky factor from the precision's: P = U U^T, cov = U^-T U^-1

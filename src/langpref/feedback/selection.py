@@ -88,8 +88,9 @@ def check_strategy(strategy: str, kind: str) -> None:
         raise LangprefError(f"unknown query selection {strategy!r}: choose one of {', '.join(STRATEGIES)}")
     allowed = BY_KIND.get(kind, ("random",))
     if strategy not in allowed:
-        raise LangprefError(f"query selection {strategy!r} is not defined for {kind} feedback: choose one of "
-                            f"{', '.join(allowed)}")
+        raise LangprefError(
+            f"query selection {strategy!r} is not defined for {kind} feedback: choose one of {', '.join(allowed)}"
+        )
 
 
 def candidate_rows(pool: np.ndarray, candidates: int | None, rng: np.random.Generator) -> np.ndarray:
@@ -114,9 +115,11 @@ def mutual_information(probs: np.ndarray) -> np.ndarray:
 
 def binary_mutual_information(p: np.ndarray) -> np.ndarray:
     """I(xi; choice) for a two-way answer: p (..., S) the probability of the first answer per draw -> (...,) nats."""
+
     def h(q):
         q = np.clip(q, 1e-6, 1 - 1e-6)  # float32-safe
         return -(q * np.log(q) + (1 - q) * np.log(1 - q))
+
     return np.maximum(h(p.mean(axis=-1)) - h(p).mean(axis=-1), 0.0)
 
 
@@ -160,8 +163,15 @@ class LanguageInfoGain(Selector):
 
     name = "infogain"
 
-    def __init__(self, space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None = None,
-                 samples: int = DEFAULT_SAMPLES, temperature: float = ANSWER_TEMPERATURE):
+    def __init__(
+        self,
+        space: LatentSpace,
+        pool: Sequence[int],
+        reward: RewardConfig,
+        candidates: int | None = None,
+        samples: int = DEFAULT_SAMPLES,
+        temperature: float = ANSWER_TEMPERATURE,
+    ):
         self.space = space
         self.pool = np.asarray(pool, dtype=np.int64)
         self.features, self.axes = feature_axes(space, reward.negative_split)
@@ -264,8 +274,14 @@ class LalInfoGain(Selector):
 class ComparisonActive(Selector):
     """`infogain` (mutual information) or `volume-removal` over every pair of candidates."""
 
-    def __init__(self, space: LatentSpace, pool: Sequence[int], strategy: str, candidates: int | None = None,
-                 samples: int = DEFAULT_SAMPLES):
+    def __init__(
+        self,
+        space: LatentSpace,
+        pool: Sequence[int],
+        strategy: str,
+        candidates: int | None = None,
+        samples: int = DEFAULT_SAMPLES,
+    ):
         self.space = space
         self.pool = np.asarray(pool, dtype=np.int64)
         self.name = strategy
@@ -281,7 +297,7 @@ class ComparisonActive(Selector):
             s = binary_mutual_information(p)
         else:
             mean = p.mean(axis=1)
-            s = 1.0 - mean ** 2 - (1.0 - mean) ** 2
+            s = 1.0 - mean**2 - (1.0 - mean) ** 2
         return i, j, s
 
     def select(self, learner: RewardLearner, rng: np.random.Generator) -> Selection:
@@ -294,13 +310,22 @@ class ComparisonActive(Selector):
         return Selection(ComparisonQuery(int(rows[i[best]]), int(rows[j[best]])), float(s[best]), self.name, len(s))
 
 
-def make_selector(strategy: str, kind: FeedbackKind, space: LatentSpace, pool: Sequence[int], reward: RewardConfig,
-                  candidates: int | None = None, samples: int | None = None) -> Selector | None:
+def make_selector(
+    strategy: str,
+    kind: FeedbackKind,
+    space: LatentSpace,
+    pool: Sequence[int],
+    reward: RewardConfig,
+    candidates: int | None = None,
+    samples: int | None = None,
+) -> Selector | None:
     """The selector of `strategy` for feedback `kind`; None for `random` (the caller draws uniformly)."""
     check_strategy(strategy, kind.name)
     if strategy != "random" and reward.model != "linear":
-        raise LangprefError(f"query selection {strategy!r} needs the linear reward model (a Laplace posterior); "
-                            f"the {reward.model} reward only works with random queries")
+        raise LangprefError(
+            f"query selection {strategy!r} needs the linear reward model (a Laplace posterior); "
+            f"the {reward.model} reward only works with random queries"
+        )
     samples = DEFAULT_SAMPLES if samples is None else int(samples)
     if strategy == "random":
         return None

@@ -72,8 +72,10 @@ class PhraseTable:
         if n == 0:
             raise LangprefError("a phrase table needs at least one phrasing")
         if len(self.feature) != n or len(self.direction) != n or len(self.psi) != n:
-            raise LangprefError(f"phrase table of {n} texts has {len(self.feature)} features, "
-                                f"{len(self.direction)} directions and {len(self.psi)} embeddings")
+            raise LangprefError(
+                f"phrase table of {n} texts has {len(self.feature)} features, "
+                f"{len(self.direction)} directions and {len(self.psi)} embeddings"
+            )
 
     def __len__(self) -> int:
         return len(self.texts)
@@ -104,8 +106,9 @@ def file_table_name(path: str | Path) -> str:
     return f"file:{path}"
 
 
-def _table(entries: Sequence[tuple[str, str, str]], feature_names: Sequence[str], encode: Encoder, where: str
-           ) -> PhraseTable:
+def _table(
+    entries: Sequence[tuple[str, str, str]], feature_names: Sequence[str], encode: Encoder, where: str
+) -> PhraseTable:
     missing = sorted({f for _, f, _ in entries} - set(feature_names))
     if missing:
         raise LangprefError(f"{where} has features {missing} the dataset lacks ({list(feature_names)})")
@@ -145,8 +148,9 @@ class LatentSpace:
             raise LangprefError(f"{self.theta.shape[1]} feature columns for features {list(self.feature_names)}")
         for name, table in self.phrases.items():
             if table.psi.shape[1] != self.phi.shape[1]:
-                raise LangprefError(f"psi of bank split {name!r} has dimension {table.psi.shape[1]}, "
-                                    f"phi has {self.phi.shape[1]}")
+                raise LangprefError(
+                    f"psi of bank split {name!r} has dimension {table.psi.shape[1]}, phi has {self.phi.shape[1]}"
+                )
 
     @property
     def dim(self) -> int:
@@ -164,8 +168,12 @@ class LatentSpace:
         """The phrasings of a bank split, of all of them (`ALL_SPLITS`), or of an utterance file (`file_table_name`)."""
         if split == ALL_SPLITS and split not in self.phrases and all(s in self.phrases for s in BANK_SPLITS):
             parts = [self.phrases[s] for s in BANK_SPLITS]
-            return PhraseTable(tuple(t for p in parts for t in p.texts), np.concatenate([p.feature for p in parts]),
-                               np.concatenate([p.direction for p in parts]), np.concatenate([p.psi for p in parts]))
+            return PhraseTable(
+                tuple(t for p in parts for t in p.texts),
+                np.concatenate([p.feature for p in parts]),
+                np.concatenate([p.direction for p in parts]),
+                np.concatenate([p.psi for p in parts]),
+            )
         if split not in self.phrases:
             raise LangprefError(f"no phrasings of {split!r} were embedded; have {', '.join(self.phrases)}")
         return self.phrases[split]
@@ -210,12 +218,14 @@ def with_feature_scale(space: LatentSpace, dataset, feature_scale: str) -> Laten
         raise LangprefError(f"unknown feature scale {feature_scale!r}: choose one of {', '.join(FEATURE_SCALES)}")
     if feature_scale == "standardised":
         return space
-    return replace(space, theta=paper_theta(dataset),
-                   description=space.description + "; humans' theta: paper scale (raw features summed over steps)")
+    return replace(
+        space,
+        theta=paper_theta(dataset),
+        description=space.description + "; humans' theta: paper scale (raw features summed over steps)",
+    )
 
 
-def build_latent_space(model, dataset, bank_splits: Sequence[str] = BANK_SPLITS, name: str = "a model"
-                       ) -> LatentSpace:
+def build_latent_space(model, dataset, bank_splits: Sequence[str] = BANK_SPLITS, name: str = "a model") -> LatentSpace:
     """phi of every trajectory of `dataset` and psi of the bank's phrasings of `bank_splits`, from a trained model.
 
     Fails with one line when the model was trained on another env or observation layout than the dataset.
@@ -224,14 +234,21 @@ def build_latent_space(model, dataset, bank_splits: Sequence[str] = BANK_SPLITS,
     bank = load_bank(dataset.env)
     phi = _as_numpy(model.encode_dataset(dataset, None))
     tables = {s: phrase_table(bank, s, dataset.feature_names, model.encode_texts) for s in dict.fromkeys(bank_splits)}
-    return LatentSpace(dataset.env, tuple(dataset.feature_names), _normalised_theta(dataset), phi,
-                       {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables,
-                       encode=lambda texts: _as_numpy(model.encode_texts(list(texts))),
-                       description=f"{name} on {dataset.root}")
+    return LatentSpace(
+        dataset.env,
+        tuple(dataset.feature_names),
+        _normalised_theta(dataset),
+        phi,
+        {k: tuple(v) for k, v in dataset.meta.splits.items()},
+        tables,
+        encode=lambda texts: _as_numpy(model.encode_texts(list(texts))),
+        description=f"{name} on {dataset.root}",
+    )
 
 
-def perfect_encoder(feature_names: Sequence[str], bank: Bank, scale: float = 1.0,
-                    extra: Sequence[tuple[str, str, str]] = ()) -> Encoder:
+def perfect_encoder(
+    feature_names: Sequence[str], bank: Bank, scale: float = 1.0, extra: Sequence[tuple[str, str, str]] = ()
+) -> Encoder:
     """An oracle language encoder: any phrasing of feature f maps to +scale e_f (increase) or -scale e_f. It knows
     the bank's phrasings and the (text, feature, direction) entries of `extra` (e.g. an utterance file's)."""
     meaning = {}
@@ -254,8 +271,13 @@ def perfect_encoder(feature_names: Sequence[str], bank: Bank, scale: float = 1.0
     return encode
 
 
-def perfect_latent_space(dataset, bank_splits: Sequence[str] = BANK_SPLITS, scale: float = 1.0,
-                         offset: float = 3.0, phrasings: str | Path | None = None) -> LatentSpace:
+def perfect_latent_space(
+    dataset,
+    bank_splits: Sequence[str] = BANK_SPLITS,
+    scale: float = 1.0,
+    offset: float = 3.0,
+    phrasings: str | Path | None = None,
+) -> LatentSpace:
     """An ideal latent space (an oracle upper bound, not a learned model): phi = (normalised features, offset),
     psi = (+-scale e_f, 0). The constant last coordinate keeps |phi| away from 0, where Eq. 4's cosine would
     blow up; it cancels in every difference of embeddings."""
@@ -272,14 +294,28 @@ def perfect_latent_space(dataset, bank_splits: Sequence[str] = BANK_SPLITS, scal
     if phrasings:
         tables[file_table_name(phrasings)] = _table(extra, dataset.feature_names, encode, f"utterance file {phrasings}")
     phi = np.concatenate([theta, np.full((len(theta), 1), float(offset))], axis=1)
-    return LatentSpace(dataset.env, tuple(dataset.feature_names), theta, phi,
-                       {k: tuple(v) for k, v in dataset.meta.splits.items()}, tables, encode=encode,
-                       description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}")
+    return LatentSpace(
+        dataset.env,
+        tuple(dataset.feature_names),
+        theta,
+        phi,
+        {k: tuple(v) for k, v in dataset.meta.splits.items()},
+        tables,
+        encode=encode,
+        description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}",
+    )
 
 
-def load_space(data: str | Path, model: str | Path | None = None, *, env: str | None = None,
-               perfect: bool = False, bank_splits: Sequence[str] = BANK_SPLITS,
-               phrasings: str | Path | None = None, feature_scale: str = "standardised") -> LatentSpace:
+def load_space(
+    data: str | Path,
+    model: str | Path | None = None,
+    *,
+    env: str | None = None,
+    perfect: bool = False,
+    bank_splits: Sequence[str] = BANK_SPLITS,
+    phrasings: str | Path | None = None,
+    feature_scale: str = "standardised",
+) -> LatentSpace:
     """Open a dataset and the latent space a command runs in: the trained `model`'s, or with `perfect` the oracle
     `perfect_latent_space` (labelled as such), with the phrasings of the utterance file `phrasings` when given, and
     the synthetic humans' theta of `feature_scale` (`with_feature_scale`). Fails with one line when the model's env
@@ -288,8 +324,9 @@ def load_space(data: str | Path, model: str | Path | None = None, *, env: str | 
 
     dataset = load_dataset(data, env=env)
     if perfect:
-        return with_feature_scale(perfect_latent_space(dataset, bank_splits, phrasings=phrasings), dataset,
-                                  feature_scale)
+        return with_feature_scale(
+            perfect_latent_space(dataset, bank_splits, phrasings=phrasings), dataset, feature_scale
+        )
     if model is None:
         raise LangprefError("give --model MODEL (a `langpref train` checkpoint) or --perfect-latent (the oracle space)")
     from langpref.model.checkpoint import load_model
@@ -298,8 +335,9 @@ def load_space(data: str | Path, model: str | Path | None = None, *, env: str | 
     return with_feature_scale(space.with_file(phrasings) if phrasings else space, dataset, feature_scale)
 
 
-def toy_latent_space(env: str = "metaworld", n: int = 60, dim: int | None = None, seed: int = 0,
-                     offset: float = 3.0) -> LatentSpace:
+def toy_latent_space(
+    env: str = "metaworld", n: int = 60, dim: int | None = None, seed: int = 0, offset: float = 3.0
+) -> LatentSpace:
     """A hand-built space without any dataset or model, for tests and benchmarks: theta ~ N(0, 1) per feature,
     splits of 60/20/20%, and the perfect latent geometry of `perfect_latent_space`, isometrically embedded into
     `dim` dimensions by a random orthonormal map when `dim` is given (so sizes match a trained model's D)."""
@@ -320,8 +358,19 @@ def toy_latent_space(env: str = "metaworld", n: int = 60, dim: int | None = None
     phi = np.concatenate([theta, np.full((n, 1), float(offset))], axis=1) @ basis
     order = rng.permutation(n)
     a, b = int(0.6 * n), int(0.8 * n)
-    splits = {"train": tuple(sorted(order[:a].tolist())), "val": tuple(sorted(order[a:b].tolist())),
-              "test": tuple(sorted(order[b:].tolist()))}
+    splits = {
+        "train": tuple(sorted(order[:a].tolist())),
+        "val": tuple(sorted(order[a:b].tolist())),
+        "test": tuple(sorted(order[b:].tolist())),
+    }
     tables = {s: phrase_table(bank, s, names, encode) for s in ("test", "train")}
-    return LatentSpace(env, tuple(names), theta, phi, splits, tables, encode=encode,
-                       description=f"toy latent space ({env}, n={n}, dim={dim}, seed={seed})")
+    return LatentSpace(
+        env,
+        tuple(names),
+        theta,
+        phi,
+        splits,
+        tables,
+        encode=encode,
+        description=f"toy latent space ({env}, n={n}, dim={dim}, seed={seed})",
+    )

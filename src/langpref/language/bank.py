@@ -135,7 +135,7 @@ def _parse_phrasings(
         fkey = f"{key}.{feature}"
         if not isinstance(directions, dict):
             raise LangprefError(
-                f"{where}: {fkey} must be an object {{\"increase\": [...], \"decrease\": [...]}}, "
+                f'{where}: {fkey} must be an object {{"increase": [...], "decrease": [...]}}, '
                 f"got {_type_name(directions)}"
             )
         dentries = _visible(directions)
@@ -209,7 +209,8 @@ def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tupl
     known = set(task_names())
     parsed = {
         name: _parse_phrasings(section, name, where, name, require_all=False)
-        for name, section in entries.items() if name in known
+        for name, section in entries.items()
+        if name in known
     }
     if env not in parsed:
         present = ", ".join(entries) or "none"
@@ -283,8 +284,9 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
     rng = np.random.default_rng([seed, 7])
     for feature in features:
         if feature not in data or not isinstance(data[feature], dict):
-            raise LangprefError(f"{where}: no phrasings for feature {feature!r} (the task's features: "
-                                f"{', '.join(features)})")
+            raise LangprefError(
+                f"{where}: no phrasings for feature {feature!r} (the task's features: {', '.join(features)})"
+            )
         for split in SPLITS:
             out[split][feature] = {}
         for direction in DIRECTIONS:
@@ -297,19 +299,26 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
             distinct.pop("", None)
             unique = list(distinct.values())
             if len(unique) < 3:
-                raise LangprefError(f"{where}: {feature}.{direction} has {len(unique)} distinct phrasing(s); an "
-                                    "unsplit bank needs at least 3 per feature and direction (one per split)")
+                raise LangprefError(
+                    f"{where}: {feature}.{direction} has {len(unique)} distinct phrasing(s); an "
+                    "unsplit bank needs at least 3 per feature and direction (one per split)"
+                )
             order = [unique[i] for i in rng.permutation(len(unique))]
             n_val = max(1, round(len(order) * SPLIT_SHARES[1]))
             n_test = max(1, round(len(order) * SPLIT_SHARES[2]))
             n_train = len(order) - n_val - n_test
-            parts = {"train": order[:n_train], "val": order[n_train:n_train + n_val], "test": order[n_train + n_val:]}
+            parts = {
+                "train": order[:n_train],
+                "val": order[n_train : n_train + n_val],
+                "test": order[n_train + n_val :],
+            }
             for split in SPLITS:
                 out[split][feature][direction] = parts[split]
     unknown = sorted(set(data) - set(features))
     if unknown:
-        raise LangprefError(f"{where}: unknown feature(s) {', '.join(unknown)}; the task's features: "
-                            f"{', '.join(features)}")
+        raise LangprefError(
+            f"{where}: unknown feature(s) {', '.join(unknown)}; the task's features: {', '.join(features)}"
+        )
     return out
 
 

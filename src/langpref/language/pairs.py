@@ -57,8 +57,9 @@ class Pairs:
         return 2 * self.feature + self.direction
 
     def subset(self, mask_or_index: np.ndarray) -> Pairs:
-        return Pairs(self.a[mask_or_index], self.b[mask_or_index], self.feature[mask_or_index],
-                     self.direction[mask_or_index])
+        return Pairs(
+            self.a[mask_or_index], self.b[mask_or_index], self.feature[mask_or_index], self.direction[mask_or_index]
+        )
 
 
 def build_pairs(features: np.ndarray, thresholds: np.ndarray) -> Pairs:
@@ -154,8 +155,9 @@ def phrasings_from_mapping(
                 if index[text] not in ids:
                     ids.append(index[text])
             if require_all and not ids:
-                raise LangprefError(f"{source}: no phrasing for {f}/{d}; "
-                                    "every feature and direction needs at least one")
+                raise LangprefError(
+                    f"{source}: no phrasing for {f}/{d}; every feature and direction needs at least one"
+                )
             group_ids.append(np.array(ids, dtype=np.int64))
     return Phrasings(tuple(texts), feature_names, tuple(group_ids))
 
@@ -198,5 +200,6 @@ def sample_phrasings(
 
 def sample_subset(phrasings: Phrasings, per_group: int, rng: np.random.Generator) -> list[np.ndarray]:
     """Up to `per_group` distinct phrasing ids of each group, drawn without replacement."""
-    return [ids if len(ids) <= per_group else rng.choice(ids, size=per_group, replace=False)
-            for ids in phrasings.group_ids]
+    return [
+        ids if len(ids) <= per_group else rng.choice(ids, size=per_group, replace=False) for ids in phrasings.group_ids
+    ]

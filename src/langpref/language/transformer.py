@@ -48,8 +48,10 @@ def load_transformer(name_or_path: str):
 
             model = T5EncoderModel.from_pretrained(path)
         elif getattr(config, "is_encoder_decoder", False):
-            raise LangprefError(f"language model {name_or_path!r} is an encoder-decoder other than T5; "
-                                "use an encoder model (BERT, MiniLM, RoBERTa...) or a T5 model")
+            raise LangprefError(
+                f"language model {name_or_path!r} is an encoder-decoder other than T5; "
+                "use an encoder model (BERT, MiniLM, RoBERTa...) or a T5 model"
+            )
         else:
             model = AutoModel.from_pretrained(path)
     except LangprefError:
@@ -72,16 +74,18 @@ class SentenceEncoder(nn.Module):
         self.tokenizer = tokenizer
         self.transformer = transformer
         self.max_length = max_length
-        self.hidden_size = int(transformer.config.hidden_size if hasattr(transformer.config, "hidden_size")
-                               else transformer.config.d_model)
+        self.hidden_size = int(
+            transformer.config.hidden_size if hasattr(transformer.config, "hidden_size") else transformer.config.d_model
+        )
 
     @property
     def device(self) -> torch.device:
         return next(self.transformer.parameters()).device
 
     def tokenize(self, texts: Sequence[str]) -> dict[str, torch.Tensor]:
-        enc = self.tokenizer(list(texts), padding=True, truncation=True, max_length=self.max_length,
-                             return_tensors="pt")
+        enc = self.tokenizer(
+            list(texts), padding=True, truncation=True, max_length=self.max_length, return_tensors="pt"
+        )
         return {"input_ids": enc["input_ids"].to(self.device), "attention_mask": enc["attention_mask"].to(self.device)}
 
     def pooled(self, input_ids: torch.Tensor, attention_mask: torch.Tensor) -> torch.Tensor:
@@ -98,7 +102,7 @@ class SentenceEncoder(nn.Module):
         out = torch.empty(len(texts), self.hidden_size, device=self.device)
         chunks = []
         for start in range(0, len(order), batch_size):
-            idx = order[start:start + batch_size]
+            idx = order[start : start + batch_size]
             chunks.append((idx, self.pooled(**self.tokenize([texts[i] for i in idx]))))
         if torch.is_grad_enabled():
             pooled = torch.cat([c for _, c in chunks])

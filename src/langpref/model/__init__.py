@@ -16,11 +16,20 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "load_model": "checkpoint", "read_config": "checkpoint", "save_model": "checkpoint",
-    "DEFAULT_LANG_MODEL": "config", "ModelConfig": "config", "TrainConfig": "config",
-    "alignment_counts": "evaluate", "embed_text": "evaluate", "evaluate_split": "evaluate",
-    "DataInfo": "latent", "LatentModel": "latent",
-    "align_loss": "loss", "latent_loss": "loss", "norm_loss": "loss",
+    "load_model": "checkpoint",
+    "read_config": "checkpoint",
+    "save_model": "checkpoint",
+    "DEFAULT_LANG_MODEL": "config",
+    "ModelConfig": "config",
+    "TrainConfig": "config",
+    "alignment_counts": "evaluate",
+    "embed_text": "evaluate",
+    "evaluate_split": "evaluate",
+    "DataInfo": "latent",
+    "LatentModel": "latent",
+    "align_loss": "loss",
+    "latent_loss": "loss",
+    "norm_loss": "loss",
     "TrainResult": "train",
 }
 __all__ = sorted(_EXPORTS)

@@ -45,16 +45,23 @@ def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: 
     """A fresh model (random trajectory encoder and head, pretrained transformer from `lang_source` or the name)."""
     tokenizer, transformer = load_transformer(lang_source or model_cfg.lang_model)
     deltas = model_cfg.observation_deltas
-    traj = TrajectoryEncoder(step_input_dim(info.obs_dim, info.action_dim, deltas), model_cfg.traj_hidden,
-                             model_cfg.latent_dim, mean, std, observation_deltas=deltas)
+    traj = TrajectoryEncoder(
+        step_input_dim(info.obs_dim, info.action_dim, deltas),
+        model_cfg.traj_hidden,
+        model_cfg.latent_dim,
+        mean,
+        std,
+        observation_deltas=deltas,
+    )
     lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
     return LatentModel(traj, lang, info, model_cfg.lang_model)
 
 
 def _own_state(model: LatentModel) -> dict[str, torch.Tensor]:
     """Every tensor of the model except the transformer's (saved apart, and only when fine-tuned)."""
-    return {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()
-            if not k.startswith("lang.transformer.")}
+    return {
+        k: v.detach().cpu().contiguous() for k, v in model.state_dict().items() if not k.startswith("lang.transformer.")
+    }
 
 
 def _sha256(path: Path) -> str:
@@ -65,10 +72,18 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def save_model(model: LatentModel, out: str | Path, *, model_cfg: ModelConfig, lang_finetuned: bool,
-               train_config: dict[str, Any] | None = None, history: list[dict] | None = None,
-               results: dict[str, Any] | None = None, force: bool = False,
-               extra_files: dict[str, Path] | None = None) -> Path:
+def save_model(
+    model: LatentModel,
+    out: str | Path,
+    *,
+    model_cfg: ModelConfig,
+    lang_finetuned: bool,
+    train_config: dict[str, Any] | None = None,
+    history: list[dict] | None = None,
+    results: dict[str, Any] | None = None,
+    force: bool = False,
+    extra_files: dict[str, Path] | None = None,
+) -> Path:
     """Write `model` as a checkpoint directory `out`; refuses an existing `out` unless `force`."""
     from safetensors.torch import save_file
 
@@ -86,14 +101,20 @@ def save_model(model: LatentModel, out: str | Path, *, model_cfg: ModelConfig, l
             save_transformer(model.lang.tokenizer, model.lang.transformer, tmp / LM_DIR)
         for name, src in (extra_files or {}).items():
             shutil.copyfile(src, tmp / name)
-        files = {p.relative_to(tmp).as_posix(): {"bytes": p.stat().st_size, "sha256": _sha256(p)}
-                 for p in sorted(tmp.rglob("*")) if p.is_file()}
+        files = {
+            p.relative_to(tmp).as_posix(): {"bytes": p.stat().st_size, "sha256": _sha256(p)}
+            for p in sorted(tmp.rglob("*"))
+            if p.is_file()
+        }
         config = {
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "langpref_version": __version__,
-            "model": {**model_cfg.__dict__, "traj_hidden": list(model_cfg.traj_hidden),
-                      "lang_hidden": model.lang.hidden_size},
+            "model": {
+                **model_cfg.__dict__,
+                "traj_hidden": list(model_cfg.traj_hidden),
+                "lang_hidden": model.lang.hidden_size,
+            },
             "lang_model": model.lang_model_name,
             "lang_finetuned": lang_finetuned,
             "data": model.info.to_dict(),
@@ -136,8 +157,10 @@ def read_config(path: str | Path) -> dict[str, Any]:
     if not isinstance(cfg, dict) or cfg.get("format") != FORMAT:
         raise LangprefError(f"{cfg_path} is not a langpref latent-model config; retrain the model")
     if cfg.get("format_version") != FORMAT_VERSION:
-        raise LangprefError(f"{path} has model format version {cfg.get('format_version')!r}, this langpref reads "
-                            f"{FORMAT_VERSION}; retrain the model")
+        raise LangprefError(
+            f"{path} has model format version {cfg.get('format_version')!r}, this langpref reads "
+            f"{FORMAT_VERSION}; retrain the model"
+        )
     for key in ("model", "data", "files", "lang_model"):
         if key not in cfg:
             raise LangprefError(f"{cfg_path} lacks {key!r}; retrain the model")
@@ -151,8 +174,9 @@ def _check_files(path: Path, files: dict[str, dict[str, Any]]) -> None:
             raise LangprefError(f"model {path} is incomplete: {name} is missing; retrain the model")
         size = f.stat().st_size
         if size != facts.get("bytes"):
-            raise LangprefError(f"{f} is truncated or altered ({size} bytes, expected {facts.get('bytes')}); "
-                                "retrain the model")
+            raise LangprefError(
+                f"{f} is truncated or altered ({size} bytes, expected {facts.get('bytes')}); retrain the model"
+            )
         if _sha256(f) != facts.get("sha256"):
             raise LangprefError(f"{f} is corrupt (checksum mismatch); retrain the model")
 
@@ -192,12 +216,15 @@ def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=Non
         missing, unexpected = model.load_state_dict(state, strict=False)
     except RuntimeError as exc:
         msg = str(exc).strip().splitlines()[-1].strip()[:160]
-        raise LangprefError(f"{path / WEIGHTS} does not fit the architecture in {CONFIG} ({msg}); retrain the model"
-                            ) from None
+        raise LangprefError(
+            f"{path / WEIGHTS} does not fit the architecture in {CONFIG} ({msg}); retrain the model"
+        ) from None
     missing = [k for k in missing if not k.startswith("lang.transformer.")]
     if missing or unexpected:
-        raise LangprefError(f"{path / WEIGHTS} does not fit the architecture in {CONFIG} (missing "
-                            f"{missing[:3]}, unexpected {unexpected[:3]}); retrain the model")
+        raise LangprefError(
+            f"{path / WEIGHTS} does not fit the architecture in {CONFIG} (missing "
+            f"{missing[:3]}, unexpected {unexpected[:3]}); retrain the model"
+        )
     model.config = cfg  # the whole config.json, for reports
     model.to(device)
     model.eval()

@@ -28,8 +28,15 @@ from langpref.language.transformer import SentenceEncoder
 class TrajectoryEncoder(nn.Module):
     """phi(tau) = mean over steps of an MLP of the normalised (s_t, a_t)."""
 
-    def __init__(self, in_dim: int, hidden: Sequence[int], latent_dim: int,
-                 mean: np.ndarray | None = None, std: np.ndarray | None = None, observation_deltas: bool = False):
+    def __init__(
+        self,
+        in_dim: int,
+        hidden: Sequence[int],
+        latent_dim: int,
+        mean: np.ndarray | None = None,
+        std: np.ndarray | None = None,
+        observation_deltas: bool = False,
+    ):
         super().__init__()
         self.observation_deltas = observation_deltas
         layers: list[nn.Module] = []

@@ -57,7 +57,7 @@ def alignment_counts(
         s = scores[torch.as_tensor(np.asarray(ids), device=scores.device)]  # (n_phr, N)
         step = max(1, chunk // len(ids))
         for start in range(0, len(sel), step):
-            idx = sel[start:start + step]
+            idx = sel[start : start + step]
             a = torch.as_tensor(pairs.a[idx], device=s.device)
             b = torch.as_tensor(pairs.b[idx], device=s.device)
             correct[g // 2] += int(((s[:, b] - s[:, a]) > 0).sum())
@@ -65,8 +65,9 @@ def alignment_counts(
     return correct, total
 
 
-def phrasing_counts(phi, psi, pairs: Pairs, group_ids: Sequence[np.ndarray], num_phrasings: int,
-                    chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
+def phrasing_counts(
+    phi, psi, pairs: Pairs, group_ids: Sequence[np.ndarray], num_phrasings: int, chunk: int = 1 << 22
+) -> tuple[np.ndarray, np.ndarray]:
     """(correct, total) per phrasing id: the samples of `alignment_counts`, counted by the phrasing that scored them."""
     phi_t = torch.as_tensor(phi, dtype=torch.float64)
     scores = torch.as_tensor(psi, dtype=torch.float64).to(phi_t.device) @ phi_t.T  # (P, N)
@@ -80,8 +81,8 @@ def phrasing_counts(phi, psi, pairs: Pairs, group_ids: Sequence[np.ndarray], num
         s = scores[torch.as_tensor(ids, device=scores.device)]
         step = max(1, chunk // len(ids))
         for start in range(0, len(sel), step):
-            a = torch.as_tensor(pairs.a[sel[start:start + step]], device=s.device)
-            b = torch.as_tensor(pairs.b[sel[start:start + step]], device=s.device)
+            a = torch.as_tensor(pairs.a[sel[start : start + step]], device=s.device)
+            b = torch.as_tensor(pairs.b[sel[start : start + step]], device=s.device)
             correct[ids] += ((s[:, b] - s[:, a]) > 0).sum(dim=1).cpu().numpy()
         total[ids] += len(sel)
     return correct, total
@@ -93,8 +94,11 @@ def per_phrasing(correct: np.ndarray, total: np.ndarray, phrasings: Phrasings) -
     for g, ids in enumerate(phrasings.group_ids):
         for i in ids:
             if total[i]:
-                out[phrasings.texts[i]] = {"meaning": "/".join(phrasings.group_name(g)),
-                                           "accuracy": float(correct[i] / total[i]), "num_samples": int(total[i])}
+                out[phrasings.texts[i]] = {
+                    "meaning": "/".join(phrasings.group_name(g)),
+                    "accuracy": float(correct[i] / total[i]),
+                    "num_samples": int(total[i]),
+                }
     return out
 
 
@@ -111,14 +115,23 @@ def summarise(correct: np.ndarray, total: np.ndarray, feature_names: Sequence[st
 def reading(psi: torch.Tensor, prototypes: torch.Tensor, phrasings: Phrasings) -> dict:
     """{"reading_accuracy", "misread"}: the share of `phrasings` whose nearest prototype (cosine; row g = 2 * feature
     + direction, as the phrasing groups) is their own meaning, and those that are not, with what they were read as."""
-    cos = torch.nn.functional.normalize(psi.double(), dim=-1) @ torch.nn.functional.normalize(
-        prototypes.double(), dim=-1).T
+    cos = (
+        torch.nn.functional.normalize(psi.double(), dim=-1)
+        @ torch.nn.functional.normalize(prototypes.double(), dim=-1).T
+    )
     read = cos.argmax(dim=1).cpu().numpy()
     misread, n = [], 0
     for g, ids in enumerate(phrasings.group_ids):
         n += len(ids)
-        misread += [{"text": phrasings.texts[i], "meaning": "/".join(phrasings.group_name(g)),
-                     "read_as": "/".join(phrasings.group_name(int(read[i])))} for i in ids if read[i] != g]
+        misread += [
+            {
+                "text": phrasings.texts[i],
+                "meaning": "/".join(phrasings.group_name(g)),
+                "read_as": "/".join(phrasings.group_name(int(read[i]))),
+            }
+            for i in ids
+            if read[i] != g
+        ]
     return {"reading_accuracy": 1.0 - len(misread) / n if n else float("nan"), "misread": misread}
 
 
@@ -137,26 +150,29 @@ def evaluate_split(model, dataset, split: str, phrasings: Phrasings) -> dict:
     pairs = build_pairs(dataset.features[idx], np.asarray(model.info.tie_thresholds))
     correct, total = alignment_counts(phi, psi, pairs, phrasings.group_ids, len(model.feature_names))
     out = summarise(correct, total, model.feature_names)
-    out.update(split=split, num_trajectories=len(idx), num_phrasings=len(phrasings.texts),
-               num_pairs=len(pairs))
+    out.update(split=split, num_trajectories=len(idx), num_phrasings=len(phrasings.texts), num_pairs=len(pairs))
     out.update(_with_ties(phi, psi, dataset.features[idx], phrasings, correct, total, len(model.feature_names)))
-    out["per_phrasing"] = per_phrasing(*phrasing_counts(phi, psi, pairs, phrasings.group_ids, len(phrasings.texts)),
-                                       phrasings)
+    out["per_phrasing"] = per_phrasing(
+        *phrasing_counts(phi, psi, pairs, phrasings.group_ids, len(phrasings.texts)), phrasings
+    )
     if bool(model.prototypes.abs().sum() > 0):
         out.update(reading(psi, model.prototypes.cpu(), phrasings))
     return out
 
 
-def _with_ties(phi, psi, features: np.ndarray, phrasings: Phrasings, correct: np.ndarray, total: np.ndarray,
-               num_features: int) -> dict:
+def _with_ties(
+    phi, psi, features: np.ndarray, phrasings: Phrasings, correct: np.ndarray, total: np.ndarray, num_features: int
+) -> dict:
     """The accuracy with the samples the tie threshold left out: scored at chance, and scored by the model."""
     every = build_pairs(features, np.zeros(features.shape[1]))
     correct_all, total_all = alignment_counts(phi, psi, every, phrasings.group_ids, num_features)
     ties = int(total_all.sum() - total.sum())
     n = int(total_all.sum())
-    return {"accuracy_ties_at_chance": float((correct.sum() + 0.5 * ties) / n) if n else float("nan"),
-            "accuracy_no_tie_threshold": float(correct_all.sum() / n) if n else float("nan"),
-            "num_tie_samples": ties}
+    return {
+        "accuracy_ties_at_chance": float((correct.sum() + 0.5 * ties) / n) if n else float("nan"),
+        "accuracy_no_tie_threshold": float(correct_all.sum() / n) if n else float("nan"),
+        "num_tie_samples": ties,
+    }
 
 
 def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) -> dict:
@@ -165,7 +181,7 @@ def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) ->
     the winner (1 / number of meanings when all are equally close, near 1 when one stands out)."""
     text = " ".join(str(text).split())
     if not text:
-        raise LangprefError("the text is empty; pass a sentence such as \"Move faster.\"")
+        raise LangprefError('the text is empty; pass a sentence such as "Move faster."')
     if not bool(model.prototypes.abs().sum() > 0):
         raise LangprefError("this checkpoint has no prototypes of the bank meanings; retrain it with this langpref")
     psi = model.encode_texts([text])[0].double()

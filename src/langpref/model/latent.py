@@ -1,9 +1,9 @@
 """`LatentModel`: both encoders and the facts of the data they were trained on; what downstream code uses.
 
-    model = load_model("runs/mw")                   # langpref.model.checkpoint
-    phi = model.encode_dataset(dataset, "test")     # (N, D) trajectory embeddings
-    psi = model.encode_texts(["Move faster."])       # (1, D) language embeddings
-    model.check_dataset(dataset)                    # LangprefError if env or observation layout differ
+model = load_model("runs/mw")                   # langpref.model.checkpoint
+phi = model.encode_dataset(dataset, "test")     # (N, D) trajectory embeddings
+psi = model.encode_texts(["Move faster."])       # (1, D) language embeddings
+model.check_dataset(dataset)                    # LangprefError if env or observation layout differ
 """
 
 from __future__ import annotations
@@ -70,32 +70,45 @@ class LatentModel(nn.Module):
         meta = dataset.meta
         where = f"dataset {dataset.root}"
         if meta.env != self.info.env:
-            raise LangprefError(f"the model was trained on {self.info.env} data but {where} is {meta.env}; "
-                                f"use a {self.info.env} dataset or a model trained on {meta.env}")
+            raise LangprefError(
+                f"the model was trained on {self.info.env} data but {where} is {meta.env}; "
+                f"use a {self.info.env} dataset or a model trained on {meta.env}"
+            )
         if list(meta.feature_names) != list(self.info.feature_names):
-            raise LangprefError(f"{where} has features {list(meta.feature_names)}, the model was trained on "
-                                f"{self.info.feature_names}")
-        if [dict(x) for x in meta.obs_layout] != [dict(x) for x in self.info.obs_layout] or \
-                meta.action_dim != self.info.action_dim:
-            raise LangprefError(f"{where} has a different observation layout or action size (obs {meta.obs_dim}, "
-                                f"action {meta.action_dim}) than the model was trained on (obs {self.info.obs_dim}, "
-                                f"action {self.info.action_dim}); regenerate the data or retrain the model")
+            raise LangprefError(
+                f"{where} has features {list(meta.feature_names)}, the model was trained on {self.info.feature_names}"
+            )
+        if [dict(x) for x in meta.obs_layout] != [
+            dict(x) for x in self.info.obs_layout
+        ] or meta.action_dim != self.info.action_dim:
+            raise LangprefError(
+                f"{where} has a different observation layout or action size (obs {meta.obs_dim}, "
+                f"action {meta.action_dim}) than the model was trained on (obs {self.info.obs_dim}, "
+                f"action {self.info.action_dim}); regenerate the data or retrain the model"
+            )
 
     @torch.no_grad()
-    def encode_trajectories(self, obs: np.ndarray, actions: np.ndarray, batch_size: int = 64,
-                            lengths: np.ndarray | None = None) -> torch.Tensor:
+    def encode_trajectories(
+        self, obs: np.ndarray, actions: np.ndarray, batch_size: int = 64, lengths: np.ndarray | None = None
+    ) -> torch.Tensor:
         """phi (N, D) of raw observations (N, T, obs_dim) and actions (N, T, A); with `lengths`, trajectory i has
         lengths[i] real steps and padding after them (`Dataset.arrays`)."""
         if obs.shape[-1] != self.info.obs_dim or actions.shape[-1] != self.info.action_dim:
-            raise LangprefError(f"trajectories have obs {obs.shape[-1]} / action {actions.shape[-1]} dims, the model "
-                                f"expects {self.info.obs_dim} / {self.info.action_dim}")
+            raise LangprefError(
+                f"trajectories have obs {obs.shape[-1]} / action {actions.shape[-1]} dims, the model "
+                f"expects {self.info.obs_dim} / {self.info.action_dim}"
+            )
         was_training = self.training
         self.eval()
         steps = step_inputs(obs, actions, self.traj.observation_deltas)
         lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
-        out = [self.traj(torch.from_numpy(steps[i:i + batch_size]).to(self.device),
-                         None if lens is None else lens[i:i + batch_size])
-               for i in range(0, len(steps), batch_size)]
+        out = [
+            self.traj(
+                torch.from_numpy(steps[i : i + batch_size]).to(self.device),
+                None if lens is None else lens[i : i + batch_size],
+            )
+            for i in range(0, len(steps), batch_size)
+        ]
         self.train(was_training)
         return torch.cat(out) if out else torch.zeros(0, self.prototypes.shape[1], device=self.device)
 

@@ -20,8 +20,9 @@ def norm_loss(phi_a: torch.Tensor, phi_b: torch.Tensor, psi: torch.Tensor, a: fl
     return a * hinge + b * (psi.norm(dim=-1) - 1) ** 2
 
 
-def latent_loss(phi_a: torch.Tensor, phi_b: torch.Tensor, psi: torch.Tensor, a: float, b: float
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def latent_loss(
+    phi_a: torch.Tensor, phi_b: torch.Tensor, psi: torch.Tensor, a: float, b: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Eq. 3 averaged over the batch: (total, align, norm)."""
     la = align_loss(phi_a, phi_b, psi).mean()
     ln = norm_loss(phi_a, phi_b, psi, a, b).mean()

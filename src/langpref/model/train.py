@@ -76,8 +76,12 @@ def load_phrasings(cfg: TrainConfig, env: str, feature_names: list[str]) -> tupl
     bank = load_bank(env)
     val = phrasings_from_bank(bank, "val", feature_names)
     if cfg.utterances:
-        user = phrasings_from_mapping(load_user_utterances(cfg.utterances, env), feature_names,
-                                      require_all=not cfg.extend_bank, source=str(cfg.utterances))
+        user = phrasings_from_mapping(
+            load_user_utterances(cfg.utterances, env),
+            feature_names,
+            require_all=not cfg.extend_bank,
+            source=str(cfg.utterances),
+        )
         train = merge_phrasings(phrasings_from_bank(bank, "train", feature_names), user) if cfg.extend_bank else user
     else:
         train = phrasings_from_bank(bank, "train", feature_names)
@@ -90,8 +94,10 @@ class _Split:
     def __init__(self, dataset, name: str, thresholds: np.ndarray, device: torch.device, observation_deltas: bool):
         idx = dataset.split(name)
         if len(idx) < 2:
-            raise LangprefError(f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
-                                "least 2 in train and val")
+            raise LangprefError(
+                f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
+                "least 2 in train and val"
+            )
         obs, act = dataset.arrays(name)
         self.steps = torch.from_numpy(step_inputs(obs, act, observation_deltas)).to(device)
         self.lengths = dataset.lengths(name)  # None: every trajectory has `horizon` steps
@@ -106,13 +112,21 @@ def _own_params(model: LatentModel) -> list[torch.nn.Parameter]:
 
 
 def _snapshot(model: LatentModel, with_transformer: bool) -> dict[str, torch.Tensor]:
-    return {k: v.detach().clone() for k, v in model.state_dict().items()
-            if with_transformer or not k.startswith("lang.transformer.")}
+    return {
+        k: v.detach().clone()
+        for k, v in model.state_dict().items()
+        if with_transformer or not k.startswith("lang.transformer.")
+    }
 
 
 class Trainer:
-    def __init__(self, cfg: TrainConfig, train_phr: Phrasings | None = None, val_phr: Phrasings | None = None,
-                 progress: bool = True):
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        train_phr: Phrasings | None = None,
+        val_phr: Phrasings | None = None,
+        progress: bool = True,
+    ):
         cfg.validate()
         self.cfg = cfg
         self.progress = progress
@@ -137,10 +151,17 @@ class Trainer:
         self.train = _Split(self.dataset, "train", thresholds, self.device, deltas)
         self.val = _Split(self.dataset, "val", thresholds, self.device, deltas)
         mean, std = normalisation_stats(self.train.steps.cpu().numpy(), self.train.lengths)
-        info = DataInfo(env=meta.env, feature_names=names, obs_layout=[dict(x) for x in meta.obs_layout],
-                        obs_dim=meta.obs_dim, action_dim=meta.action_dim, horizon=meta.horizon,
-                        schema_version=meta.schema_version, tie_thresholds=thresholds.tolist(),
-                        feature_std=self.dataset.features[train_idx].std(axis=0).tolist())
+        info = DataInfo(
+            env=meta.env,
+            feature_names=names,
+            obs_layout=[dict(x) for x in meta.obs_layout],
+            obs_dim=meta.obs_dim,
+            action_dim=meta.action_dim,
+            horizon=meta.horizon,
+            schema_version=meta.schema_version,
+            tie_thresholds=thresholds.tolist(),
+            feature_std=self.dataset.features[train_idx].std(axis=0).tolist(),
+        )
         self.model = build_model(cfg.model, info, mean, std)
         torch.manual_seed(cfg.seed)  # whatever loading the transformer drew, the fresh layers start the same
         for m in [*self.model.traj.modules(), self.model.lang.head]:
@@ -183,25 +204,42 @@ class Trainer:
         else:
             phi = self.model.traj(split.steps[rows.unsqueeze(1), t])
         inv_t = torch.as_tensor(inv, device=self.device)
-        return phi[inv_t[:len(a)]], phi[inv_t[len(a):]]
+        return phi[inv_t[: len(a)]], phi[inv_t[len(a) :]]
 
     @torch.no_grad()
     def _val_accuracy(self, pooled_val: torch.Tensor) -> float:
         lens = None if self.val.lengths is None else torch.as_tensor(self.val.lengths, device=self.device)
         phi = self.model.traj(self.val.steps, lens).double().cpu()
         psi = self.model.lang.head(pooled_val).double().cpu()
-        correct, total = alignment_counts(phi, psi, self.val.pairs, self.val_phr.group_ids,
-                                          len(self.val_phr.feature_names))
+        correct, total = alignment_counts(
+            phi, psi, self.val.pairs, self.val_phr.group_ids, len(self.val_phr.feature_names)
+        )
         return float(correct.sum() / max(total.sum(), 1))
 
     def _bar(self, stage: int, total: int):
         from tqdm import tqdm
 
-        return tqdm(total=total, desc=f"stage {stage} ({'frozen LM' if stage == 1 else 'co-finetune'})",
-                    unit="step", file=sys.stderr, disable=not self.progress, dynamic_ncols=True, leave=True)
+        return tqdm(
+            total=total,
+            desc=f"stage {stage} ({'frozen LM' if stage == 1 else 'co-finetune'})",
+            unit="step",
+            file=sys.stderr,
+            disable=not self.progress,
+            dynamic_ncols=True,
+            leave=True,
+        )
 
-    def _run_stage(self, stage: int, epochs: int, batch_size: int, optimizer, step_fn, val_fn,
-                   init_best: tuple[float, dict] | None, with_transformer: bool) -> tuple[float, dict]:
+    def _run_stage(
+        self,
+        stage: int,
+        epochs: int,
+        batch_size: int,
+        optimizer,
+        step_fn,
+        val_fn,
+        init_best: tuple[float, dict] | None,
+        with_transformer: bool,
+    ) -> tuple[float, dict]:
         """Epoch loop with validation, best-state tracking and early stopping; returns (best val acc, best state)."""
         pairs = self.train.pairs
         steps_per_epoch = math.ceil(len(pairs) / batch_size)
@@ -214,25 +252,37 @@ class Trainer:
                 order = self.rng.permutation(len(pairs))
                 sums = np.zeros(4)  # loss, align, norm, correct
                 for start in range(0, len(order), batch_size):
-                    rows = order[start:start + batch_size]
+                    rows = order[start : start + batch_size]
                     with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.mixed_precision):
                         loss, la, ln, correct = step_fn(rows, epoch)
                     optimizer.zero_grad(set_to_none=True)
                     loss.backward()
                     optimizer.step()
-                    sums += np.array([loss.item() * len(rows), la.item() * len(rows), ln.item() * len(rows),
-                                      correct])
+                    sums += np.array([loss.item() * len(rows), la.item() * len(rows), ln.item() * len(rows), correct])
                     self.samples_seen[stage] += len(rows)
                     bar.update(1)
-                    bar.set_postfix(loss=f"{loss.item():.3f}", acc=f"{correct / len(rows):.3f}",
-                                    val=f"{max(best_acc, 0):.3f}", refresh=False)
+                    bar.set_postfix(
+                        loss=f"{loss.item():.3f}",
+                        acc=f"{correct / len(rows):.3f}",
+                        val=f"{max(best_acc, 0):.3f}",
+                        refresh=False,
+                    )
                 val_acc = val_fn()
                 secs = time.perf_counter() - t0
                 self.seconds[stage] += secs
                 n = len(order)
-                self.history.append({"stage": stage, "epoch": epoch, "loss": sums[0] / n, "align": sums[1] / n,
-                                     "norm": sums[2] / n, "train_acc": sums[3] / n, "val_acc": val_acc,
-                                     "seconds": secs})
+                self.history.append(
+                    {
+                        "stage": stage,
+                        "epoch": epoch,
+                        "loss": sums[0] / n,
+                        "align": sums[1] / n,
+                        "norm": sums[2] / n,
+                        "train_acc": sums[3] / n,
+                        "val_acc": val_acc,
+                        "seconds": secs,
+                    }
+                )
                 if val_acc > best_acc:
                     best_acc, best_state, stale = val_acc, _snapshot(self.model, with_transformer), 0
                 else:
@@ -261,10 +311,13 @@ class Trainer:
         with torch.no_grad():
             pooled_train = lang.pooled_texts(self.train_phr.texts)
             pooled_val = lang.pooled_texts(self.val_phr.texts)
-        optimizer = torch.optim.Adam([
-            {"params": list(self.model.traj.parameters()), "lr": cfg.stage1_lr},
-            {"params": list(lang.head.parameters()), "lr": cfg.stage1_head_lr},
-        ], weight_decay=cfg.weight_decay)
+        optimizer = torch.optim.Adam(
+            [
+                {"params": list(self.model.traj.parameters()), "lr": cfg.stage1_lr},
+                {"params": list(lang.head.parameters()), "lr": cfg.stage1_head_lr},
+            ],
+            weight_decay=cfg.weight_decay,
+        )
         epoch_phr: dict[int, np.ndarray] = {}
 
         def step(rows: np.ndarray, epoch: int):
@@ -274,8 +327,16 @@ class Trainer:
             phr = torch.as_tensor(epoch_phr[epoch][rows], device=self.device)
             return self._loss(self.train.pairs.subset(rows), lang.head(pooled_train[phr]))
 
-        best, _ = self._run_stage(1, cfg.stage1_epochs, cfg.stage1_batch_size, optimizer, step,
-                                  lambda: self._val_accuracy(pooled_val), None, False)
+        best, _ = self._run_stage(
+            1,
+            cfg.stage1_epochs,
+            cfg.stage1_batch_size,
+            optimizer,
+            step,
+            lambda: self._val_accuracy(pooled_val),
+            None,
+            False,
+        )
         return best
 
     # ---- stage 2: co-finetuning ------------------------------------------------------------------------------------
@@ -288,10 +349,10 @@ class Trainer:
             if emb is not None:
                 freeze(emb)
         lm_params = [p for p in lang.transformer.parameters() if p.requires_grad]
-        optimizer = torch.optim.Adam([
-            {"params": _own_params(self.model), "lr": cfg.stage2_lr},
-            {"params": lm_params, "lr": cfg.stage2_lm_lr},
-        ], weight_decay=cfg.weight_decay)
+        optimizer = torch.optim.Adam(
+            [{"params": _own_params(self.model), "lr": cfg.stage2_lr}, {"params": lm_params, "lr": cfg.stage2_lm_lr}],
+            weight_decay=cfg.weight_decay,
+        )
         tokens = lang.tokenize(self.train_phr.texts)
         val_tokens = lang.tokenize(self.val_phr.texts)
         per_group = max(1, cfg.stage2_phrasings_per_step // self.train_phr.num_groups)
@@ -315,7 +376,7 @@ class Trainer:
         def val_fn() -> float:
             lang.transformer.eval()
             rows = torch.arange(len(self.val_phr.texts), device=self.device)
-            pooled = torch.cat([encode(val_tokens, rows[i:i + 128]) for i in range(0, len(rows), 128)])
+            pooled = torch.cat([encode(val_tokens, rows[i : i + 128]) for i in range(0, len(rows), 128)])
             return self._val_accuracy(pooled)
 
         init = (init_acc, _snapshot(self.model, True))
@@ -360,11 +421,22 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
     model.set_prototypes(trainer.train_phr)
     history = [h for h in trainer.history if lang_finetuned or h["stage"] == 1]
     with tempfile.TemporaryDirectory() as tmp:
-        curve = plot_history(history, Path(tmp) / "training_curve.png",
-                             title=f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}")
-        return save_model(model, out, model_cfg=cfg.model, lang_finetuned=lang_finetuned,
-                          train_config=cfg.to_dict(), history=history, results=results, force=force,
-                          extra_files={"training_curve.png": curve, **stored_task_files(trainer.dataset.root)})
+        curve = plot_history(
+            history,
+            Path(tmp) / "training_curve.png",
+            title=f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}",
+        )
+        return save_model(
+            model,
+            out,
+            model_cfg=cfg.model,
+            lang_finetuned=lang_finetuned,
+            train_config=cfg.to_dict(),
+            history=history,
+            results=results,
+            force=force,
+            extra_files={"training_curve.png": curve, **stored_task_files(trainer.dataset.root)},
+        )
 
 
 @contextmanager
@@ -380,8 +452,14 @@ def _deterministic_on_cpu(device: str):
         torch.use_deterministic_algorithms(previous)
 
 
-def train(cfg: TrainConfig, *, train_phrasings: Phrasings | None = None, val_phrasings: Phrasings | None = None,
-          progress: bool = True, stage1_out: str | Path | None = None) -> TrainResult:
+def train(
+    cfg: TrainConfig,
+    *,
+    train_phrasings: Phrasings | None = None,
+    val_phrasings: Phrasings | None = None,
+    progress: bool = True,
+    stage1_out: str | Path | None = None,
+) -> TrainResult:
     """Train and save a latent-space model into `cfg.out`.
 
     `stage1_out`, when given, also saves the stage-1 (frozen language model) checkpoint there: the frozen ablation
@@ -393,8 +471,13 @@ def train(cfg: TrainConfig, *, train_phrasings: Phrasings | None = None, val_phr
         return _train(cfg, train_phrasings, val_phrasings, progress, stage1_out)
 
 
-def _train(cfg: TrainConfig, train_phrasings: Phrasings | None, val_phrasings: Phrasings | None, progress: bool,
-           stage1_out: str | Path | None) -> TrainResult:
+def _train(
+    cfg: TrainConfig,
+    train_phrasings: Phrasings | None,
+    val_phrasings: Phrasings | None,
+    progress: bool,
+    stage1_out: str | Path | None,
+) -> TrainResult:
     if stage1_out is not None and Path(stage1_out).exists() and not cfg.force:
         raise LangprefError(f"{stage1_out} already exists; pass --force to overwrite it")
     t_start = time.perf_counter()
@@ -405,13 +488,23 @@ def _train(cfg: TrainConfig, train_phrasings: Phrasings | None, val_phrasings: P
     def results(stage: int, best: float) -> dict[str, Any]:
         s = sum(trainer.seconds[k] for k in range(1, stage + 1))
         n = sum(trainer.samples_seen[k] for k in range(1, stage + 1))
-        return {"best_val_accuracy": best, "stages": stage, "train_pairs": len(trainer.train.pairs),
-                "train_phrasings": len(trainer.train_phr.texts), "val_phrasings": len(trainer.val_phr.texts),
-                "setup_s": setup_s, "train_s": s, "samples": n, "samples_per_s": n / s if s else 0.0,
-                "device": str(trainer.device), "torch_threads": torch.get_num_threads(),
-                "stage_seconds": {str(k): v for k, v in trainer.seconds.items() if k <= stage},
-                "stage_samples_per_s": {str(k): trainer.samples_seen[k] / trainer.seconds[k]
-                                        for k in range(1, stage + 1) if trainer.seconds[k]}}
+        return {
+            "best_val_accuracy": best,
+            "stages": stage,
+            "train_pairs": len(trainer.train.pairs),
+            "train_phrasings": len(trainer.train_phr.texts),
+            "val_phrasings": len(trainer.val_phr.texts),
+            "setup_s": setup_s,
+            "train_s": s,
+            "samples": n,
+            "samples_per_s": n / s if s else 0.0,
+            "device": str(trainer.device),
+            "torch_threads": torch.get_num_threads(),
+            "stage_seconds": {str(k): v for k, v in trainer.seconds.items() if k <= stage},
+            "stage_samples_per_s": {
+                str(k): trainer.samples_seen[k] / trainer.seconds[k] for k in range(1, stage + 1) if trainer.seconds[k]
+            },
+        }
 
     s1 = None
     if stage1_out is not None:

@@ -51,8 +51,11 @@ def visualize(model, dataset, out: str | Path, split: str | None = None) -> dict
     fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 4.0), squeeze=False)
     span = np.ptp(pts, axis=0).max() or 1.0
     centre = pts.mean(axis=0)
-    tips = [centre + 1.15 * arrows[g] / np.linalg.norm(proto[g]) * 0.45 * span
-            for g in range(len(proto)) if np.linalg.norm(proto[g]) > 0]
+    tips = [
+        centre + 1.15 * arrows[g] / np.linalg.norm(proto[g]) * 0.45 * span
+        for g in range(len(proto))
+        if np.linalg.norm(proto[g]) > 0
+    ]
     box = np.vstack([pts, *tips]) if tips else pts
     lo, hi = box.min(axis=0), box.max(axis=0)
     pad = 0.06 * (hi - lo + 1e-9)
@@ -67,14 +70,16 @@ def visualize(model, dataset, out: str | Path, split: str | None = None) -> dict
             if np.linalg.norm(v) == 0 or full == 0:
                 continue
             v = v / full * 0.45 * span  # length: the share of psi that lies in the PCA plane
-            ax.annotate("", xy=centre + v, xytext=centre,
-                        arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 2.2})
+            ax.annotate("", xy=centre + v, xytext=centre, arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 2.2})
             ax.text(*(centre + 1.08 * v), direction, color=colour, fontsize=8, ha="center", va="center")
         ax.set_title(f"{name}", fontsize=10)
         ax.set_xlabel(f"PC1 ({ratio[0]:.0%})")
         ax.set_ylabel(f"PC2 ({ratio[1]:.0%})")
-    fig.suptitle(f"{model.info.env}: trajectory embeddings phi (PCA) and language directions psi "
-                 f"({len(idx)} trajectories{', ' + split if split else ''})", fontsize=10)
+    fig.suptitle(
+        f"{model.info.env}: trajectory embeddings phi (PCA) and language directions psi "
+        f"({len(idx)} trajectories{', ' + split if split else ''})",
+        fontsize=10,
+    )
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

@@ -53,8 +53,10 @@ HERE = Path(__file__).parent
 MAX_BODY = 64 * 1024
 TIME_TOLERANCE_MS = 1000.0
 """A client time per query may exceed the server's (step shown -> answer received) by this much (clock grain)."""
-NOT_FEEDBACK = ("That does not read as feedback on how the robot moves. Please say how it should move differently, "
-                "for example \"Move faster.\" or \"Stay lower.\"")
+NOT_FEEDBACK = (
+    "That does not read as feedback on how the robot moves. Please say how it should move differently, "
+    'for example "Move faster." or "Stay lower."'
+)
 
 
 VIDEO_WAIT_S = 2.0
@@ -102,8 +104,16 @@ class StudyApp:
     """Everything a request needs: the database path, the engine, the video cache, the admin token and the
     `--on-show` hook (told of every step handed out; it never blocks a request)."""
 
-    def __init__(self, db_path: str | Path, engine: StudyEngine, videos: VideoCache, admin_token: str,
-                 cfg: StudyConfig | None = None, hook: ShowHook | None = None, allowed_origins: tuple[str, ...] = ()):
+    def __init__(
+        self,
+        db_path: str | Path,
+        engine: StudyEngine,
+        videos: VideoCache,
+        admin_token: str,
+        cfg: StudyConfig | None = None,
+        hook: ShowHook | None = None,
+        allowed_origins: tuple[str, ...] = (),
+    ):
         self.db_path = str(db_path)
         self.engine = engine
         self.cfg = cfg or engine.cfg
@@ -151,9 +161,13 @@ class StudyApp:
         if not token:
             raise HttpError(401, "missing X-Participant-Token header")
         digest = _sha256(token)
-        if not hmac.compare_digest(digest, row["token_sha256"]) and conn.execute(
+        if (
+            not hmac.compare_digest(digest, row["token_sha256"])
+            and conn.execute(
                 "SELECT 1 FROM participant_tokens WHERE participant_id=? AND token_sha256=?", (pid, digest)
-        ).fetchone() is None:
+            ).fetchone()
+            is None
+        ):
             raise HttpError(403, "this token does not belong to this participant")
         return self._participant(row), row
 
@@ -205,20 +219,27 @@ class StudyApp:
             number = conn.execute("SELECT coalesce(max(number), 0) + 1 FROM participants").fetchone()[0]
             # counterbalancing: odd arrivals start Study 2 with language, even ones with comparisons
             order = METHODS if number % 2 == 1 else tuple(reversed(METHODS))
-            conn.execute("INSERT INTO participants (id, token_sha256, number, method_order, seed, created_at, "
-                         "resume_code) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                         (pid, _sha256(token), number, ",".join(order), number, now, sdb.new_resume_code(conn)))
+            conn.execute(
+                "INSERT INTO participants (id, token_sha256, number, method_order, seed, created_at, "
+                "resume_code) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (pid, _sha256(token), number, ",".join(order), number, now, sdb.new_resume_code(conn)),
+            )
             step = first_step()
-            conn.execute("INSERT INTO steps (participant_id, seq, phase, kind, payload, created_at) "
-                         "VALUES (?, ?, ?, ?, ?, ?)", (pid, step.seq, step.phase, step.kind, step.payload(), now))
+            conn.execute(
+                "INSERT INTO steps (participant_id, seq, phase, kind, payload, created_at) VALUES (?, ?, ?, ?, ?, ?)",
+                (pid, step.seq, step.phase, step.kind, step.payload(), now),
+            )
         return {"participant_id": pid, "token": token}
 
     def resume(self, body: bytes) -> dict[str, Any]:
         """`{"code": "XXXXX-XXXXX"}` -> a new token of the participant with that resume code (their other tokens
         keep working). Failed tries are limited for everyone together, so codes cannot be guessed by trying."""
         data = _decode(body)
-        code = sdb.normalise_resume_code(data.get("code", "")) if isinstance(data, dict) and \
-            isinstance(data.get("code"), str) else None
+        code = (
+            sdb.normalise_resume_code(data.get("code", ""))
+            if isinstance(data, dict) and isinstance(data.get("code"), str)
+            else None
+        )
         now = time.time()
         with self._resume_guard:
             self._resume_failures = [t for t in self._resume_failures if now - t < 60.0]
@@ -232,8 +253,10 @@ class StudyApp:
             raise HttpError(404, "no participant has this resume code; check it (it looks like ABCDE-FGH23)")
         token = secrets.token_urlsafe(32)
         with sdb.transaction(conn):
-            conn.execute("INSERT INTO participant_tokens (participant_id, token_sha256, created_at) VALUES (?, ?, ?)",
-                         (row["id"], _sha256(token), now))
+            conn.execute(
+                "INSERT INTO participant_tokens (participant_id, token_sha256, created_at) VALUES (?, ?, ?)",
+                (row["id"], _sha256(token), now),
+            )
         return {"participant_id": row["id"], "token": token}
 
     def get_step(self, pid: str, token: str | None) -> dict[str, Any]:
@@ -241,8 +264,10 @@ class StudyApp:
         p, prow = self._auth(conn, pid, token)
         step, row = self._current(conn, pid)
         if row["first_shown_at"] is None:
-            conn.execute("UPDATE steps SET first_shown_at=? WHERE participant_id=? AND seq=? AND "
-                         "first_shown_at IS NULL", (time.time(), pid, step.seq))
+            conn.execute(
+                "UPDATE steps SET first_shown_at=? WHERE participant_id=? AND seq=? AND first_shown_at IS NULL",
+                (time.time(), pid, step.seq),
+            )
         if self.hook is not None:
             self.hook.show(pid, step.seq, step.kind, step.shown)
         return self.step_json(step, prow["resume_code"], p)
@@ -286,10 +311,21 @@ class StudyApp:
             cur = conn.execute("SELECT max(seq) FROM steps WHERE participant_id=?", (p.id,)).fetchone()[0]
             if cur != step.seq:
                 raise HttpError(409, "this step was answered meanwhile; GET the current step")
-            conn.execute("INSERT INTO answers (participant_id, seq, phase, kind, body, client_ms, server_ms, "
-                         "time_consistent, answered_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                         (p.id, step.seq, step.phase, step.kind, json.dumps(ans.body), ans.client_ms, server_ms,
-                          consistent, now))
+            conn.execute(
+                "INSERT INTO answers (participant_id, seq, phase, kind, body, client_ms, server_ms, "
+                "time_consistent, answered_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (
+                    p.id,
+                    step.seq,
+                    step.phase,
+                    step.kind,
+                    json.dumps(ans.body),
+                    ans.client_ms,
+                    server_ms,
+                    consistent,
+                    now,
+                ),
+            )
             for table, record in tr.records:
                 record = {"participant_id": p.id, "seq": step.seq, **record, "answered_at": now}
                 if table in ("feedback", "comparisons"):
@@ -297,12 +333,16 @@ class StudyApp:
                 if table == "survey_responses":
                     record.pop("seq")
                 cols = ", ".join(record)
-                conn.execute(f"INSERT INTO {table} ({cols}) VALUES ({', '.join('?' * len(record))})",
-                             tuple(record.values()))
+                conn.execute(
+                    f"INSERT INTO {table} ({cols}) VALUES ({', '.join('?' * len(record))})", tuple(record.values())
+                )
             conn.execute("UPDATE steps SET answered_at=? WHERE participant_id=? AND seq=?", (now, p.id, step.seq))
             nxt = tr.next
-            conn.execute("INSERT INTO steps (participant_id, seq, phase, kind, payload, created_at, first_shown_at) "
-                         "VALUES (?, ?, ?, ?, ?, ?, ?)", (p.id, nxt.seq, nxt.phase, nxt.kind, nxt.payload(), now, now))
+            conn.execute(
+                "INSERT INTO steps (participant_id, seq, phase, kind, payload, created_at, first_shown_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (p.id, nxt.seq, nxt.phase, nxt.kind, nxt.payload(), now, now),
+            )
             if nxt.phase == "done":
                 conn.execute("UPDATE participants SET finished_at=? WHERE id=?", (now, p.id))
 
@@ -321,17 +361,37 @@ class StudyApp:
         for p in conn.execute("SELECT * FROM participants ORDER BY number").fetchall():
             step, _ = self._current(conn, p["id"])
             n_answers = conn.execute("SELECT count(*) FROM answers WHERE participant_id=?", (p["id"],)).fetchone()[0]
-            feedback = [dict(r) for r in conn.execute(
-                "SELECT phase, number, text, understood_feature, understood_direction FROM feedback "
-                "WHERE participant_id=? ORDER BY seq DESC LIMIT 5", (p["id"],))]
-            out.append({"participant_id": p["id"], "number": p["number"], "resume_code": p["resume_code"],
-                        "excluded": bool(p["excluded"]), "excluded_reason": p["excluded_reason"],
-                        "method_order": p["method_order"],
-                        "created_at": p["created_at"], "finished_at": p["finished_at"], "phase": step.phase,
-                        "kind": step.kind, "progress": progress(self.cfg, step), "answers": n_answers,
-                        "recent_feedback": feedback})
-        return {"participants": out, "videos": self.videos.progress(), "study": self.cfg.to_dict(),
-                "hooks": self.hook.status() if self.hook else None}
+            feedback = [
+                dict(r)
+                for r in conn.execute(
+                    "SELECT phase, number, text, understood_feature, understood_direction FROM feedback "
+                    "WHERE participant_id=? ORDER BY seq DESC LIMIT 5",
+                    (p["id"],),
+                )
+            ]
+            out.append(
+                {
+                    "participant_id": p["id"],
+                    "number": p["number"],
+                    "resume_code": p["resume_code"],
+                    "excluded": bool(p["excluded"]),
+                    "excluded_reason": p["excluded_reason"],
+                    "method_order": p["method_order"],
+                    "created_at": p["created_at"],
+                    "finished_at": p["finished_at"],
+                    "phase": step.phase,
+                    "kind": step.kind,
+                    "progress": progress(self.cfg, step),
+                    "answers": n_answers,
+                    "recent_feedback": feedback,
+                }
+            )
+        return {
+            "participants": out,
+            "videos": self.videos.progress(),
+            "study": self.cfg.to_dict(),
+            "hooks": self.hook.status() if self.hook else None,
+        }
 
     def set_excluded(self, pid: str, body: bytes) -> dict[str, Any]:
         """`{"excluded": true|false, "reason": "..."}`: leave a participant out of the analyses (or back in)."""
@@ -346,9 +406,10 @@ class StudyApp:
             raise HttpError(400, "'reason' must be a text of at most 300 characters")
         conn = self.connect()
         with sdb.transaction(conn):
-            n = conn.execute("UPDATE participants SET excluded=?, excluded_reason=? WHERE id=?",
-                             (int(data["excluded"]), reason.strip() or None if data["excluded"] else None,
-                              pid)).rowcount
+            n = conn.execute(
+                "UPDATE participants SET excluded=?, excluded_reason=? WHERE id=?",
+                (int(data["excluded"]), reason.strip() or None if data["excluded"] else None, pid),
+            ).rowcount
         if not n:
             raise HttpError(404, "unknown participant")
         return {"participant_id": pid, "excluded": data["excluded"]}
@@ -366,11 +427,15 @@ class StudyApp:
         task = task_text(self.engine.env)
         c = self.cfg
         values = {
-            "ROBOT": task["robot"], "TASK": task["task"],
+            "ROBOT": task["robot"],
+            "TASK": task["task"],
             "EXAMPLES": ", ".join(f"\u201c{e}\u201d" for e in task["examples"]),
-            "IMPROVE_MAX": str(c.improve_max_iterations), "PREF_QUERIES": str(c.pref_queries),
-            "RATING_EVERY": str(c.rating_every), "LANGUAGE": METHOD_LABELS["language"],
-            "COMPARISON": METHOD_LABELS["comparison"], "DURATION": duration_text(c),
+            "IMPROVE_MAX": str(c.improve_max_iterations),
+            "PREF_QUERIES": str(c.pref_queries),
+            "RATING_EVERY": str(c.rating_every),
+            "LANGUAGE": METHOD_LABELS["language"],
+            "COMPARISON": METHOD_LABELS["comparison"],
+            "DURATION": duration_text(c),
         }
         text = (HERE / "templates" / name).read_text()
         for key, value in values.items():
@@ -391,7 +456,7 @@ def duration_text(c: StudyConfig) -> str:
 
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; media-src 'self'; style-src 'self'; "
-                               "script-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'",
+    "script-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'",
     "X-Content-Type-Options": "nosniff",
     "Referrer-Policy": "no-referrer",
     "X-Frame-Options": "DENY",
@@ -417,8 +482,10 @@ def cross_site(headers, allowed: set[str]) -> str | None:
     host = (headers.get("host") or "").strip().lower()
     if netloc and netloc == host:
         return None
-    return (f"cross-site request refused: the page at {origin[:100]} is not this study's; open the study at its own "
-            "address (behind a proxy that rewrites Host, list its address in allowed_origins)")
+    return (
+        f"cross-site request refused: the page at {origin[:100]} is not this study's; open the study at its own "
+        "address (behind a proxy that rewrites Host, list its address in allowed_origins)"
+    )
 
 
 def create_app(state: StudyApp) -> FastAPI:
@@ -484,8 +551,12 @@ def create_app(state: StudyApp) -> FastAPI:
     @app.get("/api/info")
     def info():
         task = task_text(state.engine.env)
-        return {"env": state.engine.env, "task": task, "study": state.cfg.to_dict(),
-                "methods": {m: METHOD_LABELS[m] for m in METHODS}}
+        return {
+            "env": state.engine.env,
+            "task": task,
+            "study": state.cfg.to_dict(),
+            "methods": {m: METHOD_LABELS[m] for m in METHODS},
+        }
 
     # participants
     @app.post("/api/participants")
@@ -527,8 +598,9 @@ def create_app(state: StudyApp) -> FastAPI:
             finally:
                 state.video_waiters -= 1
         if status == "ready":
-            return FileResponse(info, media_type=state.videos.media_type,
-                                headers={"Cache-Control": "public, max-age=86400, immutable"})
+            return FileResponse(
+                info, media_type=state.videos.media_type, headers={"Cache-Control": "public, max-age=86400, immutable"}
+            )
         retry = {"Retry-After": str(VIDEO_RETRY_S), "Cache-Control": "no-store"}
         if status == "failed":
             raise HttpError(503, f"the video could not be made ({info}); it is being tried again", retry)
@@ -556,7 +628,11 @@ def create_app(state: StudyApp) -> FastAPI:
         state.check_admin(request.headers.get("authorization"))
         conn = state.connect()
         counts = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in sdb.TABLES}
-        return {"videos": state.videos.progress(), "rows": counts, "engine": state.engine.describe(),
-                "hooks": state.hook.status() if state.hook else None}
+        return {
+            "videos": state.videos.progress(),
+            "rows": counts,
+            "engine": state.engine.describe(),
+            "hooks": state.hook.status() if state.hook else None,
+        }
 
     return app

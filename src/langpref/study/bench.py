@@ -50,20 +50,44 @@ def prepare(work: Path, num_trajectories: int) -> tuple[Path, Path]:
 
     data, model = work / "data", work / "model"
     generate(GenerateConfig(env="metaworld", out=data, num_trajectories=num_trajectories, horizon=200, seed=5))
-    train(TrainConfig(data=str(data), out=str(model), stage1_epochs=1, stage2_epochs=0, patience=0, device="cpu"),
-          progress=True)
+    train(
+        TrainConfig(data=str(data), out=str(model), stage1_epochs=1, stage2_epochs=0, patience=0, device="cpu"),
+        progress=True,
+    )
     return data, model
 
 
-def start_server(model: Path, data: Path, db: Path, split: str, env: dict[str, str] | None = None,
-                 quiet: bool = False) -> tuple[subprocess.Popen, str]:
+def start_server(
+    model: Path, data: Path, db: Path, split: str, env: dict[str, str] | None = None, quiet: bool = False
+) -> tuple[subprocess.Popen, str]:
     """`langpref study serve` in a subprocess on a free port, once it answers /healthz: (process, base URL)."""
     import httpx
 
-    cmd = [sys.executable, "-m", "langpref", "study", "serve", "--model", str(model), "--data", str(data),
-           "--db", str(db), "--port", "0", "--split", split, "--no-prerender"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL if quiet else None, text=True,
-                            env=None if env is None else {**os.environ, **env})
+    cmd = [
+        sys.executable,
+        "-m",
+        "langpref",
+        "study",
+        "serve",
+        "--model",
+        str(model),
+        "--data",
+        str(data),
+        "--db",
+        str(db),
+        "--port",
+        "0",
+        "--split",
+        split,
+        "--no-prerender",
+    ]
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL if quiet else None,
+        text=True,
+        env=None if env is None else {**os.environ, **env},
+    )
     url = None
     for line in proc.stdout:
         m = re.search(r"participants: (http://\S+?)/?$", line.strip())
@@ -82,14 +106,16 @@ def start_server(model: Path, data: Path, db: Path, split: str, env: dict[str, s
     raise RuntimeError("the study server did not answer")
 
 
-def run(model: Path, data: Path, db: Path, split: str, participants: int, think_ms: tuple[float, float]
-        ) -> dict[str, Any]:
+def run(
+    model: Path, data: Path, db: Path, split: str, participants: int, think_ms: tuple[float, float]
+) -> dict[str, Any]:
     from langpref.study.simulate import SimConfig, simulate
 
     proc, url = start_server(model, data, db, split)
     try:
-        return simulate(url, SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0),
-                        data_dir=data, split=split)
+        return simulate(
+            url, SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0), data_dir=data, split=split
+        )
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -97,11 +123,15 @@ def run(model: Path, data: Path, db: Path, split: str, participants: int, think_
 
 def _row(name: str, r: dict[str, Any]) -> str:
     lat = r["latency"]
-    cell = {k: f"{lat[k]['p50_ms']:.0f} / {lat[k]['p95_ms']:.0f}" if k in lat else "-"
-            for k in ("language", "comparison", "rating", "satisfaction", "survey")}
-    return (f"| {name} | {r['completed']}/{r['participants']} | {r['answers']} | {r['wall_s']:.0f} s | "
-            f"{cell['language']} | {cell['comparison']} | {cell['rating']} | {cell['satisfaction']} | "
-            f"{cell['survey']} |")
+    cell = {
+        k: f"{lat[k]['p50_ms']:.0f} / {lat[k]['p95_ms']:.0f}" if k in lat else "-"
+        for k in ("language", "comparison", "rating", "satisfaction", "survey")
+    }
+    return (
+        f"| {name} | {r['completed']}/{r['participants']} | {r['answers']} | {r['wall_s']:.0f} s | "
+        f"{cell['language']} | {cell['comparison']} | {cell['rating']} | {cell['satisfaction']} | "
+        f"{cell['survey']} |"
+    )
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -113,8 +143,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
     p.add_argument("--no-burst", action="store_true", help="only the paced run")
     p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
-    p.add_argument("--export-out", type=Path, default=Path("results/study_bench"),
-                   help="where the paced run's export goes (default %(default)s)")
+    p.add_argument(
+        "--export-out",
+        type=Path,
+        default=Path("results/study_bench"),
+        help="where the paced run's export goes (default %(default)s)",
+    )
     args = p.parse_args(argv)
     if (args.model is None) != (args.data is None):
         p.error("pass both --model and --data, or neither")
@@ -134,18 +168,23 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         exported = export(work / "paced.sqlite", args.export_out)
         summary = json.loads(Path(exported["summary"]).read_text())
 
-    model_note = (f"model `{args.model}`" if args.model else
-                  "a model of the default architecture (MiniLM language encoder, D = 128) trained one epoch here")
+    model_note = (
+        f"model `{args.model}`"
+        if args.model
+        else "a model of the default architecture (MiniLM language encoder, D = 128) trained one epoch here"
+    )
     if isinstance(val_acc, float):
         model_note += f", validation accuracy {val_acc:.3f}"
     today = dt.date.today().isoformat()
     n = args.participants
     lines = [
-        (f"Measured {today} with `python -m langpref.study.bench` on this machine ({os.cpu_count()} cores, no GPU): "
-         f"{n} simulated participants at once run whole sessions of the paper's protocol against "
-         f"`langpref study serve` on loopback (server in its own process; {model_note}). Latency per answer as the "
-         "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
-         "query) under 150 ms.\n"),
+        (
+            f"Measured {today} with `python -m langpref.study.bench` on this machine ({os.cpu_count()} cores, no GPU): "
+            f"{n} simulated participants at once run whole sessions of the paper's protocol against "
+            f"`langpref study serve` on loopback (server in its own process; {model_note}). Latency per answer as the "
+            "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
+            "query) under 150 ms.\n"
+        ),
         "| run | sessions completed | answers | wall | language | comparison | rating | satisfaction | survey |",
         "|---|---|---|---|---|---|---|---|---|",
         _row("paced (0.5-1.5 s pause before each answer)", paced),
@@ -160,15 +199,18 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
     lines += [
         "",
-        (f"Export of the paced run (`langpref study export`, synthetic humans as participants; report in "
-         f"`{args.export_out}/report.html`): {summary['participants']} participants, {summary['finished']} finished, "
-         f"orders {summary['method_order']}. Area under the rating curve (queries {r['points']}): language "
-         f"{f(r['language']['auc']['mean'])} +- {f(r['language']['auc']['std'])}, comparison "
-         f"{f(r['comparison']['auc']['mean'])} +- {f(r['comparison']['auc']['std'])}; paired t-test p = "
-         f"{f(test['t_p_value'], 4)}, Wilcoxon p = {f(test['wilcoxon_p_value'], 4)} (n = {test['n']}). "
-         f"Study 1: {summary['study1_iterations_to_satisfaction']['n']} of {summary['participants']} satisfied "
-         "within the rounds. Times per query here are the simulated pauses, not human times; what the ratings say "
-         "depends on how well the model is trained."),
+        (
+            f"Export of the paced run (`langpref study export`, synthetic humans as participants; report in "
+            f"`{args.export_out}/report.html`): {summary['participants']} participants, "
+            f"{summary['finished']} finished, orders {summary['method_order']}. Area under the rating curve "
+            f"(queries {r['points']}): language "
+            f"{f(r['language']['auc']['mean'])} +- {f(r['language']['auc']['std'])}, comparison "
+            f"{f(r['comparison']['auc']['mean'])} +- {f(r['comparison']['auc']['std'])}; paired t-test p = "
+            f"{f(test['t_p_value'], 4)}, Wilcoxon p = {f(test['wilcoxon_p_value'], 4)} (n = {test['n']}). "
+            f"Study 1: {summary['study1_iterations_to_satisfaction']['n']} of {summary['participants']} satisfied "
+            "within the rounds. Times per query here are the simulated pauses, not human times; what the ratings say "
+            "depends on how well the model is trained."
+        ),
     ]
     write_section(args.results, "study-load", "\n".join(lines))
     print(f"wrote {args.results}", flush=True)

@@ -133,8 +133,9 @@ class ServeConfig:
             except ValueError as exc:
                 raise LangprefError(f"--on-show {self.on_show!r} is not a command line ({exc})") from None
             if shutil.which(program) is None:
-                raise LangprefError(f"--on-show: program {program!r} not found or not executable; give its path or "
-                                    "put it on PATH")
+                raise LangprefError(
+                    f"--on-show: program {program!r} not found or not executable; give its path or put it on PATH"
+                )
         if not self.on_show_timeout > 0:
             raise LangprefError(f"--on-show-timeout must be > 0 seconds, got {self.on_show_timeout}")
         self.study.validate()
@@ -152,13 +153,15 @@ class ServeConfig:
             try:
                 token = (path.read_text().splitlines() or [""])[0].strip()
             except (OSError, UnicodeDecodeError) as exc:
-                raise LangprefError(f"cannot read the admin token from {path} ({exc.__class__.__name__}); pass a "
-                                    "readable text file") from None
+                raise LangprefError(
+                    f"cannot read the admin token from {path} ({exc.__class__.__name__}); pass a readable text file"
+                ) from None
         if token is None and os.environ.get(ADMIN_TOKEN_ENV):
             token, where = os.environ[ADMIN_TOKEN_ENV].strip(), ADMIN_TOKEN_ENV
         if token is not None and len(token) < 16:
-            raise LangprefError(f"the admin token ({where}) must be at least 16 characters (or give none for a random "
-                                "one)")
+            raise LangprefError(
+                f"the admin token ({where}) must be at least 16 characters (or give none for a random one)"
+            )
         return token
 
 

@@ -152,8 +152,17 @@ CREATE TABLE participant_tokens (
 MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2}
 RESUME_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
 """Resume codes: no 0/O, 1/I/L, so that a code read aloud or copied by hand is typed right."""
-TABLES = ("meta", "participants", "steps", "answers", "survey_responses", "feedback", "comparisons", "satisfaction",
-          "ratings")
+TABLES = (
+    "meta",
+    "participants",
+    "steps",
+    "answers",
+    "survey_responses",
+    "feedback",
+    "comparisons",
+    "satisfaction",
+    "ratings",
+)
 
 
 def connect(path: str | Path) -> sqlite3.Connection:
@@ -201,11 +210,14 @@ def init_db(path: str | Path, meta: dict[str, Any]) -> dict[str, Any]:
         except sqlite3.DatabaseError as exc:
             raise LangprefError(f"{path} is not a usable SQLite database ({exc}); pass another --db") from None
         if version == 0 and conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]:
-            raise LangprefError(f"{path} is an SQLite database of something else (no langpref study schema); "
-                                "pass another --db")
+            raise LangprefError(
+                f"{path} is an SQLite database of something else (no langpref study schema); pass another --db"
+            )
         if version > SCHEMA_VERSION:
-            raise LangprefError(f"{path} has study schema version {version}, this langpref knows up to "
-                                f"{SCHEMA_VERSION}; upgrade langpref")
+            raise LangprefError(
+                f"{path} has study schema version {version}, this langpref knows up to "
+                f"{SCHEMA_VERSION}; upgrade langpref"
+            )
         with transaction(conn):
             for v in range(version + 1, SCHEMA_VERSION + 1):
                 # one statement at a time: executescript would COMMIT in the middle of the transaction
@@ -265,8 +277,10 @@ def open_existing(path: str | Path) -> sqlite3.Connection:
         raise LangprefError(f"{path} is not a study database ({exc})") from None
     if version != SCHEMA_VERSION:
         conn.close()
-        raise LangprefError(f"{path} has study schema version {version}, expected {SCHEMA_VERSION}: "
-                            "open it once with `langpref study serve` to migrate it, or pass another --db")
+        raise LangprefError(
+            f"{path} has study schema version {version}, expected {SCHEMA_VERSION}: "
+            "open it once with `langpref study serve` to migrate it, or pass another --db"
+        )
     return conn
 
 

@@ -97,8 +97,10 @@ class StudyEngine:
         self.space = replace(space, encode=self.cache)
         self.study = np.asarray(range(len(dataset)) if cfg.split == "all" else dataset.split(cfg.split), dtype=np.int64)
         if len(self.study) < 2:
-            raise LangprefError(f"split {cfg.split!r} of {dataset.root} has {len(self.study)} trajectories; a study "
-                                "needs at least 2 (pass another --split)")
+            raise LangprefError(
+                f"split {cfg.split!r} of {dataset.root} has {len(self.study)} trajectories; a study "
+                "needs at least 2 (pass another --split)"
+            )
         success = np.asarray(dataset.success)[self.study]
         self.failed = self.study[~success] if (~success).any() else self.study
         self._understanding = _CachedModel(model, self.cache)
@@ -137,8 +139,14 @@ class StudyEngine:
         return int(self.study[improvement_step(phi[self.study], phi[current], self.psi(text))])
 
     def describe(self) -> dict[str, Any]:
-        return {"env": self.env, "data": str(self.dataset.root), "num_trajectories": len(self.dataset),
-                "split": self.cfg.split, "study_set": self.study.tolist(), "latent_dim": self.space.dim}
+        return {
+            "env": self.env,
+            "data": str(self.dataset.root),
+            "num_trajectories": len(self.dataset),
+            "split": self.cfg.split,
+            "study_set": self.study.tolist(),
+            "latent_dim": self.space.dim,
+        }
 
 
 class StudyRobot:
@@ -178,8 +186,11 @@ class StudyRobot:
     # ---- Study 2: reward learning ----
 
     def _fresh(self, p: Participant, method: str) -> RewardLearner:
-        return RewardLearner(self.engine.space.dim, self.engine.reward_cfg,
-                             seed=int(self._rng(p, 3, METHODS.index(method)).integers(2**31)))
+        return RewardLearner(
+            self.engine.space.dim,
+            self.engine.reward_cfg,
+            seed=int(self._rng(p, 3, METHODS.index(method)).integers(2**31)),
+        )
 
     def _add(self, learner: RewardLearner, p: Participant, method: str, number: int, answer: Any) -> None:
         """Answer `number` of `method` as its kind's pairs; language read with its whitespace collapsed, as the text

@@ -53,8 +53,12 @@ def _stats(values) -> dict[str, Any]:
     v = np.asarray([x for x in values if x is not None], dtype=np.float64)
     if len(v) == 0:
         return {"mean": None, "std": None, "n": 0}
-    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0, "n": len(v),
-            "median": float(np.median(v))}
+    return {
+        "mean": float(v.mean()),
+        "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+        "n": len(v),
+        "median": float(np.median(v)),
+    }
 
 
 def _survey(tables, survey: str) -> dict[str, dict[str, Any]]:
@@ -69,8 +73,13 @@ def _survey(tables, survey: str) -> dict[str, dict[str, Any]]:
 def _paired_tests(a: list[float], b: list[float]) -> dict[str, Any]:
     from scipy import stats
 
-    out: dict[str, Any] = {"n": len(a), "t_statistic": None, "t_p_value": None, "wilcoxon_statistic": None,
-                           "wilcoxon_p_value": None}
+    out: dict[str, Any] = {
+        "n": len(a),
+        "t_statistic": None,
+        "t_p_value": None,
+        "wilcoxon_statistic": None,
+        "wilcoxon_p_value": None,
+    }
     if len(a) < 2:
         return out
     diff = np.asarray(a) - np.asarray(b)
@@ -88,8 +97,11 @@ def _paired_tests(a: list[float], b: list[float]) -> dict[str, Any]:
 def resolve_exclusions(participants: list[dict[str, Any]], given: Sequence[str | int] = ()) -> dict[str, str]:
     """Participants left out of the analyses: id -> why. Those marked on the dashboard, and `given` (arrival numbers,
     ids, or id prefixes of 8 or more characters as the dashboard shows them); an unknown one is an error."""
-    out = {p["id"]: "excluded on the dashboard: "
-           f"{p.get('excluded_reason') or 'no reason given'}" for p in participants if p.get("excluded")}
+    out = {
+        p["id"]: f"excluded on the dashboard: {p.get('excluded_reason') or 'no reason given'}"
+        for p in participants
+        if p.get("excluded")
+    }
     for item in given:
         text = str(item).strip().rstrip("\u2026")
         if text.isdigit():
@@ -97,8 +109,10 @@ def resolve_exclusions(participants: list[dict[str, Any]], given: Sequence[str |
         else:
             found = [p for p in participants if len(text) >= 8 and p["id"].startswith(text)]
         if len(found) != 1:
-            raise LangprefError(f"--exclude {item}: no single participant has this number or id (prefix of 8+ "
-                                "characters); see the dashboard or tables/participants.csv")
+            raise LangprefError(
+                f"--exclude {item}: no single participant has this number or id (prefix of 8+ "
+                "characters); see the dashboard or tables/participants.csv"
+            )
         out.setdefault(found[0]["id"], "excluded on the command line (--exclude)")
     return out
 
@@ -108,8 +122,10 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     participants (`resolve_exclusions`)."""
     excluded = resolve_exclusions(tables["participants"], exclude)
     every = tables["participants"]
-    tables = {name: [r for r in rows if r.get("participant_id", r.get("id")) not in excluded]
-              if name != "meta" else rows for name, rows in tables.items()}
+    tables = {
+        name: [r for r in rows if r.get("participant_id", r.get("id")) not in excluded] if name != "meta" else rows
+        for name, rows in tables.items()
+    }
     participants = tables["participants"]
     meta = {r["key"]: json.loads(r["value"]) for r in tables["meta"]} if tables.get("meta") else {}
     study = meta.get("study", {})
@@ -117,11 +133,16 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     out: dict[str, Any] = {
         "participants": len(participants),
         "participants_total": len(every),
-        "excluded": [{"number": p["number"], "participant_id": p["id"], "why": excluded[p["id"]]}
-                     for p in every if p["id"] in excluded],
+        "excluded": [
+            {"number": p["number"], "participant_id": p["id"], "why": excluded[p["id"]]}
+            for p in every
+            if p["id"] in excluded
+        ],
         "finished": sum(1 for p in participants if p["finished_at"]),
-        "method_order": {o: sum(1 for p in participants if p["method_order"] == o)
-                         for o in sorted({p["method_order"] for p in participants})},
+        "method_order": {
+            o: sum(1 for p in participants if p["method_order"] == o)
+            for o in sorted({p["method_order"] for p in participants})
+        },
         "study": study,
         "env": meta.get("env"),
     }
@@ -129,11 +150,14 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     # ---- Study 1 ----
     improve = _survey(tables, "improve")
     likert = [q for q in IMPROVE if q["type"] == "likert"]
-    out["study1_attributes"] = {q["id"]: {"text": q["text"], **_stats([a.get(q["id"]) for a in improve.values()])}
-                                for q in likert}
+    out["study1_attributes"] = {
+        q["id"]: {"text": q["text"], **_stats([a.get(q["id"]) for a in improve.values()])} for q in likert
+    }
     out["study1_effective"] = {o: sum(1 for a in improve.values() if a.get("effective") == o) for o in ("Yes", "No")}
-    out["study1_iterations_reported"] = {o: sum(1 for a in improve.values() if a.get("iterations_to_adapt") == o)
-                                         for o in [str(i) for i in range(1, 11)] + ["It did not adapt"]}
+    out["study1_iterations_reported"] = {
+        o: sum(1 for a in improve.values() if a.get("iterations_to_adapt") == o)
+        for o in [str(i) for i in range(1, 11)] + ["It did not adapt"]
+    }
     iters: dict[str, int | None] = {}
     by_p: dict[str, list[dict]] = {}
     for r in tables["satisfaction"]:
@@ -147,8 +171,11 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
             iters[pid] = None  # not satisfied within the rounds
     reached = [v for v in iters.values() if v is not None]
     out["study1_iterations_to_satisfaction"] = {
-        "per_participant": iters, "histogram": {str(i): reached.count(i) for i in range(1, max_iter + 1)},
-        "not_satisfied": sum(1 for v in iters.values() if v is None), **_stats(reached)}
+        "per_participant": iters,
+        "histogram": {str(i): reached.count(i) for i in range(1, max_iter + 1)},
+        "not_satisfied": sum(1 for v in iters.values() if v is None),
+        **_stats(reached),
+    }
 
     # ---- Study 2: survey ----
     pref = _survey(tables, "pref")
@@ -161,15 +188,26 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     overall = {m: (float(np.mean(v)) if v else None) for m, v in means.items()}
     out["study2_attributes"] = attrs
     out["study2_attribute_average"] = {
-        **overall, "language_vs_comparison_percent": (100.0 * (overall["language"] / overall["comparison"] - 1.0)
-                                                      if overall["language"] and overall["comparison"] else None)}
+        **overall,
+        "language_vs_comparison_percent": (
+            100.0 * (overall["language"] / overall["comparison"] - 1.0)
+            if overall["language"] and overall["comparison"]
+            else None
+        ),
+    }
     n_pref = len(pref)
-    out["study2_aspects"] = {"respondents": n_pref, **{
-        m: {a: sum(1 for x in pref.values() if a in (x.get(f"aspects_{m}") or [])) for a in (*ASPECTS, NONE_OF_THEM)}
-        for m in METHODS}}
-    out["study2_preference"] = {METHOD_LABELS[m]: sum(1 for x in pref.values()
-                                                      if x.get("preferred") == METHOD_LABELS[m])
-                                for m in METHODS}
+    out["study2_aspects"] = {
+        "respondents": n_pref,
+        **{
+            m: {
+                a: sum(1 for x in pref.values() if a in (x.get(f"aspects_{m}") or [])) for a in (*ASPECTS, NONE_OF_THEM)
+            }
+            for m in METHODS
+        },
+    }
+    out["study2_preference"] = {
+        METHOD_LABELS[m]: sum(1 for x in pref.values() if x.get("preferred") == METHOD_LABELS[m]) for m in METHODS
+    }
 
     # ---- Study 2: time per query ----
     # the page's own clock (from the videos playing to the answer) where it agrees with the server's (step handed
@@ -185,18 +223,27 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     t_out: dict[str, Any] = {}
     for m in METHODS:
         every = [t / 1000.0 for ts in times[m].values() for t in ts]
-        t_out[m] = {**_stats(every), "per_participant_s": {p: float(np.mean(ts) / 1000.0)
-                                                           for p, ts in times[m].items()}}
+        t_out[m] = {
+            **_stats(every),
+            "per_participant_s": {p: float(np.mean(ts) / 1000.0) for p, ts in times[m].items()},
+        }
     lm, cm = t_out["language"]["mean"], t_out["comparison"]["mean"]
     t_out["language_less_time_percent"] = 100.0 * (1.0 - lm / cm) if lm and cm else None
     both = sorted(set(times["language"]) & set(times["comparison"]))
-    t_out["paired"] = _paired_tests([t_out["language"]["per_participant_s"][p] for p in both],
-                                    [t_out["comparison"]["per_participant_s"][p] for p in both])
+    t_out["paired"] = _paired_tests(
+        [t_out["language"]["per_participant_s"][p] for p in both],
+        [t_out["comparison"]["per_participant_s"][p] for p in both],
+    )
     checked = [r for r in tables["answers"] if r["time_consistent"] is not None]
-    t_out["client_times_consistent_with_server"] = {"checked": len(checked),
-                                                    "consistent": sum(r["time_consistent"] for r in checked)}
-    t_out["source"] = {**sources, "rule": "the page's time (client_ms) where it is consistent with the server's "
-                       "clock, else the server's time from handing out the step to receiving the answer (server_ms)"}
+    t_out["client_times_consistent_with_server"] = {
+        "checked": len(checked),
+        "consistent": sum(r["time_consistent"] for r in checked),
+    }
+    t_out["source"] = {
+        **sources,
+        "rule": "the page's time (client_ms) where it is consistent with the server's "
+        "clock, else the server's time from handing out the step to receiving the answer (server_ms)",
+    }
     out["study2_time_per_query_s"] = t_out
 
     # ---- Study 2: ratings and their area under the curve ----
@@ -214,8 +261,9 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
                 aucs[m][pid] = _trapezoid(ys, points)
         rating_out[m] = {"per_point": per_point, "auc": _stats(list(aucs[m].values())), "auc_per_participant": aucs[m]}
     paired = sorted(set(aucs["language"]) & set(aucs["comparison"]))
-    rating_out["auc_paired_test"] = _paired_tests([aucs["language"][p] for p in paired],
-                                                  [aucs["comparison"][p] for p in paired])
+    rating_out["auc_paired_test"] = _paired_tests(
+        [aucs["language"][p] for p in paired], [aucs["comparison"][p] for p in paired]
+    )
     out["study2_ratings"] = rating_out
     return _clean(out)
 
@@ -266,7 +314,7 @@ def figures(summary: dict[str, Any], out: Path) -> dict[str, str]:
     a1 = summary["study1_attributes"]
     fig, ax = plt.subplots(figsize=(5, 3.2))
     _bar_err(ax, range(len(a1)), list(a1.values()), color="#2ca02c")
-    ax.set_xticks(range(len(a1)), ["Satisfaction", "Adaptation speed", "Experience"][:len(a1)])
+    ax.set_xticks(range(len(a1)), ["Satisfaction", "Adaptation speed", "Experience"][: len(a1)])
     ax.set_ylim(0, 5.5)
     ax.set_ylabel("score (1-5)")
     ax.set_title("Study 1: attribute scores")
@@ -286,9 +334,10 @@ def figures(summary: dict[str, Any], out: Path) -> dict[str, str]:
     fig, ax = plt.subplots(figsize=(6, 3.4))
     x = np.arange(len(a2))
     for k, m in enumerate(METHODS):
-        _bar_err(ax, x, [a2[s][m] for s in a2], label=METHOD_LABELS[m], width=0.38, offset=(k - 0.5) * 0.4,
-                 color=colors[m])
-    ax.set_xticks(x, ["Adaptation speed", "Experience", "Noticed learning", "Trust"][:len(a2)])
+        _bar_err(
+            ax, x, [a2[s][m] for s in a2], label=METHOD_LABELS[m], width=0.38, offset=(k - 0.5) * 0.4, color=colors[m]
+        )
+    ax.set_xticks(x, ["Adaptation speed", "Experience", "Noticed learning", "Trust"][: len(a2)])
     ax.set_ylim(0, 5.5)
     ax.set_ylabel("score (1-5)")
     ax.legend(fontsize=8)
@@ -316,8 +365,13 @@ def figures(summary: dict[str, Any], out: Path) -> dict[str, str]:
     pids = sorted(set(t["language"]["per_participant_s"]) | set(t["comparison"]["per_participant_s"]))
     x = np.arange(len(pids))
     for k, m in enumerate(METHODS):
-        axes[0].bar(x + (k - 0.5) * 0.4, [t[m]["per_participant_s"].get(p, 0.0) for p in pids], 0.38,
-                    color=colors[m], label=METHOD_LABELS[m])
+        axes[0].bar(
+            x + (k - 0.5) * 0.4,
+            [t[m]["per_participant_s"].get(p, 0.0) for p in pids],
+            0.38,
+            color=colors[m],
+            label=METHOD_LABELS[m],
+        )
     top = max([t[m]["per_participant_s"].get(p, 0.0) for m in METHODS for p in pids] or [1.0])
     axes[0].set_ylim(0, 1.35 * top if top > 0 else 1.0)  # room for the legend
     axes[0].set_xticks(x, [str(i + 1) for i in range(len(pids))])
@@ -352,24 +406,32 @@ def report_html(summary: dict[str, Any], figs: dict[str, str], texts: list[tuple
     rows = []
     a2 = s["study2_attributes"]
     for v in a2.values():
-        rows.append(f"<tr><td>{html.escape(v['text'])}</td><td>{_ms(v['language'])}</td>"
-                    f"<td>{_ms(v['comparison'])}</td></tr>")
+        rows.append(
+            f"<tr><td>{html.escape(v['text'])}</td><td>{_ms(v['language'])}</td><td>{_ms(v['comparison'])}</td></tr>"
+        )
     asp = s["study2_aspects"]
     n = asp["respondents"]
     aspect_rows = "".join(
         f"<tr><td>{html.escape(label)}</td><td>{asp['language'][a]} / {n}</td>"
         f"<td>{asp['comparison'][a]} / {n}</td></tr>"
-        for a, label in (("Time efficiency", "Time efficient"), ("Convenience", "Convenient"),
-                         ("Adaptability", "Adaptable")))
+        for a, label in (
+            ("Time efficiency", "Time efficient"),
+            ("Convenience", "Convenient"),
+            ("Adaptability", "Adaptable"),
+        )
+    )
     r = s["study2_ratings"]
     rating_rows = "".join(
         f"<tr><td>{q}</td><td>{_ms(r['language']['per_point'][str(q)])}</td>"
-        f"<td>{_ms(r['comparison']['per_point'][str(q)])}</td></tr>" for q in r["points"])
+        f"<td>{_ms(r['comparison']['per_point'][str(q)])}</td></tr>"
+        for q in r["points"]
+    )
     t = s["study2_time_per_query_s"]
     test = r["auc_paired_test"]
     img = "".join(f'<figure><img src="{html.escape(f)}" alt="{html.escape(k)}"></figure>' for k, f in figs.items())
-    text_rows = "".join(f"<tr><td>{html.escape(p[:8])}</td><td>{html.escape(q)}</td><td>{html.escape(v)}</td></tr>"
-                        for p, q, v in texts)
+    text_rows = "".join(
+        f"<tr><td>{html.escape(p[:8])}</td><td>{html.escape(q)}</td><td>{html.escape(v)}</td></tr>" for p, q, v in texts
+    )
     a1 = s["study1_attributes"]
     it = s["study1_iterations_to_satisfaction"]
     return f"""<!doctype html>
@@ -378,36 +440,37 @@ def report_html(summary: dict[str, Any], figs: dict[str, str], texts: list[tuple
 margin:1em 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:left}}figure{{display:inline-block;margin:.5em}}
 img{{max-width:460px}}</style></head><body>
 <h1>Study report</h1>
-<p>{s['participants']} participants ({s['finished']} finished), env {_fmt(s.get('env'))}; excluded from the
-analyses: {len(s['excluded'])}{html.escape(' (#' + ', #'.join(str(e['number']) for e in s['excluded']) + ')')
-                                    if s['excluded'] else ''};
-Study-2 orders: {html.escape(json.dumps(s['method_order']))}.</p>
+<p>{s["participants"]} participants ({s["finished"]} finished), env {_fmt(s.get("env"))}; excluded from the
+analyses: {len(s["excluded"])}{
+        html.escape(" (#" + ", #".join(str(e["number"]) for e in s["excluded"]) + ")") if s["excluded"] else ""
+    };
+Study-2 orders: {html.escape(json.dumps(s["method_order"]))}.</p>
 <h2>Study 1: trajectory improvement</h2>
 <table><tr><th>attribute</th><th>score</th></tr>
-{''.join(f"<tr><td>{html.escape(v['text'])}</td><td>{_ms(v)}</td></tr>" for v in a1.values())}
+{"".join(f"<tr><td>{html.escape(v['text'])}</td><td>{_ms(v)}</td></tr>" for v in a1.values())}
 </table>
-<p>Iterations to satisfaction: mean {_fmt(it.get('mean'))} (n={it.get('n', 0)}), not satisfied within the rounds:
-{it['not_satisfied']}. Effective: {html.escape(json.dumps(s['study1_effective']))}.</p>
+<p>Iterations to satisfaction: mean {_fmt(it.get("mean"))} (n={it.get("n", 0)}), not satisfied within the rounds:
+{it["not_satisfied"]}. Effective: {html.escape(json.dumps(s["study1_effective"]))}.</p>
 <h2>Study 2: preference learning</h2>
 <h3>Attribute scores (1-5)</h3>
-<table><tr><th>question</th><th>language</th><th>comparison</th></tr>{''.join(rows)}</table>
-<p>Average over attributes: language {_fmt(s['study2_attribute_average']['language'])}, comparison
-{_fmt(s['study2_attribute_average']['comparison'])} (language higher by
-{_fmt(s['study2_attribute_average']['language_vs_comparison_percent'], 1)}%).</p>
+<table><tr><th>question</th><th>language</th><th>comparison</th></tr>{"".join(rows)}</table>
+<p>Average over attributes: language {_fmt(s["study2_attribute_average"]["language"])}, comparison
+{_fmt(s["study2_attribute_average"]["comparison"])} (language higher by
+{_fmt(s["study2_attribute_average"]["language_vs_comparison_percent"], 1)}%).</p>
 <h3>Satisfactory aspects (not exclusive between methods)</h3>
 <table><tr><th></th><th>language</th><th>comparison</th></tr>{aspect_rows}</table>
-<p>Overall preference: {html.escape(json.dumps(s['study2_preference']))}</p>
+<p>Overall preference: {html.escape(json.dumps(s["study2_preference"]))}</p>
 <h3>Time per query (s)</h3>
-<p>Language {_ms(t['language'])}; comparison {_ms(t['comparison'])}; language takes
-{_fmt(t['language_less_time_percent'], 1)}% less time. Timing used: the page's clock for
-{t['source']['language']['client_ms'] + t['source']['comparison']['client_ms']} answers, the server's for
-{t['source']['language']['server_ms'] + t['source']['comparison']['server_ms']} (where the page's was inconsistent
+<p>Language {_ms(t["language"])}; comparison {_ms(t["comparison"])}; language takes
+{_fmt(t["language_less_time_percent"], 1)}% less time. Timing used: the page's clock for
+{t["source"]["language"]["client_ms"] + t["source"]["comparison"]["client_ms"]} answers, the server's for
+{t["source"]["language"]["server_ms"] + t["source"]["comparison"]["server_ms"]} (where the page's was inconsistent
 with it or missing).</p>
 <h3>Ratings of the best trajectory under the learned reward</h3>
 <table><tr><th>queries</th><th>language</th><th>comparison</th></tr>{rating_rows}</table>
-<p>Area under the rating curve: language {_ms(r['language']['auc'])}, comparison {_ms(r['comparison']['auc'])};
-paired t-test p = {_fmt(test['t_p_value'], 4)}, Wilcoxon p = {_fmt(test['wilcoxon_p_value'], 4)}
-(n = {test['n']}).</p>
+<p>Area under the rating curve: language {_ms(r["language"]["auc"])}, comparison {_ms(r["comparison"]["auc"])};
+paired t-test p = {_fmt(test["t_p_value"], 4)}, Wilcoxon p = {_fmt(test["wilcoxon_p_value"], 4)}
+(n = {test["n"]}).</p>
 <h2>Figures</h2>{img}
 <h2>Free-text answers</h2>
 <table><tr><th>participant</th><th>question</th><th>answer</th></tr>{text_rows}</table>
@@ -451,14 +514,24 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
         figs = figures(summary, out)
         excluded = {e["participant_id"] for e in summary["excluded"]}
         text_ids = {(s, q["id"]) for s, qs in SURVEYS.items() for q in qs if q["type"] == "text"}
-        texts = [(r["participant_id"], r["question_id"], json.loads(r["value"])) for r in tables["survey_responses"]
-                 if (r["survey"], r["question_id"]) in text_ids and json.loads(r["value"])
-                 and r["participant_id"] not in excluded]
+        texts = [
+            (r["participant_id"], r["question_id"], json.loads(r["value"]))
+            for r in tables["survey_responses"]
+            if (r["survey"], r["question_id"]) in text_ids
+            and json.loads(r["value"])
+            and r["participant_id"] not in excluded
+        ]
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         (out / "report.html").write_text(report_html(summary, figs, texts))
     except OSError as exc:
         raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
-    return {"out": str(out), "report": str(out / "report.html"), "summary": str(out / "summary.json"),
-            "tables": sorted(f"tables/{t}.csv" for t in tables), "figures": sorted(figs.values()),
-            "participants": summary["participants"], "finished": summary["finished"],
-            "excluded": len(summary["excluded"])}
+    return {
+        "out": str(out),
+        "report": str(out / "report.html"),
+        "summary": str(out / "summary.json"),
+        "tables": sorted(f"tables/{t}.csv" for t in tables),
+        "figures": sorted(figs.values()),
+        "participants": summary["participants"],
+        "finished": summary["finished"],
+        "excluded": len(summary["excluded"]),
+    }

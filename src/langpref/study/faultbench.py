@@ -35,7 +35,7 @@ def descendants(pid: int) -> set[int]:
                 stat = (entry / "stat").read_text()
             except OSError:
                 continue
-            children.setdefault(int(stat[stat.rindex(")") + 2:].split()[1]), []).append(int(entry.name))
+            children.setdefault(int(stat[stat.rindex(")") + 2 :].split()[1]), []).append(int(entry.name))
     out, todo = set(), [pid]
     while todo:
         for c in children.get(todo.pop(), []):
@@ -57,8 +57,9 @@ def alive(pids: set[int]) -> set[int]:
 
 
 def _start(model: Path, data: Path, db: Path, split: str) -> tuple[subprocess.Popen, str]:
-    return start_server(model, data, db, split, env={"LANGPREF_STUDY_ADMIN_TOKEN": "faultbench-admin-token-0123"},
-                        quiet=True)
+    return start_server(
+        model, data, db, split, env={"LANGPREF_STUDY_ADMIN_TOKEN": "faultbench-admin-token-0123"}, quiet=True
+    )
 
 
 def _video_urls(url: str, n: int) -> list[str]:
@@ -74,8 +75,12 @@ def _video_urls(url: str, n: int) -> list[str]:
             step = c.get(f"{base}/step", headers=headers).json()
             answers = {}
             for q in step["questions"]:
-                answers[q["id"]] = {"likert": q["min"], "text": "x", "choice": (q["options"] or [None])[0],
-                                    "multi": q["options"][:1]}[q["type"]]
+                answers[q["id"]] = {
+                    "likert": q["min"],
+                    "text": "x",
+                    "choice": (q["options"] or [None])[0],
+                    "multi": q["options"][:1],
+                }[q["type"]]
             step = c.post(f"{base}/answer", json={"answers": answers, "seq": step["seq"]}, headers=headers).json()
             urls += step["videos"]
     return urls
@@ -88,27 +93,35 @@ def freeze(url: str, requests: int = 80) -> dict[str, Any]:
 
     async def main() -> dict[str, Any]:
         limits = httpx.Limits(max_connections=requests + 10, max_keepalive_connections=requests + 10)
-        async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as c, \
-                httpx.AsyncClient(base_url=url, timeout=60) as other:
+        async with (
+            httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as c,
+            httpx.AsyncClient(base_url=url, timeout=60) as other,
+        ):
             t0 = time.perf_counter()
             tasks = [asyncio.create_task(c.get(videos[k % len(videos)])) for k in range(requests)]
             await asyncio.sleep(0.5)
             lat: dict[str, list[float]] = {"healthz": [], "post_participant": []}
             for _ in range(5):
-                for key, method, path in (("healthz", "GET", "/healthz"),
-                                          ("post_participant", "POST", "/api/participants")):
+                for key, method, path in (
+                    ("healthz", "GET", "/healthz"),
+                    ("post_participant", "POST", "/api/participants"),
+                ):
                     t = time.perf_counter()
                     r = await other.request(method, path, json={} if method == "POST" else None)
                     lat[key].append(time.perf_counter() - t)
                     assert r.status_code == 200, r.text
                 await asyncio.sleep(0.1)
             done = await asyncio.gather(*tasks)
-            return {"requests": requests, "distinct_videos": len(videos),
-                    "healthz_max_s": round(max(lat["healthz"]), 3),
-                    "post_participant_max_s": round(max(lat["post_participant"]), 3),
-                    "answered": {str(s): sum(r.status_code == s for r in done) for s in sorted({r.status_code
-                                                                                                 for r in done})},
-                    "all_answered_within_s": round(time.perf_counter() - t0, 2)}
+            return {
+                "requests": requests,
+                "distinct_videos": len(videos),
+                "healthz_max_s": round(max(lat["healthz"]), 3),
+                "post_participant_max_s": round(max(lat["post_participant"]), 3),
+                "answered": {
+                    str(s): sum(r.status_code == s for r in done) for s in sorted({r.status_code for r in done})
+                },
+                "all_answered_within_s": round(time.perf_counter() - t0, 2),
+            }
 
     return asyncio.run(main())
 
@@ -136,8 +149,13 @@ def stop(model: Path, data: Path, work: Path, split: str, sig: int) -> dict[str,
     deadline = time.time() + 5
     while alive(kids) and time.time() < deadline:
         time.sleep(0.05)
-    return {"signal": signal.Signals(sig).name, "exit_s": round(took, 2), "returncode": proc.returncode,
-            "processes_of_it": len(kids), "left_after_5_s": len(alive(kids))}
+    return {
+        "signal": signal.Signals(sig).name,
+        "exit_s": round(took, 2),
+        "returncode": proc.returncode,
+        "processes_of_it": len(kids),
+        "left_after_5_s": len(alive(kids)),
+    }
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:

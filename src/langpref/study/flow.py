@@ -29,8 +29,12 @@ from langpref.study.surveys import SURVEYS, validate_answers
 
 PHASES = ("pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey", "done")
 KINDS = ("survey", "language", "comparison", "satisfaction", "rating", "done")
-ANSWER_KEYS = {"answers": "survey", **{get_kind(m).answer_key: m for m in METHODS}, "satisfied": "satisfaction",
-               "rating": "rating"}
+ANSWER_KEYS = {
+    "answers": "survey",
+    **{get_kind(m).answer_key: m for m in METHODS},
+    "satisfied": "satisfaction",
+    "rating": "rating",
+}
 """The field of an answer body that says its kind of step (the feedback kinds' own fields in the middle)."""
 MAX_CLIENT_MS = 24 * 3600 * 1000
 
@@ -67,18 +71,26 @@ class Step:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def payload(self) -> str:
-        return json.dumps({"shown": list(self.shown), "survey": self.survey, "number": self.number,
-                           "extra": self.extra})
+        return json.dumps(
+            {"shown": list(self.shown), "survey": self.survey, "number": self.number, "extra": self.extra}
+        )
 
     @classmethod
     def from_row(cls, row: dict[str, Any]) -> Step:
         p = json.loads(row["payload"])
-        return cls(int(row["seq"]), row["phase"], row["kind"], tuple(p["shown"]), p["survey"], int(p["number"]),
-                   p.get("extra") or {})
+        return cls(
+            int(row["seq"]),
+            row["phase"],
+            row["kind"],
+            tuple(p["shown"]),
+            p["survey"],
+            int(p["number"]),
+            p.get("extra") or {},
+        )
 
     @property
     def method(self) -> str | None:
-        return self.phase[len("pref_"):] if self.phase in ("pref_language", "pref_comparison") else None
+        return self.phase[len("pref_") :] if self.phase in ("pref_language", "pref_comparison") else None
 
 
 @dataclass(frozen=True)
@@ -177,8 +189,16 @@ def parse_answer(body: Any, step: Step) -> Answer:
     body = clean_text(body)
     client_ms = None
     if kind in METHODS:
-        client_ms = float(_number(body, "client_ms", 0, MAX_CLIENT_MS, "the milliseconds from showing the videos to "
-                                  "the answer (a number >= 0)", integer=False))
+        client_ms = float(
+            _number(
+                body,
+                "client_ms",
+                0,
+                MAX_CLIENT_MS,
+                "the milliseconds from showing the videos to the answer (a number >= 0)",
+                integer=False,
+            )
+        )
     try:
         if kind in METHODS:
             feedback = get_kind(kind)
@@ -223,7 +243,7 @@ def _pref_start(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, method
 
 
 def _after_method(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, method: str) -> Step:
-    later = p.method_order[p.method_order.index(method) + 1:]
+    later = p.method_order[p.method_order.index(method) + 1 :]
     if later:
         return _pref_start(cfg, p, robot, seq, later[0])
     return Step(seq, "pref_survey", "survey", survey="pref")
@@ -235,9 +255,19 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
     timing = {"client_ms": answer.client_ms}
     if step.kind == "survey":
         items = {q["id"]: q for q in SURVEYS[step.survey or ""]}
-        records = [("survey_responses", {"survey": step.survey, "question_id": qid, "item": items[qid]["item"],
-                                         "method": items[qid]["method"], "value": json.dumps(v)})
-                   for qid, v in answer.value.items()]
+        records = [
+            (
+                "survey_responses",
+                {
+                    "survey": step.survey,
+                    "question_id": qid,
+                    "item": items[qid]["item"],
+                    "method": items[qid]["method"],
+                    "value": json.dumps(v),
+                },
+            )
+            for qid, v in answer.value.items()
+        ]
         if step.survey == "pre":
             return Transition(Step(seq, "improve", "language", (robot.start_trajectory(p),), number=0), records)
         if step.survey == "improve":
@@ -249,12 +279,20 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
         if step.kind == "language":
             text = answer.value.text
             improved, understood = robot.improve(p, shown, text)
-            row = {"phase": "improve", "number": step.number + 1, "shown": shown, "text": text,
-                   "improved": improved, **_understood_columns(understood), **timing}
-            extra = {"understood": {**understood, "text": text}, "previous": shown,
-                     "unchanged": improved == shown}
-            return Transition(Step(seq, "improve", "satisfaction", (improved,), number=step.number + 1, extra=extra),
-                              [("feedback", row)])
+            row = {
+                "phase": "improve",
+                "number": step.number + 1,
+                "shown": shown,
+                "text": text,
+                "improved": improved,
+                **_understood_columns(understood),
+                **timing,
+            }
+            extra = {"understood": {**understood, "text": text}, "previous": shown, "unchanged": improved == shown}
+            return Transition(
+                Step(seq, "improve", "satisfaction", (improved,), number=step.number + 1, extra=extra),
+                [("feedback", row)],
+            )
         row = {"iteration": step.number, "shown": shown, "satisfied": int(answer.value)}
         if answer.value or step.number >= cfg.improve_max_iterations:
             return Transition(Step(seq, "improve_survey", "survey", survey="improve"), [("satisfaction", row)])
@@ -286,8 +324,11 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
 
 
 def _understood_columns(understood: dict[str, Any]) -> dict[str, Any]:
-    return {"understood_feature": understood.get("feature"), "understood_direction": understood.get("direction"),
-            "understood_confidence": understood.get("confidence")}
+    return {
+        "understood_feature": understood.get("feature"),
+        "understood_direction": understood.get("direction"),
+        "understood_confidence": understood.get("confidence"),
+    }
 
 
 def questions(step: Step) -> list[dict[str, Any]]:

@@ -86,8 +86,7 @@ class HookRun:
 class ShowHook:
     """Runs the `--on-show` command for every trajectory shown, in a background thread with a bounded queue."""
 
-    def __init__(self, command: str, dataset: Dataset, timeout_s: float = 60.0, queue_size: int = 64,
-                 keep: int = 20):
+    def __init__(self, command: str, dataset: Dataset, timeout_s: float = 60.0, queue_size: int = 64, keep: int = 20):
         self.command = command
         self.argv = parse_command(command)
         self.dataset = dataset
@@ -116,8 +115,17 @@ class ShowHook:
             for position, index in enumerate(trajectories):
                 event = ShowEvent(participant, seq, kind, position, int(index))
                 if len(self._queue) >= self.queue_size:
-                    self._record(HookRun(event, None, "skipped", None, time.time(), 0.0,
-                                         f"{self.queue_size} runs were already waiting"))
+                    self._record(
+                        HookRun(
+                            event,
+                            None,
+                            "skipped",
+                            None,
+                            time.time(),
+                            0.0,
+                            f"{self.queue_size} runs were already waiting",
+                        )
+                    )
                 else:
                     self._queue.append(event)
             self._cond.notify_all()
@@ -126,10 +134,14 @@ class ShowHook:
         """For the admin dashboard: the command, counts per status, what waits and runs, the last runs (newest
         first)."""
         with self._cond:
-            return {"command": self.command, "timeout_s": self.timeout_s, "queued": len(self._queue),
-                    "running": asdict(self._running) if self._running else None,
-                    "counts": {s: self._counts[s] for s in STATUSES},
-                    "recent": [r.to_json() for r in reversed(self._recent)]}
+            return {
+                "command": self.command,
+                "timeout_s": self.timeout_s,
+                "queued": len(self._queue),
+                "running": asdict(self._running) if self._running else None,
+                "counts": {s: self._counts[s] for s in STATUSES},
+                "recent": [r.to_json() for r in reversed(self._recent)],
+            }
 
     def wait(self, timeout: float = 60.0) -> bool:
         """Wait until nothing waits or runs (tests, shutdown)."""
@@ -154,9 +166,16 @@ class ShowHook:
         self._counts[run.status] += 1
         if run.status != "ok":
             e = run.event
-            log.warning("--on-show hook %s for trajectory %d (participant %s, %s step): exit code %s, %.1f s; %s",
-                        run.status, e.trajectory, e.participant[:8], e.kind, run.returncode, run.seconds,
-                        run.output[-200:].strip() or "no output")
+            log.warning(
+                "--on-show hook %s for trajectory %d (participant %s, %s step): exit code %s, %.1f s; %s",
+                run.status,
+                e.trajectory,
+                e.participant[:8],
+                e.kind,
+                run.returncode,
+                run.seconds,
+                run.output[-200:].strip() or "no output",
+            )
 
     def _run(self) -> None:
         while True:
@@ -182,17 +201,36 @@ class ShowHook:
     def _execute(self, event: ShowEvent) -> HookRun:
         """Run the command for one event, its output into a temporary file (a pipe could block on a grandchild)."""
         episode = self._episode(event.trajectory)
-        env = {**os.environ, "LANGPREF_TRAJECTORY": str(event.trajectory), "LANGPREF_EPISODE": episode or "",
-               "LANGPREF_PARTICIPANT": event.participant, "LANGPREF_DATA": str(self.dataset.root.resolve()),
-               "LANGPREF_KIND": event.kind, "LANGPREF_POSITION": str(event.position)}
+        env = {
+            **os.environ,
+            "LANGPREF_TRAJECTORY": str(event.trajectory),
+            "LANGPREF_EPISODE": episode or "",
+            "LANGPREF_PARTICIPANT": event.participant,
+            "LANGPREF_DATA": str(self.dataset.root.resolve()),
+            "LANGPREF_KIND": event.kind,
+            "LANGPREF_POSITION": str(event.position),
+        }
         started, t0 = time.time(), time.monotonic()
         with tempfile.TemporaryFile() as out:
             try:
-                proc = subprocess.Popen(self.argv, env=env, stdin=subprocess.DEVNULL, stdout=out,
-                                        stderr=subprocess.STDOUT, start_new_session=True)
+                proc = subprocess.Popen(
+                    self.argv,
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=out,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
             except OSError as exc:
-                return HookRun(event, episode, "error", None, started, time.monotonic() - t0,
-                               f"cannot start {self.argv[0]}: {exc.strerror or exc}")
+                return HookRun(
+                    event,
+                    episode,
+                    "error",
+                    None,
+                    started,
+                    time.monotonic() - t0,
+                    f"cannot start {self.argv[0]}: {exc.strerror or exc}",
+                )
             with self._cond:
                 self._proc = proc
                 if self._stopped:

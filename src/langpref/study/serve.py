@@ -52,8 +52,10 @@ def resolve_study_config(db_path: str | Path, overrides: dict[str, Any]) -> Stud
             for key, value in given.items():
                 if getattr(stored, key) != value:
                     flag = "--" + key.replace("_", "-")
-                    raise LangprefError(f"{path} holds a study made with {flag} {getattr(stored, key)}, not {value}; "
-                                        f"drop {flag} to continue it, or pass a new --db for a new study")
+                    raise LangprefError(
+                        f"{path} holds a study made with {flag} {getattr(stored, key)}, not {value}; "
+                        f"drop {flag} to continue it, or pass a new --db for a new study"
+                    )
             return stored
     known = {f.name for f in fields(StudyConfig)}
     cfg = StudyConfig(**{k: v for k, v in given.items() if k in known})
@@ -61,24 +63,35 @@ def resolve_study_config(db_path: str | Path, overrides: dict[str, Any]) -> Stud
     return cfg
 
 
-def build_state(cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True,
-                admin_token: str | None = None) -> StudyApp:
+def build_state(
+    cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True, admin_token: str | None = None
+) -> StudyApp:
     """Engine, database (created or checked), video cache and `--on-show` hook of a study."""
     cfg.validate()
     check_db_path(cfg.db)
     engine = engine or StudyEngine.load(cfg.model, cfg.data, cfg.study)
     model_dir, data_dir = Path(cfg.model).resolve(), Path(cfg.data).resolve()
-    meta = {"study": cfg.study.to_dict(), "model": str(model_dir), "model_sha256": _file_sha(model_dir / "config.json"),
-            "data": str(data_dir), "data_sha256": _file_sha(data_dir / "meta.json"), "env": engine.env,
-            "video": asdict(cfg.video), "langpref_version": __version__}
+    meta = {
+        "study": cfg.study.to_dict(),
+        "model": str(model_dir),
+        "model_sha256": _file_sha(model_dir / "config.json"),
+        "data": str(data_dir),
+        "data_sha256": _file_sha(data_dir / "meta.json"),
+        "env": engine.env,
+        "video": asdict(cfg.video),
+        "langpref_version": __version__,
+    }
     stored = sdb.init_db(cfg.db, meta)
     if stored.get("study") != cfg.study.to_dict():
-        raise LangprefError(f"{cfg.db} holds a study with protocol {stored.get('study')}; pass a new --db for "
-                            "another protocol")
+        raise LangprefError(
+            f"{cfg.db} holds a study with protocol {stored.get('study')}; pass a new --db for another protocol"
+        )
     for key, what in (("model_sha256", "model"), ("data_sha256", "dataset")):
         if stored.get(key) != meta[key]:
-            raise LangprefError(f"{cfg.db} belongs to a study run with another {what} ({stored.get(key[:-7])}); pass "
-                                f"that {what} again, or a new --db for a new study")
+            raise LangprefError(
+                f"{cfg.db} belongs to a study run with another {what} ({stored.get(key[:-7])}); pass "
+                f"that {what} again, or a new --db for a new study"
+            )
     videos = VideoCache(cfg.data, cfg.videos or f"{cfg.db}.videos", cfg.video, engine.study, progress=progress)
     hook = ShowHook(cfg.on_show, engine.dataset, cfg.on_show_timeout) if cfg.on_show else None
     token = admin_token or cfg.resolve_admin_token() or secrets.token_urlsafe(24)
@@ -104,8 +117,16 @@ def _uvicorn_server(app, log_level: str = "warning"):
     import uvicorn
 
     # a stop waits at most 2 s for requests in flight (none waits long: videos are not waited for in threads)
-    return uvicorn.Server(uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="off",
-                                         timeout_keep_alive=30, timeout_graceful_shutdown=2))
+    return uvicorn.Server(
+        uvicorn.Config(
+            app,
+            log_level=log_level,
+            access_log=False,
+            lifespan="off",
+            timeout_keep_alive=30,
+            timeout_graceful_shutdown=2,
+        )
+    )
 
 
 class _Stopped(BaseException):
@@ -140,15 +161,18 @@ def network_warning(host: str) -> str | None:
         loopback = host == "localhost"
     if loopback:
         return None
-    return (f"warning: --host {host} serves plain HTTP to the network: participants' tokens and answers travel "
-            "unencrypted. On a shared network put a TLS reverse proxy in front and keep the server on 127.0.0.1 "
-            "(README: 'Running a user study'; example configurations in langpref/study/deploy/)")
+    return (
+        f"warning: --host {host} serves plain HTTP to the network: participants' tokens and answers travel "
+        "unencrypted. On a shared network put a TLS reverse proxy in front and keep the server on 127.0.0.1 "
+        "(README: 'Running a user study'; example configurations in langpref/study/deploy/)"
+    )
 
 
 def serve(cfg: ServeConfig) -> None:
     """Run the study server until interrupted (SIGINT) or stopped (SIGTERM: it exits within a few seconds)."""
-    previous = signal.signal(signal.SIGTERM, _on_sigterm) if threading.current_thread() is threading.main_thread() \
-        else None
+    previous = (
+        signal.signal(signal.SIGTERM, _on_sigterm) if threading.current_thread() is threading.main_thread() else None
+    )
     state = sock = None
     try:
         # everything that can be checked without the model first: a taken port or a bad --db fails in a second
@@ -166,13 +190,18 @@ def serve(cfg: ServeConfig) -> None:
         host, port = sock.getsockname()[:2]
         shown = f"[{host}]" if ":" in host else host
         url = f"http://{shown}:{port}"
-        print(f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
-              f"database {cfg.db}", file=sys.stderr)
+        print(
+            f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
+            f"database {cfg.db}",
+            file=sys.stderr,
+        )
         if state.hook is not None:
             print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
         print(f"participants: {url}/", flush=True)
-        print(f"admin:        {url}/admin   token: "
-              f"{state.admin_token if admin_token is None else '(as given)'}", flush=True)
+        print(
+            f"admin:        {url}/admin   token: {state.admin_token if admin_token is None else '(as given)'}",
+            flush=True,
+        )
         state.videos.start(prerender=cfg.prerender)
         _uvicorn_server(create_app(state)).run(sockets=[sock])
     except _Stopped:

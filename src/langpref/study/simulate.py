@@ -50,8 +50,9 @@ class _World:
         self.theta = FeatureScale.fit(feats[ds.split("train")])(feats)
         self.study = np.arange(len(ds)) if split == "all" else np.asarray(ds.split(split))
         self.feature_names = ds.feature_names
-        self.phrases = phrase_table(load_bank(ds.env), "test", ds.feature_names,
-                                    lambda texts: np.zeros((len(texts), 1)))
+        self.phrases = phrase_table(
+            load_bank(ds.env), "test", ds.feature_names, lambda texts: np.zeros((len(texts), 1))
+        )
 
 
 def _answer_survey(step: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
@@ -115,8 +116,11 @@ class SimParticipant:
             time.sleep(float(rng.uniform(lo, hi)) / 1000.0)
         client_ms = (time.perf_counter() - received) * 1000.0
         if kind == "language":
-            text = self.lang.answer(LanguageQuery(shown[0])).text if world else \
-                str(rng.choice(["Move faster.", "Go higher.", "Slow down.", "Stay lower, please"]))
+            text = (
+                self.lang.answer(LanguageQuery(shown[0])).text
+                if world
+                else str(rng.choice(["Move faster.", "Go higher.", "Slow down.", "Stay lower, please"]))
+            )
             return {"feedback": text, "client_ms": round(client_ms, 1), "seq": step["seq"]}
         if kind == "comparison":
             choice = self.comp.answer(ComparisonQuery(*shown)).choice if world else int(rng.integers(2))
@@ -158,8 +162,9 @@ def percentile(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
-def simulate(base_url: str, cfg: SimConfig | None = None, data_dir: str | Path | None = None,
-             split: str = "test") -> dict[str, Any]:
+def simulate(
+    base_url: str, cfg: SimConfig | None = None, data_dir: str | Path | None = None, split: str = "test"
+) -> dict[str, Any]:
     """Run `cfg.participants` simulated participants at once against a study server; latency per answer kind."""
     cfg = cfg or SimConfig()
     world = _World(data_dir, split) if data_dir is not None else None
@@ -176,10 +181,19 @@ def simulate(base_url: str, cfg: SimConfig | None = None, data_dir: str | Path |
     latency = {}
     for k in kinds:
         vals = [v for s in sims for v in s.latency.get(k, [])]
-        latency[k] = {"n": len(vals), "p50_ms": percentile(vals, 50), "p95_ms": percentile(vals, 95),
-                      "max_ms": max(vals)}
-    return {"participants": cfg.participants, "completed": sum(1 for s in sims if not s.errors),
-            "answers": sum(s.answers for s in sims), "wall_s": wall, "latency": latency,
-            "errors": [e for s in sims for e in s.errors][:20],
-            "per_participant": {s.participant_id: s.answers for s in sims if s.participant_id},
-            "think_ms": list(cfg.think_ms)}
+        latency[k] = {
+            "n": len(vals),
+            "p50_ms": percentile(vals, 50),
+            "p95_ms": percentile(vals, 95),
+            "max_ms": max(vals),
+        }
+    return {
+        "participants": cfg.participants,
+        "completed": sum(1 for s in sims if not s.errors),
+        "answers": sum(s.answers for s in sims),
+        "wall_s": wall,
+        "latency": latency,
+        "errors": [e for s in sims for e in s.errors][:20],
+        "per_participant": {s.participant_id: s.answers for s in sims if s.participant_id},
+        "think_ms": list(cfg.think_ms),
+    }

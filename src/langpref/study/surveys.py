@@ -19,79 +19,186 @@ METHOD_LABELS = {"language": "Language feedback", "comparison": "Pair-wise compa
 MAX_TEXT = 2000
 
 
-def _q(qid: str, item: int, text: str, type_: str, *, options: list[str] | None = None, labels=None,
-       required: bool = True, method: str | None = None, lo: int = 1, hi: int = 5) -> dict[str, Any]:
+def _q(
+    qid: str,
+    item: int,
+    text: str,
+    type_: str,
+    *,
+    options: list[str] | None = None,
+    labels=None,
+    required: bool = True,
+    method: str | None = None,
+    lo: int = 1,
+    hi: int = 5,
+) -> dict[str, Any]:
     likert = type_ == "likert"
-    return {"id": qid, "text": text, "type": type_, "min": lo if likert else None, "max": hi if likert else None,
-            "options": list(options or []), "item": item, "required": required,
-            "labels": list(labels) if labels else None, "method": method}
+    return {
+        "id": qid,
+        "text": text,
+        "type": type_,
+        "min": lo if likert else None,
+        "max": hi if likert else None,
+        "options": list(options or []),
+        "item": item,
+        "required": required,
+        "labels": list(labels) if labels else None,
+        "method": method,
+    }
 
 
 PRE = [
     _q("age", 1, "Age", "text"),
     _q("gender", 2, "Gender", "choice", options=["Female", "Male", "Non-binary", "Other", "Prefer not to say"]),
-    _q("race", 3, "Race", "multi", options=["American Indian or Alaska Native", "Asian", "Black or African American",
-                                             "Hispanic or Latino", "Middle Eastern or North African",
-                                             "Native Hawaiian or Pacific Islander", "White", "Other",
-                                             "Prefer not to say"]),
-    _q("education", 4, "Highest level of education", "choice",
-       options=["High school or less", "Some college", "Bachelor's degree", "Master's degree", "Doctorate",
-                "Other", "Prefer not to say"]),
-    _q("robotics_experience", 5, "Please describe your level of robotics experience, on a scale from 1 to 5.",
-       "likert", labels=("No experience", "Expert")),
-    _q("ml_experience", 6, "Please describe your level of machine learning experience, on a scale from 1 to 5.",
-       "likert", labels=("No experience", "Expert")),
+    _q(
+        "race",
+        3,
+        "Race",
+        "multi",
+        options=[
+            "American Indian or Alaska Native",
+            "Asian",
+            "Black or African American",
+            "Hispanic or Latino",
+            "Middle Eastern or North African",
+            "Native Hawaiian or Pacific Islander",
+            "White",
+            "Other",
+            "Prefer not to say",
+        ],
+    ),
+    _q(
+        "education",
+        4,
+        "Highest level of education",
+        "choice",
+        options=[
+            "High school or less",
+            "Some college",
+            "Bachelor's degree",
+            "Master's degree",
+            "Doctorate",
+            "Other",
+            "Prefer not to say",
+        ],
+    ),
+    _q(
+        "robotics_experience",
+        5,
+        "Please describe your level of robotics experience, on a scale from 1 to 5.",
+        "likert",
+        labels=("No experience", "Expert"),
+    ),
+    _q(
+        "ml_experience",
+        6,
+        "Please describe your level of machine learning experience, on a scale from 1 to 5.",
+        "likert",
+        labels=("No experience", "Expert"),
+    ),
     _q("robot_interaction", 7, "Have you ever interacted with a robot before? Please describe:", "text"),
 ]
 
 IMPROVE = [
-    _q("satisfied_final", 1, "Are you satisfied with the final trajectory?", "likert",
-       labels=("Completely unsatisfied", "Completely satisfied")),
-    _q("iterations_to_adapt", 2, "How many iterations did it take for the robot to adapt to your feedback?", "choice",
-       options=[str(i) for i in range(1, 11)] + ["It did not adapt"]),
-    _q("adapt_speed", 3, "How fast does the robot adapt to your feedback?", "likert",
-       labels=("Very slow", "Very fast")),
-    _q("experience", 4, "How did the robot's learning capabilities affect your interaction experience?", "likert",
-       labels=("Negatively", "Positively")),
+    _q(
+        "satisfied_final",
+        1,
+        "Are you satisfied with the final trajectory?",
+        "likert",
+        labels=("Completely unsatisfied", "Completely satisfied"),
+    ),
+    _q(
+        "iterations_to_adapt",
+        2,
+        "How many iterations did it take for the robot to adapt to your feedback?",
+        "choice",
+        options=[str(i) for i in range(1, 11)] + ["It did not adapt"],
+    ),
+    _q(
+        "adapt_speed", 3, "How fast does the robot adapt to your feedback?", "likert", labels=("Very slow", "Very fast")
+    ),
+    _q(
+        "experience",
+        4,
+        "How did the robot's learning capabilities affect your interaction experience?",
+        "likert",
+        labels=("Negatively", "Positively"),
+    ),
     _q("effective", 5, "Overall, do you think the approach is effective?", "choice", options=["Yes", "No"]),
     _q("comments", 6, "Do you have any other comments?", "text", required=False),
 ]
 
 # The per-method Likert items of the preference-learning survey: (id stem, item, text, labels).
 PREF_LIKERT = [
-    ("adapt_speed", 3, "How long did it take for the robot to adapt to your feedback?",
-     ("Very slowly", "Very quickly")),
-    ("experience", 4, "How did the robot's learning capabilities affect your interaction experience?",
-     ("Negatively", "Positively")),
-    ("noticed_learning", 5, "Did you notice the robot learning or adapting to your behavior?",
-     ("Not at all", "Constantly")),
-    ("trust", 6, "How did the robot's learning process affect your level of trust in its capabilities?",
-     ("Negatively", "Positively")),
+    (
+        "adapt_speed",
+        3,
+        "How long did it take for the robot to adapt to your feedback?",
+        ("Very slowly", "Very quickly"),
+    ),
+    (
+        "experience",
+        4,
+        "How did the robot's learning capabilities affect your interaction experience?",
+        ("Negatively", "Positively"),
+    ),
+    (
+        "noticed_learning",
+        5,
+        "Did you notice the robot learning or adapting to your behavior?",
+        ("Not at all", "Constantly"),
+    ),
+    (
+        "trust",
+        6,
+        "How did the robot's learning process affect your level of trust in its capabilities?",
+        ("Negatively", "Positively"),
+    ),
 ]
 
 
 def _pref() -> list[dict[str, Any]]:
     qs = []
     for m in ("language", "comparison"):
-        qs.append(_q(f"aspects_{m}", 1, f"{METHOD_LABELS[m]}: what did you like about this method? Tick each aspect in "
-                     "which you found the method satisfactory.", "multi", options=[*ASPECTS, NONE_OF_THEM], method=m))
+        qs.append(
+            _q(
+                f"aspects_{m}",
+                1,
+                f"{METHOD_LABELS[m]}: what did you like about this method? Tick each aspect in "
+                "which you found the method satisfactory.",
+                "multi",
+                options=[*ASPECTS, NONE_OF_THEM],
+                method=m,
+            )
+        )
     qs.append(_q("aspects_reasons", 2, "Could you explain the reasons?", "text", required=False))
     for stem, item, text, labels in PREF_LIKERT:
         for m in ("language", "comparison"):
             qs.append(_q(f"{stem}_{m}", item, f"{METHOD_LABELS[m]}: {text}", "likert", labels=labels, method=m))
-    qs.append(_q("preferred", 7, "Overall, which method do you prefer?", "choice",
-                 options=[METHOD_LABELS["comparison"], METHOD_LABELS["language"]]))
+    qs.append(
+        _q(
+            "preferred",
+            7,
+            "Overall, which method do you prefer?",
+            "choice",
+            options=[METHOD_LABELS["comparison"], METHOD_LABELS["language"]],
+        )
+    )
     qs.append(_q("preferred_why", 8, "Why do you prefer this method?", "text", required=False))
-    qs.append(_q("wish", 9, "Is there anything you wish the system would do but currently does not?", "text",
-                 required=False))
+    qs.append(
+        _q("wish", 9, "Is there anything you wish the system would do but currently does not?", "text", required=False)
+    )
     qs.append(_q("comments", 10, "Do you have any other comments?", "text", required=False))
     return qs
 
 
 PREF = _pref()
 SURVEYS: dict[str, list[dict[str, Any]]] = {"pre": PRE, "improve": IMPROVE, "pref": PREF}
-SURVEY_TITLES = {"pre": "Before we begin", "improve": "About Experiment 1: improving a trajectory",
-                 "pref": "About Experiment 2: learning your preferences"}
+SURVEY_TITLES = {
+    "pre": "Before we begin",
+    "improve": "About Experiment 1: improving a trajectory",
+    "pref": "About Experiment 2: learning your preferences",
+}
 
 
 def validate_answers(survey: str, answers: Any) -> dict[str, Any]:
@@ -105,8 +212,11 @@ def validate_answers(survey: str, answers: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for qid, q in questions.items():
         value = answers.get(qid)
-        if value is None or (q["type"] in ("text",) and isinstance(value, str) and not value.strip()) or \
-                (q["type"] == "multi" and value == []):
+        if (
+            value is None
+            or (q["type"] in ("text",) and isinstance(value, str) and not value.strip())
+            or (q["type"] == "multi" and value == [])
+        ):
             if q["required"]:
                 raise LangprefError(f"question {qid!r} needs an answer")
             continue

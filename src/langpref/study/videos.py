@@ -151,8 +151,12 @@ class VideoCache:
 
     def progress(self) -> dict[str, Any]:
         done = sum(self.cached(i) for i in self.indices)
-        return {"done": done, "total": len(self.indices), "running": self._active,
-                "errors": {str(k): v for k, v in self._errors.items()}}
+        return {
+            "done": done,
+            "total": len(self.indices),
+            "running": self._active,
+            "errors": {str(k): v for k, v in self._errors.items()},
+        }
 
     # rendering
     def start(self, prerender: bool = True) -> None:
@@ -192,8 +196,13 @@ class VideoCache:
         if self.show_progress and self._queue:
             from tqdm import tqdm
 
-            bar = tqdm(total=len(self.indices), initial=len(self.indices) - len(self._queue), desc="study videos",
-                       unit="video", file=sys.stderr)
+            bar = tqdm(
+                total=len(self.indices),
+                initial=len(self.indices) - len(self._queue),
+                desc="study videos",
+                unit="video",
+                file=sys.stderr,
+            )
         try:
             while True:
                 index = self._next()
@@ -201,11 +210,16 @@ class VideoCache:
                     return
                 try:
                     if self._pool is None:
-                        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                                         initializer=_worker_init, initargs=(os.getpid(),))
+                        self._pool = ProcessPoolExecutor(
+                            max_workers=1,
+                            mp_context=multiprocessing.get_context("spawn"),
+                            initializer=_worker_init,
+                            initargs=(os.getpid(),),
+                        )
                     c = self.cfg
-                    self._pool.submit(make_video, self.data_dir, index, str(self.path(index)), c.width, c.height,
-                                      c.fps, c.stride).result()
+                    self._pool.submit(
+                        make_video, self.data_dir, index, str(self.path(index)), c.width, c.height, c.fps, c.stride
+                    ).result()
                     self._errors.pop(index, None)
                 except Exception as exc:  # noqa: BLE001 (reported per video, the server keeps running)
                     self._errors[index] = f"{type(exc).__name__}: {exc}"[:300]
@@ -268,8 +282,9 @@ class VideoCache:
     def wait(self, timeout: float = 600.0) -> bool:
         """Wait until the queue is empty (tests, benchmarks)."""
         with self._cond:
-            return self._cond.wait_for(lambda: not self._queue and not self._urgent and self._rendering is None,
-                                       timeout)
+            return self._cond.wait_for(
+                lambda: not self._queue and not self._urgent and self._rendering is None, timeout
+            )
 
     def close(self, timeout: float = 3.0) -> None:
         """Stop rendering now: the worker is killed (a half-written video is never served: it is written to a

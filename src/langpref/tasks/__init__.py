@@ -42,8 +42,9 @@ def _load_plugins() -> None:
             if task.name in _BUILTIN:
                 raise ValueError(f"it is named {task.name!r}, a built-in task's name")
         except Exception as exc:  # a broken plugin must not break the other tasks: say which one and go on
-            warnings.warn(f"langpref: skipped the task plugin {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}",
-                          stacklevel=2)
+            warnings.warn(
+                f"langpref: skipped the task plugin {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}", stacklevel=2
+            )
             continue
         _registry.setdefault(task.name, replace(task, source="plugin"))
 
@@ -84,8 +85,10 @@ def get_simulator(name: str) -> Simulator:
     """The simulator of a task, or a one-line error for a recorded task (which has only its recordings)."""
     task = get_task(name)
     if task.simulator is None:
-        raise LangprefError(f"task {name!r} has no simulator (it is a recorded task): its trajectories come from "
-                            "`langpref import`, and its videos from the recording")
+        raise LangprefError(
+            f"task {name!r} has no simulator (it is a recorded task): its trajectories come from "
+            "`langpref import`, and its videos from the recording"
+        )
     if task.simulator.extra:
         from langpref.extras import require
 
@@ -98,5 +101,16 @@ def make_env(name: str, horizon: int | None = None) -> SimEnv:
     return sim.make_env(horizon or sim.default_horizon)
 
 
-__all__ = ["ENTRY_POINT_GROUP", "Controller", "ObsField", "SimEnv", "Simulator", "Task", "get_simulator",
-           "get_task", "make_env", "register_task", "task_names"]
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "Controller",
+    "ObsField",
+    "SimEnv",
+    "Simulator",
+    "Task",
+    "get_simulator",
+    "get_task",
+    "make_env",
+    "register_task",
+    "task_names",
+]

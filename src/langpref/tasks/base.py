@@ -78,8 +78,10 @@ class Task:
 
     def __post_init__(self) -> None:
         if len(self.feature_descriptions) != len(self.features):
-            raise LangprefError(f"task {self.name!r}: {len(self.features)} features but "
-                                f"{len(self.feature_descriptions)} feature descriptions")
+            raise LangprefError(
+                f"task {self.name!r}: {len(self.features)} features but "
+                f"{len(self.feature_descriptions)} feature descriptions"
+            )
         if len(set(self.features)) != len(self.features):
             raise LangprefError(f"task {self.name!r} names a feature twice: {', '.join(self.features)}")
 

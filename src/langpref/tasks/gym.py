@@ -48,8 +48,10 @@ class LangprefEnv(gym.Env):
     def step(self, action):
         obs = np.asarray(self.sim.step(np.asarray(action, dtype=np.float64)), dtype=np.float32)
         self._t += 1
-        info = {"features": np.asarray(self.sim.step_features(), dtype=np.float64).copy(),
-                "success": bool(self.sim.is_success())}
+        info = {
+            "features": np.asarray(self.sim.step_features(), dtype=np.float64).copy(),
+            "success": bool(self.sim.is_success()),
+        }
         return obs, 0.0, False, self._t >= self.horizon, info
 
     def close(self) -> None:
@@ -66,8 +68,12 @@ def register_envs() -> list[str]:
             continue
         for env_id in dict.fromkeys((NAMES.get(name, f"langpref/{name}"), f"langpref/{name}")):
             if env_id not in gym.registry:
-                gym.register(id=env_id, entry_point="langpref.tasks.gym:LangprefEnv", kwargs={"task": name},
-                             disable_env_checker=True)
+                gym.register(
+                    id=env_id,
+                    entry_point="langpref.tasks.gym:LangprefEnv",
+                    kwargs={"task": name},
+                    disable_env_checker=True,
+                )
             ids.append(env_id)
     return ids
 

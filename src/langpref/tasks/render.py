@@ -29,8 +29,9 @@ def _camera(mujoco, model, spec: dict):
     return cam
 
 
-def render_frames(env, qpos: np.ndarray, qvel: np.ndarray, width: int = 320, height: int = 240,
-                  stride: int = 1) -> np.ndarray:
+def render_frames(
+    env, qpos: np.ndarray, qvel: np.ndarray, width: int = 320, height: int = 240, stride: int = 1
+) -> np.ndarray:
     """Frames (N, height, width, 3) uint8, upright, of the states `qpos/qvel[::stride]` in a live env."""
     import mujoco
 
@@ -63,8 +64,9 @@ def write_video(frames: np.ndarray, out: Path, fps: int) -> Path:
     codec, pix = VIDEO_CODECS[out.suffix]
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.partial{out.suffix}")
-    writer = imageio.get_writer(tmp, fps=fps, codec=codec, pixelformat=pix, macro_block_size=8,
-                                ffmpeg_log_level="error", output_params=["-an"])
+    writer = imageio.get_writer(
+        tmp, fps=fps, codec=codec, pixelformat=pix, macro_block_size=8, ffmpeg_log_level="error", output_params=["-an"]
+    )
     try:
         for frame in frames:
             writer.append_data(frame)

@@ -38,8 +38,17 @@ from langpref.tasks.base import ObsField, Task
 TASK_JSON = "task.json"
 BANK_JSON = "utterances.json"
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_.-]{0,63}$")
-_KEYS = {"name", "description", "features", "features_from", "utterances", "robot", "examples",
-         "feature_descriptions", "observation"}
+_KEYS = {
+    "name",
+    "description",
+    "features",
+    "features_from",
+    "utterances",
+    "robot",
+    "examples",
+    "feature_descriptions",
+    "observation",
+}
 
 StepFeatures = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -64,17 +73,28 @@ class TaskFile:
         if self.observation:
             total = sum(size for _, size in self.observation)
             if total != obs_dim:
-                raise LangprefError(f"{self.path}: [observation] sizes add up to {total}, the recording's "
-                                    f"observations have {obs_dim} dims")
+                raise LangprefError(
+                    f"{self.path}: [observation] sizes add up to {total}, the recording's "
+                    f"observations have {obs_dim} dims"
+                )
             layout, start = [], 0
             for field, size in self.observation:
                 layout.append(ObsField(field, start, start + size))
                 start += size
         else:
             layout = [ObsField("observation", 0, obs_dim)]
-        return Task(name=self.name, features=self.features, feature_descriptions=self.feature_descriptions,
-                    obs_layout=tuple(layout), action_dim=action_dim, description=self.description,
-                    utterances=utterances, robot=self.robot, examples=self.examples, source="recorded")
+        return Task(
+            name=self.name,
+            features=self.features,
+            feature_descriptions=self.feature_descriptions,
+            obs_layout=tuple(layout),
+            action_dim=action_dim,
+            description=self.description,
+            utterances=utterances,
+            robot=self.robot,
+            examples=self.examples,
+            source="recorded",
+        )
 
     def step_features(self) -> StepFeatures | None:
         """The feature function named by `features_from`, loaded from its file; None when the task file has none."""
@@ -86,8 +106,9 @@ class TaskFile:
 def _str(raw: dict[str, Any], key: str, where: Path, default: str | None = None) -> str:
     value = raw.get(key, default)
     if not isinstance(value, str) or not value.strip():
-        raise LangprefError(f"{where}: {key!r} must be a non-empty string" + ("" if default is not None else
-                                                                                 " (it is required)"))
+        raise LangprefError(
+            f"{where}: {key!r} must be a non-empty string" + ("" if default is not None else " (it is required)")
+        )
     return value.strip()
 
 
@@ -137,10 +158,15 @@ def read_task_file(path: str | Path) -> TaskFile:
     if not utterances.is_file():
         raise LangprefError(f"{path}: utterances file {utterances} not found")
     return TaskFile(
-        path=path, name=name, description=_str(raw, "description", path), features=features,
+        path=path,
+        name=name,
+        description=_str(raw, "description", path),
+        features=features,
         feature_descriptions=tuple(descriptions.get(f, f.replace("_", " ")) for f in features),
-        utterances=utterances, robot=_str(raw, "robot", path, "a robot arm"),
-        examples=_str_list(raw, "examples", path), observation=tuple(observation.items()),
+        utterances=utterances,
+        robot=_str(raw, "robot", path, "a robot arm"),
+        examples=_str_list(raw, "examples", path),
+        observation=tuple(observation.items()),
         features_from=features_from,
     )
 
@@ -174,9 +200,16 @@ def save_task(task: Task, root: Path, bank: dict[str, Any]) -> None:
     """Write `task.json` and the bank (`utterances.json`, split) into a dataset or model directory."""
     root.mkdir(parents=True, exist_ok=True)
     (root / BANK_JSON).write_text(json.dumps(bank, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
-    desc = {"name": task.name, "description": task.description, "robot": task.robot, "examples": list(task.examples),
-            "features": list(task.features), "feature_descriptions": list(task.feature_descriptions),
-            "obs_layout": [[f.name, f.start, f.stop] for f in task.obs_layout], "action_dim": task.action_dim}
+    desc = {
+        "name": task.name,
+        "description": task.description,
+        "robot": task.robot,
+        "examples": list(task.examples),
+        "features": list(task.features),
+        "feature_descriptions": list(task.feature_descriptions),
+        "obs_layout": [[f.name, f.start, f.stop] for f in task.obs_layout],
+        "action_dim": task.action_dim,
+    }
     (root / TASK_JSON).write_text(json.dumps(desc, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
@@ -193,14 +226,29 @@ def load_stored_task(root: Path) -> Task | None:
         return None
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
-        return Task(name=d["name"], features=tuple(d["features"]),
-                    feature_descriptions=tuple(d["feature_descriptions"]),
-                    obs_layout=tuple(ObsField(n, a, b) for n, a, b in d["obs_layout"]), action_dim=int(d["action_dim"]),
-                    description=d["description"], utterances=root / BANK_JSON, robot=d["robot"],
-                    examples=tuple(d["examples"]), source="recorded")
+        return Task(
+            name=d["name"],
+            features=tuple(d["features"]),
+            feature_descriptions=tuple(d["feature_descriptions"]),
+            obs_layout=tuple(ObsField(n, a, b) for n, a, b in d["obs_layout"]),
+            action_dim=int(d["action_dim"]),
+            description=d["description"],
+            utterances=root / BANK_JSON,
+            robot=d["robot"],
+            examples=tuple(d["examples"]),
+            source="recorded",
+        )
     except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as exc:
         raise LangprefError(f"{path} is corrupt ({type(exc).__name__}: {exc}); import the recording again") from None
 
 
-__all__ = ["BANK_JSON", "TASK_JSON", "TaskFile", "stored_task_files", "load_function", "load_stored_task",
-           "read_task_file", "save_task"]
+__all__ = [
+    "BANK_JSON",
+    "TASK_JSON",
+    "TaskFile",
+    "stored_task_files",
+    "load_function",
+    "load_stored_task",
+    "read_task_file",
+    "save_task",
+]

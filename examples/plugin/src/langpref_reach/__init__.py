@@ -29,13 +29,19 @@ TASK = Task(
     action_dim=ACTION_DIM,
     robot="a simulated Sawyer robot arm",
     description="The robot stands at a table, and its task is to reach a small red dot floating above the table "
-                "with its fingertips (the dark cylinder on the table plays no part). Trajectories differ in how high "
-                "the arm moves, how fast it moves, and how close it comes to the dot.",
+    "with its fingertips (the dark cylinder on the table plays no part). Trajectories differ in how high "
+    "the arm moves, how fast it moves, and how close it comes to the dot.",
     examples=("Move faster.", "Keep lower.", "Get closer to the red dot."),
     utterances=resources.files(__name__).joinpath("utterances.json"),
     default_splits=(160, 20, 20),
-    simulator=Simulator(make_env=make, make_controller=make_controller, controller_dim=CONTROLLER_DIM,
-                        default_horizon=150, default_num_trajectories=200, success_name="target reached"),
+    simulator=Simulator(
+        make_env=make,
+        make_controller=make_controller,
+        controller_dim=CONTROLLER_DIM,
+        default_horizon=150,
+        default_num_trajectories=200,
+        success_name="target reached",
+    ),
     source="plugin",
 )
 

@@ -23,11 +23,17 @@ TASK = Task(
     action_dim=ACTION_DIM,
     robot="a simulated Sawyer robot arm",
     description="The robot stands at a table with a button on it, and its task is to press the button. Trajectories "
-                "differ in how high the arm moves, how fast it moves, and how close it comes to the button.",
+    "differ in how high the arm moves, how fast it moves, and how close it comes to the button.",
     examples=("Move faster.", "Stay lower.", "Get closer to the button."),
     utterances=resources.files(__name__).joinpath("utterances.json"),
     default_splits=(260, 32, 32),
-    simulator=Simulator(make_env=make, make_controller=make_controller, controller_dim=CONTROLLER_DIM,
-                        default_horizon=500, default_num_trajectories=324, success_name="button pressed",
-                        extra="metaworld"),
+    simulator=Simulator(
+        make_env=make,
+        make_controller=make_controller,
+        controller_dim=CONTROLLER_DIM,
+        default_horizon=500,
+        default_num_trajectories=324,
+        success_name="button pressed",
+        extra="metaworld",
+    ),
 )

@@ -17,20 +17,21 @@ from langpref.tasks.base import ObsField
 
 FEATURES = ("height", "speed", "distance_to_button")
 OBS_LAYOUT = (
-        ObsField("hand_pos", 0, 3),
-        ObsField("gripper_opening", 3, 4),
-        ObsField("button_pos", 4, 7),
-        ObsField("button_quat", 7, 11),
-        ObsField("padding", 11, 18),
-        ObsField("prev_hand_pos", 18, 21),
-        ObsField("prev_gripper_opening", 21, 22),
-        ObsField("prev_button_pos", 22, 25),
-        ObsField("prev_button_quat", 25, 29),
-        ObsField("prev_padding", 29, 36),
-        ObsField("goal", 36, 39),
+    ObsField("hand_pos", 0, 3),
+    ObsField("gripper_opening", 3, 4),
+    ObsField("button_pos", 4, 7),
+    ObsField("button_quat", 7, 11),
+    ObsField("padding", 11, 18),
+    ObsField("prev_hand_pos", 18, 21),
+    ObsField("prev_gripper_opening", 21, 22),
+    ObsField("prev_button_pos", 22, 25),
+    ObsField("prev_button_quat", 25, 29),
+    ObsField("prev_padding", 29, 36),
+    ObsField("goal", 36, 39),
 )
 OBS_DIM = OBS_LAYOUT[-1].stop
 ACTION_DIM = 4
+
 
 class MetaWorldButtonPress:
     """`SimEnv` over Meta-World's SawyerButtonPressEnvV3."""

@@ -25,12 +25,18 @@ TASK = Task(
     action_dim=ACTION_DIM,
     robot="a simulated Kinova Jaco robot arm",
     description="The robot stands at a table with a cube and a bottle on it, and its task is to lift the cube. "
-                "Trajectories differ in how high and how fast the arm moves, how close it comes to the cube and to "
-                "the bottle, and how well it lifts the cube.",
+    "Trajectories differ in how high and how fast the arm moves, how close it comes to the cube and to "
+    "the bottle, and how well it lifts the cube.",
     examples=("Move slower.", "Keep away from the bottle.", "Be better at lifting the cube."),
     utterances=resources.files(__name__).joinpath("utterances.json"),
     default_splits=(359, 44, 45),
-    simulator=Simulator(make_env=make, make_controller=make_controller, controller_dim=CONTROLLER_DIM,
-                        default_horizon=500, default_num_trajectories=448, success_name="cube lifted",
-                        extra="robosuite"),
+    simulator=Simulator(
+        make_env=make,
+        make_controller=make_controller,
+        controller_dim=CONTROLLER_DIM,
+        default_horizon=500,
+        default_num_trajectories=448,
+        success_name="cube lifted",
+        extra="robosuite",
+    ),
 )

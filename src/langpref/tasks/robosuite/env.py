@@ -39,14 +39,14 @@ from langpref.tasks.base import ObsField
 
 FEATURES = ("height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success")
 OBS_LAYOUT = (
-        ObsField("eef_pos", 0, 3),
-        ObsField("eef_vel", 3, 6),
-        ObsField("gripper_qpos", 6, 12),
-        ObsField("cube_pos", 12, 15),
-        ObsField("cube_quat", 15, 19),
-        ObsField("bottle_pos", 19, 22),
-        ObsField("eef_to_cube", 22, 25),
-        ObsField("eef_to_bottle", 25, 28),
+    ObsField("eef_pos", 0, 3),
+    ObsField("eef_vel", 3, 6),
+    ObsField("gripper_qpos", 6, 12),
+    ObsField("cube_pos", 12, 15),
+    ObsField("cube_quat", 15, 19),
+    ObsField("bottle_pos", 19, 22),
+    ObsField("eef_to_cube", 22, 25),
+    ObsField("eef_to_bottle", 25, 28),
 )
 OBS_DIM = OBS_LAYOUT[-1].stop
 ACTION_DIM = 4
