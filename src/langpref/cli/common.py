@@ -1,0 +1,33 @@
+"""What the command modules share: the common options, the split and backend names, loading a model."""
+
+from __future__ import annotations
+
+import argparse
+
+from langpref.cli_config import opt, path
+
+TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
+SPLITS = ("train", "val", "test")
+BACKENDS = ("local", "ray")
+# Command groups: name -> (help, dest, metavar)
+GROUPS = {
+    "experiment": ("the paper's experiments, one command each", "experiment", "EXPERIMENT"),
+    "study": ("the web app for user studies with real people (paper Sec. 5.2)", "study_command", "SUBCOMMAND"),
+}
+
+
+JSON = opt("--json", action="store_true", help="print one JSON object")
+DIR = path("dir", help="dataset directory")
+MODEL = path("--model", required=True, help="checkpoint directory (`langpref train`)")
+DATA = path("--data", required=True, help="dataset directory (`langpref generate`)")
+TASK = opt("--env", required=True, metavar="TASK", help=TASK_HELP)
+
+
+def load(args: argparse.Namespace, with_data: bool = True):
+    """The model of `--model` (on `--device`) and, with `with_data`, the dataset of `--data` it is checked against."""
+    from langpref.dataset.storage import load_dataset
+    from langpref.model.checkpoint import load_model
+    from langpref.model.train import resolve_device
+
+    dataset = load_dataset(args.data) if with_data else None
+    return load_model(args.model, device=resolve_device(getattr(args, "device", "cpu")), dataset=dataset), dataset

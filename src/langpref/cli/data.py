@@ -1,0 +1,159 @@
+"""`langpref generate | import | tasks | inspect | render | demo`: making and looking at datasets."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from langpref.cli.common import BACKENDS, DIR, JSON
+from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+from langpref.errors import LangprefError
+
+
+@command(
+    "generate",
+    "roll out scripted policies in the simulator and store a trajectory dataset",
+    [
+        config(
+            "langpref.dataset.generate:GenerateConfig", {"env": {"metavar": "TASK"}, "backend": {"choices": BACKENDS}}
+        ),
+        JSON,
+    ],
+    "Roll out closed-loop controllers whose parameters are drawn by Latin hypercube sampling so that every "
+    "feature is covered, and store the trajectories with their features.",
+)
+def cmd_generate(args: argparse.Namespace) -> None:
+    from langpref.dataset.generate import GenerateConfig, generate
+
+    cfg = from_args(GenerateConfig, args)
+    summary = generate(cfg)
+    record(args, Path(summary["out"]) / "generate.config.json", cfg.resolved())
+    emit(
+        summary,
+        args.json,
+        lambda s: (
+            f"wrote {s['num_trajectories']} trajectories to {s['out']} "
+            f"({s['success_rate']:.0%} succeed, {s['wall_s']:.0f} s)"
+        ),
+    )
+
+
+@command(
+    "import",
+    "a robot recording (plain folder of episodes or LeRobotDataset) into a dataset",
+    [
+        config(
+            "langpref.dataset.importer:ImportConfig",
+            {"src": {"positional": True}, "splits": {"metavar": "TRAIN,VAL,TEST"}},
+        ),
+        JSON,
+    ],
+    "Read a recording of your own robot into a langpref dataset of the task described by a task file (TOML: "
+    "name, description, features, features_from, utterances). A plain folder holds NAME.npz episodes "
+    "(observations (T, obs_dim), actions (T, A), optional features and success) with an optional "
+    "NAME.mp4/.webm video each; a LeRobotDataset (v3) is read with pyarrow and PyAV. Episodes may differ in "
+    "length. See README, 'Your own robot'.",
+)
+def cmd_import(args: argparse.Namespace) -> None:
+    from langpref.dataset.importer import ImportConfig, import_recording
+    from langpref.language.bank import check_bank, split_bank
+    from langpref.tasks.taskfile import read_task_file
+
+    task = read_task_file(args.task)
+    bank = split_bank(task.utterances, task.features, seed=args.seed)
+    check_bank(bank, task.name, task.features, f"utterances file {task.utterances}")
+    cfg = from_args(ImportConfig, args)
+    if len(cfg.splits) != 3 or min(cfg.splits) <= 0:
+        raise LangprefError(
+            f"--splits {','.join(map(str, cfg.splits))} must be three positive shares TRAIN,VAL,TEST, e.g. 0.8,0.1,0.1"
+        )
+    summary = import_recording(cfg, task, bank)
+    record(args, Path(summary["out"]) / "import.config.json", cfg)
+    emit(
+        summary,
+        args.json,
+        lambda s: (
+            f"imported {s['num_trajectories']} episodes of task {s['task']} into "
+            f"{s['out']} (splits {s['splits']}, videos: {'yes' if s['videos'] else 'no'}, {s['wall_s']:.1f} s)"
+        ),
+    )
+
+
+@command(
+    "tasks",
+    "list the tasks langpref knows: built-in, plugins, and a dataset's own",
+    [path("--data", default=None, help="also the task of this dataset"), JSON],
+    "Built-in tasks, tasks of installed plugins (entry-point group langpref.tasks), and with --data the "
+    "recorded task a dataset carries.",
+)
+def cmd_tasks(args: argparse.Namespace) -> None:
+    from langpref.tasks import get_task, task_names
+
+    if args.data:
+        from langpref.dataset.storage import load_dataset
+
+        load_dataset(args.data)
+    out = {}
+    for name in task_names():
+        task = get_task(name)
+        out[name] = {
+            "source": task.source,
+            "simulator": task.simulator is not None,
+            "features": dict(zip(task.features, task.feature_descriptions)),
+            "description": task.description,
+            "obs_dim": task.obs_dim,
+            "action_dim": task.action_dim,
+        }
+    emit(
+        out,
+        args.json,
+        lambda o: "\n".join(
+            f"{n:<16} {'simulated' if d['simulator'] else 'recorded '} {d['source']:<9} features: "
+            f"{', '.join(d['features'])}"
+            for n, d in o.items()
+        ),
+    )
+
+
+@command("inspect", "describe a dataset: sizes, splits, feature ranges and correlations", [DIR, JSON])
+def cmd_inspect(args: argparse.Namespace) -> None:
+    from langpref.dataset.inspect import describe, format_description
+
+    emit(describe(args.dir), args.json, format_description)
+
+
+@command(
+    "render",
+    "render a stored trajectory into a video (.mp4 or .webm)",
+    [
+        DIR,
+        opt("--index", type=int, required=True, help="trajectory index"),
+        path("--out", required=True, help="output video, .mp4 (H.264) or .webm (VP9)"),
+        opt("--width", type=int, default=320, help="pixels (default %(default)s)"),
+        opt("--height", type=int, default=240, help="pixels (default %(default)s)"),
+        opt("--fps", type=int, default=40, help="frame rate, one frame per stored step (default %(default)s)"),
+        JSON,
+    ],
+    "Replays the stored simulator states offscreen (EGL) into a video.",
+)
+def cmd_render(args: argparse.Namespace) -> None:
+    from langpref.dataset.render import render_trajectory
+
+    out = render_trajectory(args.dir, args.index, args.out, width=args.width, height=args.height, fps=args.fps)
+    record(args, beside(out))
+    emit({"video": str(out)}, args.json, lambda o: f"wrote {o['video']}")
+
+
+@command(
+    "demo",
+    "the whole story at small size on Meta-World, printing what it made",
+    [
+        path("--out", default=Path("demo_out"), help="where the demo writes (default demo_out/)"),
+        opt("--workers", type=int, default=None, help="parallel worker processes (default: all cores)"),
+    ],
+)
+def cmd_demo(args: argparse.Namespace) -> None:
+    from langpref.demo import run_demo
+
+    run_demo(Path(args.out), workers=args.workers)
+    record(args, Path(args.out) / "demo.config.json")

@@ -1,0 +1,211 @@
+"""`langpref train | evaluate | embed | visualize | utterances | experiment alignment`: the latent space."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from pathlib import Path
+
+from langpref.cli.common import DATA, JSON, MODEL, SPLITS, TASK, load
+from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+
+
+@command(
+    "train",
+    "learn the shared latent space of trajectories and language",
+    [
+        config(
+            "langpref.model.config:TrainConfig",
+            {
+                "model.lang_model": {"metavar": "NAME_OR_PATH"},
+                "device": {"choices": ("auto", "cpu", "cuda")},
+                "stage1_epochs": "--epochs",
+                "stage1_batch_size": "--batch-size",
+                "stage1_lr": "--lr",
+                "stage1_head_lr": "--head-lr",
+                "stage2_epochs": "--finetune-epochs",
+                "stage2_batch_size": "--finetune-batch-size",
+                "stage2_phrasings_per_step": "--phrasings-per-step",
+                "stage2_lr": "--finetune-lr",
+                "stage2_lm_lr": "--lm-lr",
+                "model.traj_hidden": {"metavar": "H1,H2,..."},
+            },
+        ),
+        JSON,
+    ],
+    "Stage 1 trains the trajectory encoder and a language head with the language model frozen; stage 2 "
+    "co-finetunes the transformer (paper Sec. 4.1). Keeps the epoch with the best validation accuracy, stops "
+    "early, writes a checkpoint directory with a training curve.",
+)
+def cmd_train(args: argparse.Namespace) -> None:
+    from langpref.model.config import TrainConfig
+    from langpref.model.train import train
+
+    cfg = from_args(TrainConfig, args)
+    result = train(cfg, progress=True)
+    record(args, Path(result.out) / "train.config.json", cfg.to_dict())
+    r = result.results
+    summary = {
+        "out": str(result.out),
+        "best_val_accuracy": r["best_val_accuracy"],
+        "stages": r["stages"],
+        "epochs": len(result.history),
+        "wall_s": r["wall_s"],
+        "samples_per_s": r["samples_per_s"],
+        "train_pairs": r["train_pairs"],
+        "device": r["device"],
+    }
+    emit(
+        summary,
+        args.json,
+        lambda s: (
+            f"wrote {s['out']}: validation accuracy {s['best_val_accuracy']:.3f} after "
+            f"{s['stages']} stage(s), {s['epochs']} epochs, {s['wall_s']:.0f} s"
+        ),
+    )
+
+
+@command(
+    "evaluate",
+    "alignment accuracy of a model on a split (paper Sec. 5.1)",
+    [
+        MODEL,
+        DATA,
+        opt("--split", default="test", choices=SPLITS, help="default %(default)s"),
+        opt(
+            "--phrasing-split",
+            default=None,
+            choices=SPLITS,
+            help="bank split of the phrasings (default: --split); "
+            "`train` on test trajectories separates reading the trajectories from reading unseen words",
+        ),
+        path(
+            "--utterances",
+            default=None,
+            help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split",
+        ),
+        opt("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="default %(default)s"),
+        JSON,
+    ],
+    "Over every ordered pair of the split's trajectories, every feature that differs (beyond the model's tie "
+    "threshold) and every phrasing of it in the direction taking A to B: the share with psi_l . (phi_B - "
+    "phi_A) > 0.",
+)
+def cmd_evaluate(args: argparse.Namespace) -> None:
+    from langpref.language.pairs import phrasings_from_bank, phrasings_from_mapping
+    from langpref.model.evaluate import evaluate_split
+
+    model, dataset = load(args)
+    if args.utterances:
+        from langpref.language.bank import load_user_utterances
+
+        mapping = load_user_utterances(args.utterances, dataset.env)
+        phrasings = phrasings_from_mapping(
+            mapping, dataset.feature_names, require_all=False, source=str(args.utterances)
+        )
+    else:
+        from langpref.language.bank import load_bank
+
+        phrasing_split = args.phrasing_split or args.split
+        phrasings = phrasings_from_bank(load_bank(dataset.env), phrasing_split, dataset.feature_names)
+    out = evaluate_split(model, dataset, args.split, phrasings)
+    out["utterances"] = str(args.utterances) if args.utterances else f"bank:{phrasing_split}"
+    emit(
+        out,
+        args.json,
+        lambda o: (
+            f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
+            f"{o['utterances']}); "
+            + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items())
+            + (
+                f"\nread as their own meaning by `langpref embed`: {o['reading_accuracy']:.3f} of "
+                f"{o['num_phrasings']} phrasings"
+                + "".join(f"\n  misread: {m['text']!r} ({m['meaning']}) as {m['read_as']}" for m in o["misread"])
+                if "reading_accuracy" in o
+                else ""
+            )
+        ),
+    )
+
+
+@command(
+    "embed",
+    "which feature and direction the model reads into a sentence",
+    [
+        MODEL,
+        opt("text", help='free-form feedback, e.g. "you\'re way too slow"'),
+        JSON,
+        lambda p: setattr(
+            p,
+            "description",
+            p.description.replace(
+                "the gate's floor", str(importlib.import_module("langpref.language.relevance").RELEVANCE_FLOOR)
+            ),
+        ),
+    ],
+    "Nearest bank meaning by cosine: the mean psi of each feature/direction's training phrasings; confidence is "
+    "a softmax over the cosines at temperature 0.1. A sentence that does not read as feedback on the robot's "
+    "motion (relevance: its highest cosine to a bank phrasing in the pretrained MiniLM space, below the gate's "
+    "floor) is refused with an error.",
+)
+def cmd_embed(args: argparse.Namespace) -> None:
+    from langpref.language.relevance import FeedbackGate
+    from langpref.model.evaluate import embed_text
+
+    model, _ = load(args, with_data=False)
+    out = embed_text(model, args.text)  # an empty text fails here, before the gate is built
+    out["relevance"] = round(FeedbackGate(model.info.env).check(args.text).score, 4)
+    emit(
+        out,
+        args.json,
+        lambda o: f"{o['feature']}/{o['direction']} (confidence {o['confidence']:.2f}, cosine {o['cosine']:.2f})",
+    )
+
+
+@command(
+    "visualize",
+    "draw the latent space: phi by PCA per feature, language directions as arrows",
+    [
+        MODEL,
+        DATA,
+        path("--out", required=True, help="image to write (.png, .pdf, .svg)"),
+        opt("--split", default=None, choices=SPLITS, help="default: every trajectory"),
+        JSON,
+    ],
+)
+def cmd_visualize(args: argparse.Namespace) -> None:
+    from langpref.model.visualize import visualize
+
+    model, dataset = load(args)
+    out = visualize(model, dataset, args.out, split=args.split)
+    record(args, beside(args.out))
+    emit(out, args.json, lambda o: f"wrote {o['out']} ({o['num_trajectories']} trajectories)")
+
+
+@command("utterances", "print the shipped utterance bank of an env (all splits merged)", [TASK, JSON])
+def cmd_utterances(args: argparse.Namespace) -> None:
+    from langpref.language.bank import load_bank
+
+    emit(load_bank(args.env).merged(), args.json)
+
+
+@command(
+    "experiment alignment",
+    "Appendix C: test accuracy, co-finetuned vs frozen language model",
+    [
+        TASK,
+        path("--data", default=None, help="dataset directory (default data/ENV)"),
+        path("--out", default=None, help="output directory (default results/alignment/ENV)"),
+        opt("--force", action="store_true", help="overwrite models already in --out"),
+        JSON,
+    ],
+    "Trains once (the frozen model is stage 1 of the co-finetuned one), evaluates both on the test split with "
+    "the bank's test phrasings, writes alignment.md/.json.",
+)
+def cmd_experiment_alignment(args: argparse.Namespace) -> None:
+    from langpref.experiments.alignment import alignment_table, default_out, run_alignment_experiment
+
+    args.data, args.out = args.data or Path("data") / args.env, args.out or default_out(args.env)
+    summary = run_alignment_experiment(args.env, args.data, args.out, force=args.force)
+    record(args, Path(args.out) / "alignment.config.json")
+    emit(summary, args.json, lambda s: alignment_table([s]) + f"\n(wrote {args.out}/alignment.md and alignment.json)")

@@ -1,0 +1,67 @@
+"""`langpref study serve | export`: the web app for user studies with real people."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from pathlib import Path
+
+from langpref import cli_config as cc
+from langpref.cli.common import JSON, SPLITS
+from langpref.cli_config import command, config, emit, from_args, record
+
+
+@command(
+    "study serve",
+    "serve a study in the browser (Study 1: improvement, Study 2: language vs comparisons)",
+    [
+        config(
+            "langpref.study.config:ServeConfig",
+            {"study": None, "video": None, "on_show": {"metavar": "CMD"}, "on_show_timeout": {"metavar": "SECONDS"}},
+        ),
+        config(
+            "langpref.study.config:StudyConfig",
+            {"study.split": {"choices": (*SPLITS, "all")}},
+            prefix="study.",
+            unset=True,
+        ),
+        config(
+            "langpref.study.config:VideoConfig",
+            lambda: {"video.format": {"choices": importlib.import_module("langpref.study.config").VIDEO_FORMATS}},
+            prefix="video.",
+            flag_prefix="video-",
+        ),
+    ],
+    "Prints the participant URL and an admin token. State lives in the SQLite --db: a restart on the same --db "
+    "continues every participant where they were. Protocol options are fixed when the database is created.",
+)
+def cmd_study_serve(args: argparse.Namespace) -> None:
+    from langpref.extras import needs
+    from langpref.study.config import ServeConfig
+
+    with needs("study", "langpref study serve"):
+        from langpref.study.serve import resolve_study_config, serve
+    serve(from_args(ServeConfig, args, study=resolve_study_config(args.db, cc.args_of(args, "study."))))
+
+
+@command(
+    "study export",
+    "CSV tables, analyses and figures of a study (HTML report + JSON)",
+    [config("langpref.study.config:ExportConfig"), JSON],
+    "Writes the tables, summary.json, the figures and report.html into --out.",
+)
+def cmd_study_export(args: argparse.Namespace) -> None:
+    from langpref.study.config import ExportConfig
+    from langpref.study.export import export
+
+    cfg = from_args(ExportConfig, args)
+    out = export(cfg.db, cfg.out, exclude=cfg.exclude)
+    record(args, Path(cfg.out) / "export.config.json", cfg)
+    emit(
+        out,
+        args.json,
+        lambda o: (
+            f"wrote {o['report']} ({o['participants']} participants, {o['finished']} "
+            f"finished), {len(o['tables'])} tables and {len(o['figures'])} figures in {o['out']}"
+        ),
+    )

@@ -1,0 +1,293 @@
+"""`langpref improve | learn-reward | experiment improve|reward|ablation|prior|active|generate`: uses of the
+latent space, with synthetic humans."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from pathlib import Path
+from typing import Any
+
+from langpref import cli_config as cc
+from langpref.cli.common import BACKENDS, JSON, SPLITS, TASK
+from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+
+
+def _use_opts(experiment: bool = False) -> dict[str, Any]:
+    """The flags of the fields of the synthetic human, the reward model and the splits, where they differ from the
+    derived ones."""
+    from langpref.feedback import KINDS
+    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_SCALES, HumanConfig
+    from langpref.feedback.space import PHRASING_SPLITS
+    from langpref.improve import OBJECTIVES, STRATEGIES
+    from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES
+
+    docs, out = cc.field_docs(HumanConfig), (lambda s: f" Results go to ENV-{s} unless --out." if experiment else "")
+    return {
+        "human.phrasing_split": {"choices": PHRASING_SPLITS, "help": docs["phrasing_split"] + out("bank-SPLIT")},
+        "human.phrasings": {"metavar": "FILE", "help": docs["phrasings"] + out("phrasings")},
+        "human.feature_scale": {"choices": FEATURE_SCALES, "help": docs["feature_scale"] + out("paper-scale")},
+        "human.direction": {"choices": DIRECTION_RULES, "help": docs["direction"] + out("toward-best")},
+        "reward.model": {"flag": "--reward-model", "choices": MODELS},
+        "reward.hidden": "--reward-hidden",
+        "reward.loss": {"choices": LOSSES},
+        "reward.negatives": {"choices": NEGATIVES},
+        "reward.negative_split": None,
+        "reward.weight_decay": {
+            "help": "L2 prior on r_xi's parameters, against the weighted mean loss over feedback "
+            "pairs (default "
+            + ", ".join(f"{v:g} for {k}" for k, v in DEFAULT_WEIGHT_DECAY.items())
+            + "; `langpref experiment prior` shows how the linear one was chosen)"
+        },
+        "candidate_split": {"flag": "--candidates", "choices": (*SPLITS, "generated")},
+        "base_split": {"choices": SPLITS},
+        "generated_out": {"metavar": "DIR"},
+        "query_split": {"choices": SPLITS},
+        "eval_split": {"choices": SPLITS},
+        "strategy": {"choices": STRATEGIES},
+        "objective": {"choices": OBJECTIVES},
+        "feedback": {"required": True, "choices": sorted(KINDS, key=lambda k: k != "language")},
+    }
+
+
+def _space_options(experiment: bool = False) -> list[cc.Options]:
+    return [
+        path(
+            "--model",
+            default=None,
+            help="checkpoint directory (`langpref train`)"
+            + ("; default results/alignment/ENV/cofinetuned, from `experiment alignment`" if experiment else ""),
+        ),
+        path(
+            "--data",
+            required=not experiment,
+            default=None,
+            help="dataset directory" + (" (default data/ENV)" if experiment else " (`langpref generate`)"),
+        ),
+        opt(
+            "--perfect-latent",
+            action="store_true",
+            help="ORACLE: use phi = normalised features and psi = +-e_f instead of a model (an upper bound)",
+        ),
+    ]
+
+
+def _space(args: argparse.Namespace):
+    from langpref.feedback.space import load_space
+
+    return load_space(
+        args.data,
+        args.model,
+        perfect=args.perfect_latent,
+        phrasings=getattr(args, "human.phrasings"),
+        feature_scale=getattr(args, "human.feature_scale", "standardised"),
+    )
+
+
+PROPOSE = config("langpref.propose:ProposeConfig", prefix="propose.")
+
+
+def _generation(args: argparse.Namespace, space):
+    """The simulator search of `langpref.propose` over the dataset's controllers, with the search flags."""
+    from langpref.propose import ProposeConfig, open_generation
+
+    return open_generation(
+        args.data, None if args.perfect_latent else args.model, space, from_args(ProposeConfig, args, "propose.")
+    )
+
+
+@command(
+    "improve",
+    "iterative trajectory improvement with a synthetic language human (Eq. 4)",
+    [
+        *_space_options(),
+        config("langpref.improve:ImproveConfig", lambda: {**_use_opts(), "human.rationality": None}),
+        PROPOSE,
+        path("--figure", default=None, help="also draw the curve into this PNG"),
+        JSON,
+    ],
+    "From a random trajectory of the candidate split, N rounds of synthetic language feedback, each followed by "
+    "the argmax over the candidates of Eq. 4's cosine objective (strategy paper) or of the reward learned from "
+    "all feedback so far (strategy history). Reports the mean normalised true reward per iteration (0 = worst, "
+    "1 = best candidate).",
+)
+def cmd_improve(args: argparse.Namespace) -> None:
+    from langpref.improve import ImproveConfig, improve, plot_improvement
+
+    cfg = from_args(ImproveConfig, args)
+    cfg.validate()
+    space = _space(args)
+    result = improve(space, cfg, generation=_generation(args, space) if cfg.generated else None)
+    if args.figure:
+        result["figure"] = str(plot_improvement({cfg.strategy: result}, args.figure, f"strategy {cfg.strategy}"))
+        record(args, beside(args.figure), cfg, data=args.data, model=args.model, perfect=args.perfect_latent)
+    emit(
+        result,
+        args.json,
+        lambda r: (
+            "mean normalised true reward per iteration: "
+            + " ".join(f"{v:.2f}" for v in r["curve"])
+            + f"\ngain {r['gain']:+.3f} over {r['num_runs']} runs"
+            + (f"; figure {r['figure']}" if "figure" in r else "")
+        ),
+    )
+
+
+@command(
+    "learn-reward",
+    "reward learning from synthetic language feedback or comparisons",
+    [
+        *_space_options(),
+        config("langpref.reward:LearnRewardConfig", _use_opts),
+        opt(
+            "--optimize",
+            action="store_true",
+            help="after the last query, generate r_xi's optimum in the simulator "
+            "(`langpref.propose`); adds optimized_true_reward, one per human x seed run (above 1: better than the "
+            "eval split's best)",
+        ),
+        PROPOSE,
+        path(
+            "--save-reward",
+            default=None,
+            metavar="DIR",
+            help="write each run's r_xi into DIR (reward.json is "
+            "the first run's) for the Gymnasium wrapper langpref.rewards.LearnedReward",
+        ),
+        path("--figure", default=None, help="also draw the curves into this PNG"),
+        JSON,
+    ],
+    "Each query shows one train trajectory (language: the human says how to improve it; L_Explicit + "
+    "L_Implicit, Eq. 5-9) or a random train pair (comparison: Bradley-Terry). After every query, r_xi is refit "
+    "on all feedback so far and scored on the test split.",
+)
+def cmd_learn_reward(args: argparse.Namespace) -> None:
+    from langpref.reward import LearnRewardConfig, learn_reward
+
+    cfg = from_args(LearnRewardConfig, args)
+    cfg.validate()
+    space = _space(args)
+    result = learn_reward(
+        space,
+        cfg,
+        generation=_generation(args, space) if args.optimize else None,
+        save_reward=args.save_reward,
+        model=None if args.perfect_latent else args.model,
+    )
+    if args.figure:
+        from langpref.experiments.reward import plot_reward_curves
+
+        result["figure"] = str(plot_reward_curves({cfg.feedback: result}, args.figure, f"{cfg.feedback} feedback"))
+        record(args, beside(args.figure), cfg, data=args.data, model=args.model, perfect=args.perfect_latent)
+    emit(
+        result,
+        args.json,
+        lambda r: (
+            f"{r['feedback']} feedback, {r['num_runs']} runs\n"
+            + "cross-entropy per query:        "
+            + " ".join(f"{v:.3f}" for v in r["cross_entropy"])
+            + "\n"
+            + "true reward of the best, per q: "
+            + " ".join(f"{v:.2f}" for v in r["true_reward_of_best"])
+            + f"\narea under the true-reward curve {r['auc_true_reward']:.3f}; reaches 0.95 after "
+            + f"{r['queries_to_0.95']} queries"
+            + (f"; figure {r['figure']}" if "figure" in r else "")
+            + (
+                f"\ngenerated r_xi optimum: mean normalised true reward {r['optimized_true_reward_mean']:.2f}, "
+                f"above the split's best in {r['optimized_beats_best_of_split']:.0%} of runs"
+                if "optimized_true_reward" in r
+                else ""
+            )
+        ),
+    )
+
+
+def cmd_experiment_uses(args: argparse.Namespace) -> None:
+    from langpref.experiments.common import SweepConfig
+
+    kw = {
+        "env": args.env,
+        "data": args.data,
+        "model": args.model,
+        "out": args.out,
+        "perfect": args.perfect_latent,
+        "force": args.force,
+        "sweep": from_args(SweepConfig, args),
+    }
+    module = "improve" if EXPERIMENTS[args.experiment][1] == "ImproveConfig" else "reward"
+    cfg = from_args(getattr(importlib.import_module(f"langpref.{module}"), EXPERIMENTS[args.experiment][1]), args)
+    runner = {"improve": "improve", "active": "active", "generate": "generate"}.get(args.experiment, "reward")
+    run = getattr(importlib.import_module(f"langpref.experiments.{runner}"), f"run_{args.experiment}_experiment")
+    summary = run(**kw, config=cfg)
+    md = Path(summary["figure"]).with_suffix(".md")
+    record(
+        args,
+        beside(md),
+        cfg,
+        **{**kw, "data": summary.get("data", kw["data"]), "model": summary.get("model", kw["model"]), "out": md.parent},
+    )
+    emit(
+        summary,
+        args.json,
+        lambda s: md.read_text() + f"\n(wrote {md.parent}/: {md.stem}.json, .png, .md, .config.json)",
+    )
+
+
+PHRASING = ("human.phrasing_split", "human.phrasings", "human.feature_scale", "human.direction")
+REWARD_FLAGS = ("seeds", "humans", "queries", "reward.model", *PHRASING)
+EXPERIMENTS = {  # name: what it is, its config (in langpref.improve or langpref.reward), the fields given a flag
+    "improve": (
+        "Fig. 4: iterative improvement, Eq. 4 (cosine and as printed) and the history strategy, 100 seeds",
+        "ImproveConfig",
+        ("iterations", "seeds", *PHRASING),
+    ),
+    "reward": (
+        "Fig. 5: reward learning, language vs comparisons, 3 humans x 3 seeds, Q = 40",
+        "LearnRewardConfig",
+        REWARD_FLAGS,
+    ),
+    "ablation": ("Fig. 6: language reward loss, explicit + implicit vs each alone", "LearnRewardConfig", REWARD_FLAGS),
+    "prior": (
+        "the L2 prior's strength per reward-learning method, chosen on the val split",
+        "LearnRewardConfig",
+        REWARD_FLAGS,
+    ),
+    "active": (
+        "active queries: language x {random, lal-infogain, infogain} and comparisons x {random, infogain, "
+        "volume-removal}, 10 humans x 3 seeds, Q = 40",
+        "LearnRewardConfig",
+        (*REWARD_FLAGS, "candidates", "posterior_samples"),
+    ),
+    "generate": (
+        "issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "
+        "best test trajectory (10 humans x 3 seeds, Q = 40)",
+        "ImproveConfig",
+        ("iterations", "seeds"),
+    ),
+}
+ACTIVE_OPTS = {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}}
+for _name, (_text, _cls, _only) in EXPERIMENTS.items():
+    command(
+        f"experiment {_name}",
+        _text,
+        [
+            TASK,
+            *_space_options(experiment=True),
+            path(
+                "--out",
+                default=None,
+                help=f"output directory (default results/{_name}/ENV, or ENV-perfect"
+                + (")" if _name == "improve" else ", ENV-mlp)"),
+            ),
+            config(
+                f"langpref.{'improve' if _cls == 'ImproveConfig' else 'reward'}:{_cls}",
+                lambda n=_name: {**_use_opts(True), **(ACTIVE_OPTS if n == "active" else {})},
+                only=_only,
+            ),
+            opt("--force", action="store_true", help="discard finished runs in --out and start over"),
+            config("langpref.experiments.common:SweepConfig", {"backend": {"choices": BACKENDS}}),
+            JSON,
+        ],
+        _text + ". Writes NAME.json, NAME.png and NAME.md (a section for docs/results.md); an interrupted run "
+        "resumes without redoing finished seeds.",
+    )(cmd_experiment_uses)
