@@ -1,9 +1,11 @@
 """The optional parts of langpref (pip extras), and the one-line error a command gives when one is not installed.
 
 `pip install langpref` is the core: datasets, language, model, feedback, improvement, reward learning, import of
-plain recordings (with their videos) and the command line. The simulators, the study web app, Ray and the import of
+plain recordings and the command line. The simulators, figures, videos, the study web app, Ray and the import of
 LeRobotDatasets are extras:
 
+    pip install 'langpref[plots]'        # figures (matplotlib): training curves, --figure, visualize, experiments
+    pip install 'langpref[video]'        # camera videos of recordings, their frames (PyAV)
     pip install 'langpref[metaworld]'    # the built-in Meta-World task (Sawyer button press)
     pip install 'langpref[robosuite]'    # the built-in robosuite task (Jaco lift with a bottle)
     pip install 'langpref[study]'        # langpref study serve (FastAPI, uvicorn)
@@ -20,15 +22,18 @@ from __future__ import annotations
 import importlib.util
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 from langpref.errors import LangprefError
 
 EXTRAS: dict[str, tuple[str, ...]] = {
     "metaworld": ("metaworld", "mujoco", "imageio", "imageio_ffmpeg", "OpenGL"),
     "robosuite": ("robosuite", "mujoco", "imageio", "imageio_ffmpeg", "OpenGL"),
-    "study": ("fastapi", "starlette", "uvicorn", "httpx"),
+    "plots": ("matplotlib",),
+    "video": ("av",),
+    "study": ("fastapi", "starlette", "uvicorn", "httpx", "matplotlib", "av"),
     "ray": ("ray",),
-    "lerobot": ("pyarrow",),
+    "lerobot": ("pyarrow", "av"),
 }
 """Each extra and the top-level modules it installs (import names, not distribution names)."""
 
@@ -75,3 +80,14 @@ def needs(extra: str, what: str) -> Iterator[None]:
         if top not in EXTRAS[extra]:
             raise
         raise MissingExtra(message(extra, what, top)) from None
+
+
+def pyplot(what: str) -> Any:
+    """matplotlib.pyplot on the file-only Agg backend (no display needed), or `MissingExtra` naming `plots`."""
+    with needs("plots", what):
+        import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt

@@ -276,10 +276,9 @@ def generation_stats(runs: list[ImprovementRun]) -> dict:
 def plot_improvement(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
     """Fig. 4 analogue: mean +- std of the normalised true reward per iteration, one line per result, and the
     dashed optimum."""
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("improvement figure")
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -59,10 +59,9 @@ def _job(state, job) -> tuple[str, dict]:
 
 
 def _plot_reward(picked: np.ndarray, generated: np.ndarray, out: Path, title: str) -> Path:
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the generated-optimum figure")
 
     fig, ax = plt.subplots(figsize=(4.2, 4.0))
     ax.scatter(picked, generated, s=18)

@@ -44,10 +44,9 @@ PAPER_FIG6 = "Fig. 6 (no numbers printed): L_Explicit + L_Implicit beats each al
 
 def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
     """Fig. 5/6 analogue: (a) cross-entropy and (b) normalised true reward of the best test trajectory per query."""
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the reward-learning figure")
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -437,10 +436,9 @@ PRIOR_METHODS = {
 
 def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Path, title: str = "") -> Path:
     """Mean cross-entropy over queries 1..Q (val split) against the weight decay, one line per method."""
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the prior figure")
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
