@@ -113,7 +113,7 @@ def test_flags_carry_the_dataclass_defaults_and_docstrings():
     assert train["--device"].choices == ("auto", "cpu", "cuda")
     lr = {a.option_strings[0]: a for a in p["learn-reward"]._actions if a.option_strings}
     assert lr["--queries"].default == LearnRewardConfig().queries and lr["--feedback"].required
-    assert set(lr["--feedback"].choices) == {"language", "comparison"}
+    assert set(lr["--feedback"].choices) == {"language", "comparison", "mixed"}
     assert lr["--reward-model"].choices == ("linear", "mlp") and lr["--weight-decay"].default is None
     serve = {a.option_strings[0]: a for a in p["study serve"]._actions if a.option_strings}
     assert serve["--split"].default is None and f"default {StudyConfig().split}" in serve["--split"].help

@@ -19,7 +19,12 @@ With a linear r, r(phi + psi_l) - r(phi) = xi . psi_l: what language teaches doe
 
 Queries are drawn uniformly from the query split (the paper's), or chosen by an active strategy from the learner's
 Laplace posterior (`query_selection`; `langpref.feedback.selection`, `langpref.feedback.posterior`) from a separate
-random stream, so that the human's answers and the negatives draw from the same streams whatever the strategy.
+random stream, so that the human's answers and the negatives draw from the same streams whatever the strategy. With
+`feedback="mixed"` one learner asks either kind, each query of the kind and item with the most information per
+modelled second of the person's time (`langpref.feedback.mixed`, `langpref.feedback.cost`), and its answers, of both
+kinds, enter the same fit. With `query_batch` K > 1, K queries are chosen at once (`langpref.feedback.batch`) and the
+learner is refit only after the K-th answer; the metrics are still recorded after every query, so within a batch the
+curves stay where the last refit left them.
 
 Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged over all its unordered pairs, and
 `reward_of_best`, the normalised true reward (0 worst, 1 best of the split) of the trajectory r_xi ranks first
@@ -43,14 +48,21 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback import bradley_terry
 from langpref.feedback.bradley_terry import PairBatch
+from langpref.feedback.cost import query_costs
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
-from langpref.feedback.kind import get_kind, random_query
+from langpref.feedback.kind import KINDS, MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_of, random_query
 from langpref.feedback.space import LatentSpace
 
 LOSSES = ("both", "explicit", "implicit")
 NEGATIVES = ("other_meaning", "any")
 MODELS = ("linear", "mlp")
 DEFAULT_WEIGHT_DECAY = {"linear": 1.0, "mlp": 0.25}
+
+
+def feedback_choices() -> tuple[str, ...]:
+    """Every `feedback` a learner takes: each registered kind, and `mixed` (language and comparisons, chosen per
+    query)."""
+    return (*KINDS, MIXED)
 
 
 @dataclass
@@ -232,6 +244,10 @@ class Curves:
     true_reward_of_best: list[float] = field(default_factory=list)
     optimized_true_reward: float | None = None
     """With generation: the normalised true reward of r_xi's generated optimum after the last query."""
+    kinds: list[str] = field(default_factory=list)
+    """The kind of feedback asked at queries 1..Q."""
+    seconds: list[float] = field(default_factory=list)
+    """Modelled seconds of the person's time after 0, 1, ..., Q queries (`langpref.feedback.cost`)."""
 
     def record(
         self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray, rationality: float
@@ -250,7 +266,8 @@ class LearnRewardConfig:
 
     feedback: str = "language"
     """The kind of feedback (`langpref.feedback.KINDS`): `language` (one trajectory shown, comparative feedback),
-    `comparison` (a pair shown, one choice), or any registered kind."""
+    `comparison` (a pair shown, one choice), any registered kind, or `mixed`: both in one learner, each query of the
+    kind and item with the most information per modelled second (`infogain`; the linear reward)."""
     queries: int = 40
     """Q, queries per run."""
     humans: int = 3
@@ -274,17 +291,41 @@ class LearnRewardConfig:
     every query; None: the whole split."""
     posterior_samples: int | None = None
     """Draws of the reward's Laplace posterior per active selection; None: 64."""
+    query_batch: int | None = None
+    """K, queries chosen at once (greedily, by score with a penalty for pointing the same way in the latent space as
+    one already in the batch); the learner is refit only after the batch. None: 1, a refit after every query."""
+    language_seconds: float | None = None
+    """Modelled time a person takes per language query, in the unit of comparison_seconds. None: 0.887, the paper's
+    measurement (Sec. 5.2: language took 11.3% less time per query than comparisons; it gives no seconds). Sets
+    what `mixed` asks and the time axis of the curves."""
+    comparison_seconds: float | None = None
+    """Modelled time a person takes per comparison. None: 1.0 (the unit; the paper reports only the ratio); give
+    both in seconds where they were measured."""
 
     @property
     def selection(self) -> str:
-        """The query selection strategy, `random` when unset."""
-        return self.query_selection or "random"
+        """The query selection strategy: `random` when unset (`infogain` for `mixed`)."""
+        return self.query_selection or ("infogain" if self.feedback == MIXED else "random")
+
+    @property
+    def batch(self) -> int:
+        """K, queries chosen at once (1 when unset)."""
+        return 1 if self.query_batch is None else int(self.query_batch)
+
+    @property
+    def costs(self) -> dict[str, float]:
+        """Modelled seconds per query by kind (`langpref.feedback.cost.query_costs`)."""
+        return query_costs(self.language_seconds, self.comparison_seconds)
 
     def validate(self) -> None:
         from langpref.feedback.selection import check_strategy
 
-        get_kind(self.feedback)
+        if self.feedback not in feedback_choices():
+            raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(feedback_choices())}")
         check_strategy(self.selection, self.feedback)
+        if self.query_batch is not None and self.query_batch < 1:
+            raise LangprefError(f"query_batch must be >= 1, got {self.query_batch}")
+        query_costs(self.language_seconds, self.comparison_seconds)
         if self.selection != "random" and self.reward.model != "linear":
             raise LangprefError(
                 f"query selection {self.selection!r} needs the linear reward model; the "
@@ -316,37 +357,51 @@ def run_reward_learning(
 ) -> Curves:
     """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each. Queries
     are drawn uniformly (`random`, from their own stream) or chosen by `cfg.query_selection` (from another stream,
-    so the human's answers and the negatives use the same streams whatever the strategy). With `record`, appends
-    each query's `langpref.feedback.selection.Selection` (score None for random) and answer as a pair. With
-    `generation` (`langpref.propose.Generation`), generates r_xi's optimum after the last query and scores it
-    (`Curves.optimized_true_reward`); with `learners`, appends the final reward model."""
-    from langpref.feedback.selection import Selection, make_selector
-
+    so the human's answers and the negatives use the same streams whatever the strategy), `cfg.batch` at a time,
+    the learner refit after each batch. `mixed` asks a language human and a comparison human with the same `w`,
+    each on the answer stream of its kind's single-kind runs, so a mixed run that asks one kind only is that kind's
+    `infogain` run, answer for answer. With `record`, appends each query's `langpref.feedback.selection.Selection`
+    (score None for random) and answer as a pair. With `generation` (`langpref.propose.Generation`), generates r_xi's
+    optimum after the last query and scores it (`Curves.optimized_true_reward`); with `learners`, appends the final
+    reward model."""
     cfg.validate()
-    kind = get_kind(cfg.feedback)
     pool = space.split(cfg.query_split)
     eval_rows = space.split(cfg.eval_split)
     R_eval = true_reward(w, space.theta[eval_rows])
     rng_query, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
     learner = RewardLearner(space.dim, cfg.reward, seed=int(np.random.default_rng([*run_seed, 4]).integers(2**31)))
-    selector = make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
+    selector = _selector(cfg, space, pool)
     rng_select = np.random.default_rng([*run_seed, 5])
-    curves = Curves()
+    costs = cfg.costs
+    curves = Curves(seconds=[0.0])
     curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
-    human = kind.make_human(w, space, pool, cfg.human, rng_human)
-    for _ in range(cfg.queries):
-        if selector is None:
-            chosen = Selection(random_query(kind, pool, rng_query), None, "random", len(pool))
-        else:
-            chosen = selector.select(learner, rng_select)
-        answer = human.answer(chosen.query)
-        if selector is not None:
-            selector.observe(space, answer)
-        if record is not None:
-            record.append((chosen, answer))
-        learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
-        learner.fit()
-        curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+    if cfg.feedback == MIXED:  # each kind's human on the stream of that kind's own runs (common random numbers)
+        humans = {
+            name: get_kind(name).make_human(w, space, pool, cfg.human, np.random.default_rng([*run_seed, 2]))
+            for name in MIXED_KINDS
+        }
+    else:
+        humans = {cfg.feedback: get_kind(cfg.feedback).make_human(w, space, pool, cfg.human, rng_human)}
+    while len(curves.kinds) < cfg.queries:
+        size = min(cfg.batch, cfg.queries - len(curves.kinds))
+        batch = (
+            _random_batch(get_kind(cfg.feedback), pool, rng_query, size)
+            if selector is None
+            else selector.select_batch(learner, rng_select, size)
+        )
+        for n, chosen in enumerate(batch, start=1):
+            kind = kind_of(chosen.query)
+            answer = humans[kind.name].answer(chosen.query)
+            if selector is not None:
+                selector.observe(space, answer)
+            if record is not None:
+                record.append((chosen, answer))
+            learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
+            if n == len(batch):
+                learner.fit()
+            curves.kinds.append(kind.name)
+            curves.seconds.append(curves.seconds[-1] + costs.get(kind.name, 1.0))
+            curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
     if generation is not None:
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
         raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
@@ -354,6 +409,27 @@ def run_reward_learning(
     if learners is not None:
         learners.append(learner)
     return curves
+
+
+def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
+    """The active strategy of `cfg` (None for random: the loop draws uniformly)."""
+    from langpref.feedback.selection import make_selector
+
+    if cfg.feedback == MIXED:
+        from langpref.feedback.mixed import make_mixed_selector
+
+        return make_mixed_selector(
+            cfg.selection, space, pool, cfg.reward, cfg.costs, cfg.candidates, cfg.posterior_samples
+        )
+    kind = get_kind(cfg.feedback)
+    return make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
+
+
+def _random_batch(kind: FeedbackKind, pool: np.ndarray, rng: np.random.Generator, size: int) -> list:
+    """`size` uniform queries of `kind`, one after another from the query stream (a batch of 1 is the paper's)."""
+    from langpref.feedback.selection import Selection
+
+    return [Selection(random_query(kind, pool, rng), None, "random", len(pool)) for _ in range(size)]
 
 
 def optimize_reward(generation, learner: RewardLearner, run_seed: tuple[int, ...] = (0,)):
@@ -365,7 +441,8 @@ def optimize_reward(generation, learner: RewardLearner, run_seed: tuple[int, ...
 
 def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
     """Mean and std per query count over runs, the area under the mean true-reward curve (its mean over query
-    counts 0..Q) and the first query count whose mean true reward reaches `threshold` (None if never)."""
+    counts 0..Q), the first query count whose mean true reward reaches `threshold` (None if never), and what the
+    queries cost (`kinds_summary`)."""
     ce = np.array([c.cross_entropy for c in runs])
     best = np.array([c.true_reward_of_best for c in runs])
     mean_best = best.mean(axis=0)
@@ -379,7 +456,24 @@ def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
         "auc_cross_entropy": float(ce.mean(axis=0).mean()),
         f"queries_to_{threshold:g}": int(reached[0]) if len(reached) else None,
         "num_runs": len(runs),
+        **kinds_summary(runs),
         **optimized_summary(runs),
+    }
+
+
+def kinds_summary(runs: list[Curves]) -> dict:
+    """Which kind was asked and the person's modelled time: `kinds_asked` (per run, the kind of queries 1..Q),
+    `kind_share` ({kind: share of runs asking it at each query 1..Q}) and `modelled_seconds` (mean over runs after
+    0..Q queries, with `modelled_seconds_std`). Empty for runs recorded before these were kept."""
+    if not runs or any(not c.kinds or len(c.seconds) != len(c.kinds) + 1 for c in runs):
+        return {}
+    asked = np.array([c.kinds for c in runs])
+    seconds = np.array([c.seconds for c in runs])
+    return {
+        "kinds_asked": asked.tolist(),
+        "kind_share": {k: (asked == k).mean(axis=0).tolist() for k in sorted(set(asked.ravel()))},
+        "modelled_seconds": seconds.mean(axis=0).tolist(),
+        "modelled_seconds_std": seconds.std(axis=0).tolist(),
     }
 
 

@@ -16,11 +16,10 @@ from langpref.cli_config import beside, command, config, emit, from_args, opt, p
 def _use_opts(experiment: bool = False) -> dict[str, Any]:
     """The flags of the fields of the synthetic human, the reward model and the splits, where they differ from the
     derived ones."""
-    from langpref.feedback import KINDS
     from langpref.feedback.humans import DIRECTION_RULES, FEATURE_SCALES, HumanConfig
     from langpref.feedback.space import PHRASING_SPLITS
     from langpref.improve import OBJECTIVES, STRATEGIES
-    from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES
+    from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES, feedback_choices
 
     docs, out = cc.field_docs(HumanConfig), (lambda s: f" Results go to ENV-{s} unless --out." if experiment else "")
     return {
@@ -46,7 +45,7 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
         "eval_split": {"choices": SPLITS},
         "strategy": {"choices": STRATEGIES},
         "objective": {"choices": OBJECTIVES},
-        "feedback": {"required": True, "choices": sorted(KINDS, key=lambda k: k != "language")},
+        "feedback": {"required": True, "choices": feedback_choices()},
     }
 
 
@@ -254,9 +253,10 @@ EXPERIMENTS = {  # name: what it is, its config (in langpref.improve or langpref
     ),
     "active": (
         "active queries: language x {random, lal-infogain, infogain} and comparisons x {random, infogain, "
-        "volume-removal}, 10 humans x 3 seeds, Q = 40",
+        "volume-removal}, and both kinds chosen per query by information per modelled second (mixed), 10 humans x 3 "
+        "seeds, Q = 40",
         "LearnRewardConfig",
-        (*REWARD_FLAGS, "candidates", "posterior_samples"),
+        (*REWARD_FLAGS, "candidates", "posterior_samples", "query_batch", "language_seconds", "comparison_seconds"),
     ),
     "generate": (
         "issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "

@@ -1,23 +1,36 @@
-"""`langpref experiment active --env ENV`: active queries against random ones, for language and for comparisons.
+"""`langpref experiment active --env ENV`: active queries against random ones, for language and for comparisons,
+and a learner that asks either kind.
 
 Language x {random (the paper's), lal-infogain (the authors' follow-up), infogain (ours: the latent Eq. 10 answer
-model, `langpref.feedback.selection`)} and comparisons x {random, infogain (mutual information), volume-removal},
-10 synthetic humans x 3 seeds, Q = 40, the same learner (Eq. 9 / Bradley-Terry, L-BFGS, L2 prior) for all: only what
-is shown differs. Writes into its output directory (default `results/active/ENV`): `active.json` (curves and
-summaries per method, per-run AUCs, paired 95% intervals between strategies, the targets of issue 21 checked, the
-config), `active.png` (cross-entropy and true reward of the best test trajectory per query), `active.md` (a section
-for docs/results.md) and `runs.json` (finished runs; an interrupted experiment resumes).
+model, `langpref.feedback.selection`)}, comparisons x {random, infogain (mutual information), volume-removal}, and
+mixed-infogain (both kinds in one learner, each query of the kind and item with the most information per modelled
+second, `langpref.feedback.mixed`), 10 synthetic humans x 3 seeds, Q = 40, the same learner (Eq. 9 / Bradley-Terry,
+L-BFGS, L2 prior) for all: only what is shown differs.
+
+Over queries and over the person's time. A query's modelled seconds are its kind's (`langpref.feedback.cost`: the
+paper's measurement, language 11.3% faster than a comparison, unless given), so every run also has a curve over
+modelled seconds (a step function: at time t, the metrics after the last query finished by t). These are compared up
+to the horizon every run reaches (the least total time of any run, Q language queries unless a mixed run is faster),
+by their mean over that time (AUC per second), with the same paired intervals as per query.
+
+Writes into its output directory (default `results/active/ENV`): `active.json` (curves and summaries per method,
+per-run AUCs per query and per modelled second, paired 95% intervals between strategies, the mixed learner's share of
+language queries, the targets of issue 21 checked, the config), `active.png` (cross-entropy and true reward of the
+best test trajectory per query and over modelled seconds), `active.md` (a section for docs/results.md) and
+`runs.json` (finished runs; an interrupted experiment resumes).
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from langpref.experiments.common import SweepConfig, figure_link
-from langpref.experiments.reward import _run_methods, _save, _table, paired_difference, plot_reward_curves
+from langpref.experiments.reward import _run_methods, _save, _table, paired_difference
+from langpref.feedback.cost import elapsed, on_time_grid, time_average
 
 METHODS = {
     "language-random": ("language", None),
@@ -26,18 +39,26 @@ METHODS = {
     "comparison-random": ("comparison", None),
     "comparison-infogain": ("comparison", "infogain"),
     "comparison-volume-removal": ("comparison", "volume-removal"),
+    "mixed-infogain": ("mixed", "infogain"),
 }
 """Method name -> (feedback, query selection); None is random."""
 OURS, LAL, LANG_RANDOM = "language-infogain", "language-lal-infogain", "language-random"
+COMP, MIXED = "comparison-infogain", "mixed-infogain"
 CONTRASTS = (
     (OURS, LANG_RANDOM),
     (OURS, LAL),
     (LAL, LANG_RANDOM),
-    (OURS, "comparison-infogain"),
-    ("comparison-infogain", "comparison-random"),
+    (OURS, COMP),
+    (COMP, "comparison-random"),
     ("comparison-volume-removal", "comparison-random"),
+    (MIXED, OURS),
+    (MIXED, COMP),
 )
 """Paired differences reported (first minus second)."""
+METRICS = {"true_reward_of_best": "auc_true_reward", "cross_entropy": "auc_cross_entropy"}
+"""Each curve and the name of its area."""
+GRID_POINTS = 201
+"""Points of the modelled-time axis of the curves over seconds (the AUC per second is exact, not read off it)."""
 
 
 def _per_run(runs: dict, method: str, keys: list[str], key: str, upto: int | None = None) -> np.ndarray:
@@ -48,6 +69,44 @@ def _per_run(runs: dict, method: str, keys: list[str], key: str, upto: int | Non
 def _interval(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
     d = paired_difference(a, b)
     return {k: float(v[0]) for k, v in d.items()}
+
+
+def run_seconds(run: dict, feedback: str, costs: dict[str, float]) -> list[float]:
+    """A run's modelled seconds after 0..Q queries: as recorded, or (a run recorded before they were kept) Q queries
+    of its one kind."""
+    q = len(run["cross_entropy"]) - 1
+    seconds = run.get("seconds") or []
+    return list(seconds) if len(seconds) == q + 1 else elapsed([feedback] * q, costs)
+
+
+def per_second(runs: dict, methods: dict, keys: list[str]) -> dict[str, Any]:
+    """The curves over modelled seconds, up to the horizon every run reaches: per method the mean and std of each
+    metric on a grid, the time average of each run (`per_run`, the AUC per second) and its mean, and the seconds Q
+    queries took (mean over runs)."""
+    seconds = {m: [run_seconds(runs[f"{m}/{k}"], cfg.feedback, cfg.costs) for k in keys] for m, cfg in methods.items()}
+    horizon = min(s[-1] for m in methods for s in seconds[m])
+    grid = np.linspace(0.0, horizon, GRID_POINTS)
+    out: dict[str, Any] = {"horizon": horizon, "grid": grid.tolist(), "methods": {}}
+    for m in methods:
+        res: dict[str, Any] = {"seconds_for_q": float(np.mean([s[-1] for s in seconds[m]])), "per_run": {}}
+        for key in METRICS:
+            curves = [runs[f"{m}/{k}"][key] for k in keys]
+            on_grid = np.array([on_time_grid(c, s, grid) for c, s in zip(curves, seconds[m])])
+            per_run = [time_average(c, s, horizon) for c, s in zip(curves, seconds[m])]
+            res[key] = on_grid.mean(axis=0).tolist()
+            res[f"{key}_std"] = on_grid.std(axis=0).tolist()
+            res[METRICS[key]] = float(np.mean(per_run))
+            res["per_run"][key] = per_run
+        out["methods"][m] = res
+    return out
+
+
+def language_share(runs: dict, method: str, keys: list[str]) -> float | None:
+    """The share of language queries over all runs of `method` (None for runs recorded before kinds were kept)."""
+    kinds = [runs[f"{method}/{k}"].get("kinds") or [] for k in keys]
+    if not all(kinds):
+        return None
+    return float(np.mean([kind == "language" for ks in kinds for kind in ks]))
 
 
 def run_active_experiment(
@@ -78,10 +137,15 @@ def run_active_experiment(
     keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
     auc = {m: _per_run(runs, m, keys, "true_reward_of_best") for m in methods}
     auc_ce = {m: _per_run(runs, m, keys, "cross_entropy") for m in methods}
+    timed = per_second(runs, methods, keys)
+    auc_s = {m: np.array(timed["methods"][m]["per_run"]["true_reward_of_best"])[:, None] for m in methods}
+    auc_ce_s = {m: np.array(timed["methods"][m]["per_run"]["cross_entropy"])[:, None] for m in methods}
     contrasts = {
         f"{a} - {b}": {
             "auc_true_reward": _interval(auc[a], auc[b]),
             "auc_cross_entropy": _interval(auc_ce[a], auc_ce[b]),
+            "auc_true_reward_per_second": _interval(auc_s[a], auc_s[b]),
+            "auc_cross_entropy_per_second": _interval(auc_ce_s[a], auc_ce_s[b]),
         }
         for a, b in CONTRASTS
     }
@@ -105,17 +169,58 @@ def run_active_experiment(
         f"active language (ours) beats active comparisons ({best_comp}) on AUC": ours["auc_true_reward"]
         > results[best_comp]["auc_true_reward"],
     }
-    figure = plot_reward_curves(
-        results, out / "active.png", f"Active queries, {env}" + (" (perfect latent)" if model is None else "")
+    figure = plot_active(
+        results, timed, out / "active.png", f"Active queries, {env}" + (" (perfect latent)" if model is None else "")
     )
     fields = {
         "methods": results,
         "targets": targets,
         "contrasts": contrasts,
+        "per_second": timed,
+        "language_share": {m: language_share(runs, m, keys) for m in methods},
+        "costs": base.costs,
+        "query_batch": base.batch,
         "figure": str(figure),
         "per_run_auc": {m: auc[m][:, 0].tolist() for m in methods},
+        "per_run_auc_per_second": {m: auc_s[m][:, 0].tolist() for m in methods},
     }
     return _save("active", env, data, model, out, space, base, fields, _markdown)
+
+
+def plot_active(results: dict[str, dict], timed: dict[str, Any], out: str | Path, title: str = "") -> Path:
+    """Four panels: cross-entropy and true reward of the best test trajectory per query (as Fig. 5), and the same
+    over modelled seconds of the person's time, up to the horizon every run reaches; mean with a +-std band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.2))
+    grid = np.array(timed["grid"])
+    panels = (
+        (axes[0, 0], results, None, "cross_entropy", "(a) cross-entropy per query"),
+        (axes[0, 1], results, None, "true_reward_of_best", "(b) true reward of the best test trajectory per query"),
+        (axes[1, 0], timed["methods"], grid, "cross_entropy", "(c) cross-entropy over modelled seconds"),
+        (axes[1, 1], timed["methods"], grid, "true_reward_of_best", "(d) true reward of the best per modelled second"),
+    )
+    for ax, curves, x, key, label in panels:
+        for name, res in curves.items():
+            mean, std = np.array(res[key]), np.array(res[f"{key}_std"])
+            xs = np.arange(len(mean)) if x is None else x
+            ax.plot(xs, mean, label=name, drawstyle="default" if x is None else "steps-post")
+            ax.fill_between(xs, mean - std, mean + std, alpha=0.15, step=None if x is None else "post")
+        ax.set_xlabel("queries" if x is None else "modelled seconds (unit: one comparison unless set)")
+        ax.set_title(label, fontsize=10)
+        if key == "true_reward_of_best":
+            ax.set_ylim(-0.05, 1.05)
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
 
 
 def _markdown(summary: dict[str, Any]) -> str:
@@ -131,19 +236,18 @@ def _markdown(summary: dict[str, Any]) -> str:
         "",
     ]
     lines += _table(summary["methods"], at)
+    lines += ["", *_time_table(summary)]
     lines += [
         "",
-        "Paired differences over runs (same human and seed), 95% t-intervals:",
+        "Paired differences over runs (same human and seed), 95% t-intervals; per query (over query counts 0..Q) "
+        "and per modelled second (over 0..T):",
         "",
-        "| contrast | AUC best | mean CE |",
-        "|---|---|---|",
+        "| contrast | AUC best | mean CE | AUC best per second | mean CE per second |",
+        "|---|---|---|---|---|",
     ]
     for name, c in summary["contrasts"].items():
-        a, ce = c["auc_true_reward"], c["auc_cross_entropy"]
-        lines.append(
-            f"| {name} | {a['mean']:+.3f} ({a['low']:+.3f} to {a['high']:+.3f}) | "
-            f"{ce['mean']:+.3f} ({ce['low']:+.3f} to {ce['high']:+.3f}) |"
-        )
+        cells = [_cell(c[f"{k}{per}"]) for per in ("", "_per_second") for k in METRICS.values() if f"{k}{per}" in c]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines += [
         "",
         "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items()),
@@ -151,3 +255,31 @@ def _markdown(summary: dict[str, Any]) -> str:
         f"![Active queries {summary['env']}]({figure_link(summary['figure'])})",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _cell(d: dict[str, float]) -> str:
+    return f"{d['mean']:+.3f} ({d['low']:+.3f} to {d['high']:+.3f})"
+
+
+def _time_table(summary: dict[str, Any]) -> list[str]:
+    """Per method: modelled seconds for Q queries, its share of language queries and its areas per modelled second."""
+    timed = summary["per_second"]
+    costs = summary["costs"]
+    lines = [
+        f"Over the person's time: modelled seconds per query language {costs['language']:g}, comparison "
+        f"{costs['comparison']:g} (the paper's ratio unless set); T = {timed['horizon']:.2f}, the time every run "
+        "reaches; AUC per second: mean of the curve over modelled time 0..T (at t, the metrics after the last query "
+        "finished by t).",
+        "",
+        "| method | seconds for Q queries | language share | AUC best per query | AUC best per second | mean CE per "
+        "second |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, res in timed["methods"].items():
+        share = summary["language_share"].get(name)
+        lines.append(
+            f"| {name} | {res['seconds_for_q']:.2f} | {'n/a' if share is None else f'{share:.2f}'} | "
+            f"{summary['methods'][name]['auc_true_reward']:.3f} | {res['auc_true_reward']:.3f} | "
+            f"{res['auc_cross_entropy']:.3f} |"
+        )
+    return lines

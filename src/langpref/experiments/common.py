@@ -136,7 +136,9 @@ def cli_flags(base, default, names: tuple[str, ...]) -> str:
     """The `langpref experiment` options that reproduce the config `base`: each of `names` where it differs from
     `default`, where its language human's phrasings come from when that is not the default, and the humans' feature
     scale and direction rule when not the defaults."""
-    flags = "".join(f" --{k} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k))
+    flags = "".join(
+        f" --{k.replace('_', '-')} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k)
+    )
     for k in ("feature_scale", "direction"):
         if getattr(base.human, k) != getattr(default.human, k):
             flags += f" --{k.replace('_', '-')} {getattr(base.human, k)}"

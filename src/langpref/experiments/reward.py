@@ -297,7 +297,8 @@ def _cli_flags(base) -> str:
 
     d = LearnRewardConfig()
     model = f" --reward-model {base.reward.model}" if base.reward.model != d.reward.model else ""
-    return cli_flags(base, d, ("humans", "seeds", "queries")) + model
+    active = ("candidates", "posterior_samples", "query_batch", "language_seconds", "comparison_seconds")
+    return cli_flags(base, d, ("humans", "seeds", "queries", *active)) + model
 
 
 def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown) -> dict[str, Any]:

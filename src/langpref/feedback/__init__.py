@@ -12,7 +12,7 @@ Each kind is one module with one `FeedbackKind` (`kind.py`), registered by name:
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.comparison import ComparisonAnswer, ComparisonHuman, ComparisonQuery
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, softmax, true_reward
-from langpref.feedback.kind import KINDS, FeedbackKind, get_kind, random_query, register_kind
+from langpref.feedback.kind import KINDS, FeedbackKind, get_kind, kind_of, random_query, register_kind
 from langpref.feedback.language import LanguageAnswer, LanguageHuman, LanguageQuery
 from langpref.feedback.space import (
     FeatureScale,
@@ -42,6 +42,7 @@ __all__ = [
     "PhraseTable",
     "build_latent_space",
     "get_kind",
+    "kind_of",
     "load_space",
     "normalised_reward",
     "perfect_encoder",

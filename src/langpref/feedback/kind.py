@@ -70,6 +70,10 @@ class FeedbackKind:
 
 KINDS: dict[str, FeedbackKind] = {}
 """The registered kinds by name."""
+MIXED = "mixed"
+"""The `feedback` of a learner that asks either kind, chosen per query (`langpref.feedback.mixed`); not a kind."""
+MIXED_KINDS = ("language", "comparison")
+"""The kinds a mixed learner chooses between, in this order."""
 
 
 def register_kind(kind: FeedbackKind) -> FeedbackKind:
@@ -94,3 +98,11 @@ def random_query(kind: FeedbackKind, pool: np.ndarray, rng: np.random.Generator)
     if kind.shows == 1:
         return kind.query(int(rng.choice(pool)))
     return kind.query(*(int(i) for i in rng.choice(pool, size=kind.shows, replace=False)))
+
+
+def kind_of(query: Any) -> FeedbackKind:
+    """The registered kind whose query type `query` is (a mixed learner asks queries of several kinds)."""
+    for kind in KINDS.values():
+        if type(query) is kind.query:
+            return kind
+    raise LangprefError(f"no registered feedback kind asks a {type(query).__name__}")

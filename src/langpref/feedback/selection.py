@@ -11,6 +11,11 @@ drawn afresh for every query):
   `volume_removal` returns the remaining sum, which it minimises).
 - `lal-infogain`, language: the follow-up's selection (Hirota, Yang et al., USC-Lira/language_active_learning,
   `lal/active_learning/{laplace,info,next_traj}.py`, the `--active=1 --reward=3 --lang=3` setting of its scripts).
+- `infogain` with both kinds in one learner (`--feedback mixed`, `langpref.feedback.mixed`): the language and the
+  comparison scores above, from the same posterior draws, per modelled second of the person's time.
+
+Every strategy scores all its candidates at once (`langpref.feedback.batch.Scored`); `select` asks the best, and
+`select_batch` K at once, greedily with a diversity penalty (`langpref.feedback.batch.pick`).
 
 The answer model of `infogain` for language. With a linear r_xi the likelihood the learner fits (Eq. 5-9) does not
 depend on the shown trajectory (r(phi + psi_l) - r(phi) = xi . psi_l), so its information cannot rank trajectories.
@@ -50,6 +55,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.feedback.batch import Scored, comparison_candidates, language_candidates, pick
 from langpref.feedback.posterior import laplace_posterior
 
 if TYPE_CHECKING:
@@ -59,8 +65,13 @@ if TYPE_CHECKING:
 
 STRATEGIES = ("random", "infogain", "lal-infogain", "volume-removal")
 """Every `query_selection`."""
-BY_KIND = {"language": ("random", "infogain", "lal-infogain"), "comparison": ("random", "infogain", "volume-removal")}
-"""The strategies each built-in kind has (`random` works for every registered kind)."""
+BY_KIND = {
+    "language": ("random", "infogain", "lal-infogain"),
+    "comparison": ("random", "infogain", "volume-removal"),
+    "mixed": ("infogain",),
+}
+"""The strategies each built-in kind has (`random` works for every registered kind); `mixed` (both kinds in one
+learner, `langpref.feedback.mixed`) chooses by information per second, so only `infogain`."""
 DEFAULT_SAMPLES = 64
 """Posterior draws of xi per selection."""
 ANSWER_TEMPERATURE = 1.0
@@ -124,13 +135,23 @@ def binary_mutual_information(p: np.ndarray) -> np.ndarray:
 
 
 class Selector:
-    """A strategy with its state: `select` the next query from the learner's current fit, then `observe` the
-    answer."""
+    """A strategy with its state: `select` the next query (or `select_batch` the next K) from the learner's current
+    fit, then `observe` each answer. A strategy is its `score`: every candidate, scored once."""
 
     name = "random"
 
-    def select(self, learner: RewardLearner, rng: np.random.Generator) -> Selection:
+    def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         raise NotImplementedError
+
+    def select_batch(self, learner: RewardLearner, rng: np.random.Generator, k: int) -> list[Selection]:
+        """The next min(k, candidates) queries, chosen at once from one scoring (`langpref.feedback.batch.pick`);
+        k = 1 is `select`."""
+        scored = self.score(learner, rng)
+        n = len(scored.gains)
+        return [Selection(scored.query(c), float(scored.gains[c]), self.name, n) for c in pick(scored, k)]
+
+    def select(self, learner: RewardLearner, rng: np.random.Generator) -> Selection:
+        return self.select_batch(learner, rng, 1)[0]
 
     def observe(self, space: LatentSpace, answer: Any) -> None:
         """Called with every answer (the follow-up's strategy keeps its own record of them)."""
@@ -181,10 +202,14 @@ class LanguageInfoGain(Selector):
         self._pool_proj = space.phi[self.pool] @ self.axes.T  # (N, F)
         self._pool_phi = space.phi[self.pool]
 
+    def best(self, xi: np.ndarray) -> np.ndarray:
+        """(S,) position in the pool of phi*_xi, the best trajectory under each draw."""
+        return np.argmax(xi @ self._pool_phi.T, axis=1)
+
     def answer_probabilities(self, xi: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """(S, C, 2F) P(meaning | xi_s, tau_c); meaning 2k + d for feature self.features[k], d = 0 increase."""
         a = xi @ self.axes.T  # (S, F): xi . v_f
-        best = np.argmax(xi @ self._pool_phi.T, axis=1)  # (S,) phi*_xi in the pool
+        best = self.best(xi)  # (S,) phi*_xi in the pool
         gap = self._pool_proj[best][:, None, :] - (self.space.phi[rows] @ self.axes.T)[None, :, :]  # (S, C, F)
         logits = a[:, None, :] * gap / self.temperature
         logits -= logits.max(axis=2, keepdims=True)
@@ -200,14 +225,14 @@ class LanguageInfoGain(Selector):
         """I(xi; answer | tau) in nats for each of `rows`, from the draws `xi` (S, D)."""
         return mutual_information(self.answer_probabilities(xi, rows))
 
-    def select(self, learner: RewardLearner, rng: np.random.Generator) -> Selection:
-        from langpref.feedback.language import LanguageQuery
+    def scored(self, xi: np.ndarray, rows: np.ndarray) -> Scored:
+        """`rows` scored from the draws `xi`, each pointing to the mean over draws of phi*_xi."""
+        star = self._pool_phi[self.best(xi)].mean(axis=0)
+        return language_candidates(rows, self.scores(xi, rows), self.space.phi[rows], star)
 
+    def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         rows = candidate_rows(self.pool, self.candidates, rng)
-        xi = laplace_posterior(learner).sample(self.samples, rng)
-        s = self.scores(xi, rows)
-        best = int(np.argmax(s))
-        return Selection(LanguageQuery(int(rows[best])), float(s[best]), self.name, len(rows))
+        return self.scored(laplace_posterior(learner).sample(self.samples, rng), rows)
 
 
 class LalInfoGain(Selector):
@@ -256,16 +281,15 @@ class LalInfoGain(Selector):
         log_tmp = np.log(m) + logp - np.logaddexp.reduce(logp, axis=0, keepdims=True)
         return (log_tmp / np.log(2.0)).sum(axis=(0, 2)) / l_samples.shape[0]
 
-    def select(self, learner: RewardLearner, rng: np.random.Generator) -> Selection:
-        from langpref.feedback.language import LanguageQuery
-
+    def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
+        """Trajectories not shown before (all when every one was), each pointing away from the pool's mean phi (the
+        follow-up has no guess of the best trajectory; only batches use the directions)."""
         rows = candidate_rows(self.pool, self.candidates, rng)
         fresh = rows[~np.isin(rows, self.shown)]
         rows = fresh if len(fresh) else rows
         w, l_samples = self.samples(rng)
-        s = self.scores(w, l_samples, rows)
-        best = int(np.argmax(s))
-        return Selection(LanguageQuery(int(rows[best])), float(s[best]), self.name, len(rows))
+        star = self.space.phi[self.pool].mean(axis=0)
+        return language_candidates(rows, self.scores(w, l_samples, rows), self.space.phi[rows], star)
 
 
 # ---- comparisons ----------------------------------------------------------------------------------------------
@@ -300,14 +324,14 @@ class ComparisonActive(Selector):
             s = 1.0 - mean**2 - (1.0 - mean) ** 2
         return i, j, s
 
-    def select(self, learner: RewardLearner, rng: np.random.Generator) -> Selection:
-        from langpref.feedback.comparison import ComparisonQuery
-
-        rows = candidate_rows(self.pool, self.candidates, rng)
-        xi = laplace_posterior(learner).sample(self.samples, rng)
+    def scored(self, xi: np.ndarray, rows: np.ndarray) -> Scored:
+        """Every pair of `rows` scored from the draws `xi`."""
         i, j, s = self.scores(xi, rows)
-        best = int(np.argmax(s))
-        return Selection(ComparisonQuery(int(rows[i[best]]), int(rows[j[best]])), float(s[best]), self.name, len(s))
+        return comparison_candidates(rows, i, j, s, self.space.phi[rows])
+
+    def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
+        rows = candidate_rows(self.pool, self.candidates, rng)
+        return self.scored(laplace_posterior(learner).sample(self.samples, rng), rows)
 
 
 def make_selector(

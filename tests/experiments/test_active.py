@@ -1,0 +1,61 @@
+"""`langpref experiment active` with the mixed learner: its arm beside the single kinds, curves and areas over
+modelled seconds up to the time every run reaches, and paired intervals per query and per second."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from langpref.experiments.active import MIXED, per_second, run_seconds
+from langpref.reward import LearnRewardConfig, RewardConfig
+
+torch.set_num_threads(1)
+
+
+def test_per_second_areas_reach_the_common_horizon_and_fall_back_to_one_kind():
+    methods = {"a": LearnRewardConfig(feedback="language"), "b": LearnRewardConfig(feedback="comparison")}
+    runs = {
+        "a/0/0": {"cross_entropy": [0.7, 0.5, 0.4], "true_reward_of_best": [0.0, 1.0, 1.0]},  # recorded without times
+        "b/0/0": {
+            "cross_entropy": [0.7, 0.6, 0.3],
+            "true_reward_of_best": [0.0, 0.0, 1.0],
+            "seconds": [0.0, 1.0, 2.0],
+            "kinds": ["comparison", "comparison"],
+        },
+    }
+    assert run_seconds(runs["a/0/0"], "language", methods["a"].costs) == pytest.approx([0.0, 0.887, 1.774])
+    timed = per_second(runs, methods, ["0/0"])
+    assert timed["horizon"] == pytest.approx(1.774)  # two language queries; comparisons would take 2
+    a, b = timed["methods"]["a"], timed["methods"]["b"]
+    assert a["auc_true_reward"] == pytest.approx((1.774 - 0.887) / 1.774)
+    assert b["auc_true_reward"] == pytest.approx(0.0)  # its second answer comes after the horizon
+    assert a["seconds_for_q"] == pytest.approx(1.774) and b["seconds_for_q"] == 2.0
+    assert len(a["true_reward_of_best"]) == len(timed["grid"]) and a["true_reward_of_best"][-1] == 1.0
+
+
+def test_active_experiment_reports_the_mixed_arm_per_query_and_per_second(tmp_path, make_synthetic_dataset):
+    from langpref.experiments.active import run_active_experiment
+
+    data = make_synthetic_dataset(tmp_path / "d", n=40)
+    cfg = LearnRewardConfig(queries=3, candidates=8, reward=RewardConfig(num_negatives=3, max_iter=20))
+    res = run_active_experiment(
+        "metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=2, seeds=1, progress=False
+    )
+    mixed = res["methods"][MIXED]
+    assert len(mixed["cross_entropy"]) == len(mixed["true_reward_of_best"]) == 4
+    assert mixed["config"]["feedback"] == "mixed" and len(mixed["kinds_asked"]) == 2
+    assert 0.0 <= res["language_share"][MIXED] <= 1.0 and res["language_share"]["language-random"] == 1.0
+    timed = res["per_second"]
+    assert timed["horizon"] == pytest.approx(min(m["seconds_for_q"] for m in timed["methods"].values()))
+    assert timed["methods"]["comparison-random"]["seconds_for_q"] == pytest.approx(3.0)
+    assert timed["methods"]["language-random"]["seconds_for_q"] == pytest.approx(3 * 0.887)
+    for name in (f"{MIXED} - language-infogain", f"{MIXED} - comparison-infogain"):
+        c = res["contrasts"][name]
+        assert c["auc_true_reward_per_second"]["low"] <= c["auc_true_reward_per_second"]["mean"]
+    assert np.isfinite(res["per_run_auc_per_second"][MIXED]).all()
+    md = (tmp_path / "a" / "active.md").read_text()
+    assert "Over the person's time" in md and "AUC best per second" in md and f"| {MIXED} |" in md
+    assert json.loads((tmp_path / "a" / "active.json").read_text())["costs"] == {"language": 0.887, "comparison": 1.0}
