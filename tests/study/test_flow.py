@@ -20,6 +20,7 @@ from langpref.study.flow import (
     parse_answer,
     progress,
 )
+from langpref.study.queries import Chosen
 from langpref.study.surveys import SURVEYS, validate_answers
 
 
@@ -32,7 +33,7 @@ class ScriptedRobot:
     def start_trajectory(self, p):
         return 0
 
-    def improve(self, p, shown, text):
+    def improve(self, p, shown, text, round_):
         return shown + 1, {"feature": "speed", "direction": "increase", "confidence": 0.9}
 
     def learn(self, p, method, number, answer):
@@ -40,7 +41,8 @@ class ScriptedRobot:
         return {"feature": "speed", "direction": "increase", "confidence": 0.9} if method == "language" else None
 
     def query(self, p, method, number):
-        return (100 + number,) if method == "language" else (100 + number, 200 + number)
+        shown = (100 + number,) if method == "language" else (100 + number, 200 + number)
+        return Chosen(shown, "random", None, 300)
 
     def best(self, p, method):
         return 7

@@ -259,3 +259,18 @@ def test_every_command_runs_on_the_recorded_task(recorded_data, recorded_model, 
             "1",
         )
         assert len(reward["cross_entropy"]) == 4 and len(reward["true_reward_of_best"]) == 4
+
+
+def test_generated_candidates_need_a_simulator_one_line_before_the_model_loads(recorded_data, h, tmp_path):
+    from langpref.errors import LangprefError
+    from langpref.study.serve import build_state
+
+    cfg = replace(
+        h.serve_config(tmp_path / "gen.sqlite", improve_candidates="generated"),
+        model=str(tmp_path / "no-model-here"),  # never read: the task is checked first
+        data=str(recorded_data),
+    )
+    with pytest.raises(LangprefError, match="'tiny-colours' is recorded") as err:
+        build_state(cfg, progress=False)
+    assert "\n" not in str(err.value)
+    assert not (tmp_path / "gen.sqlite").exists()

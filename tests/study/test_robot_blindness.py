@@ -39,7 +39,7 @@ def test_the_study_robot_is_blind_to_the_true_features(engine):
         human = kind.make_human(
             w, engine.space, engine.study, HumanConfig(phrasing_split="train"), np.random.default_rng(0)
         )
-        answers[method] = [human.answer(kind.query(*robot.query(p, method, n))) for n in range(1, 6)]
+        answers[method] = [human.answer(kind.query(*robot.query(p, method, n).shown)) for n in range(1, 6)]
     runs = []
     for eng in (engine, _scrambled(engine)):
         assert eng is engine or not np.array_equal(eng.space.theta, engine.space.theta)
@@ -49,7 +49,7 @@ def test_the_study_robot_is_blind_to_the_true_features(engine):
         for method in ("language", "comparison"):
             for n, answer in enumerate(answers[method], start=1):
                 asked = (answer.query.shown,) if method == "language" else (answer.query.a, answer.query.b)
-                assert r.query(p, method, n) == asked
+                assert r.query(p, method, n).shown == asked
                 r.learn(p, method, n, answer)
                 history[method].append(answer)
             out[method] = (

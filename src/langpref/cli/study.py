@@ -17,11 +17,20 @@ from langpref.cli_config import command, config, emit, from_args, record
     [
         config(
             "langpref.study.config:ServeConfig",
-            {"study": None, "video": None, "on_show": {"metavar": "CMD"}, "on_show_timeout": {"metavar": "SECONDS"}},
+            {
+                "study": None,
+                "video": None,
+                "on_show": {"metavar": "CMD"},
+                "on_show_timeout": {"metavar": "SECONDS"},
+                "generated": {"metavar": "DIR"},
+            },
         ),
         config(
             "langpref.study.config:StudyConfig",
-            {"study.split": {"choices": (*SPLITS, "all")}},
+            {
+                "study.split": {"choices": (*SPLITS, "all")},
+                "study.improve_candidates": {"choices": ("split", "generated")},
+            },
             prefix="study.",
             unset=True,
         ),

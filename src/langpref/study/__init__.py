@@ -4,6 +4,8 @@ config.py    StudyConfig (the protocol, stored in the database), VideoConfig, Se
 surveys.py   Appendix B questionnaires and the task descriptions, as data
 flow.py      the participant's path as a state machine: (step, answer) -> next step
 engine.py    embedding feedback, improvement (Eq. 4), a reward learner per participant (Eq. 5-9 / Bradley-Terry)
+queries.py   which trajectories each Study-2 query shows (random, or an active strategy; `--query-selection`)
+generated.py Study 1's new trajectories made in the simulator, in the background (`--improve-candidates generated`)
 db.py        SQLite schema (WAL, versioned) and transactions
 videos.py    render cache with background pre-rendering
 app.py       the HTTP contract (DESIGN.md) and the pages

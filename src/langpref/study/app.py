@@ -44,6 +44,7 @@ from langpref.study.flow import (
     progress,
     questions,
 )
+from langpref.study.generated import Generator, NotReady
 from langpref.study.hook import ShowHook
 from langpref.study.surveys import METHOD_LABELS, SURVEY_TITLES, task_text
 from langpref.study.videos import VideoCache
@@ -101,8 +102,9 @@ def _no_constant(name: str):
 
 
 class StudyApp:
-    """Everything a request needs: the database path, the engine, the video cache, the admin token and the
-    `--on-show` hook (told of every step handed out; it never blocks a request)."""
+    """Everything a request needs: the database path, the engine, the video cache, the admin token, the
+    `--on-show` hook (told of every step handed out; it never blocks a request) and Study 1's generated candidates
+    (`--improve-candidates generated`)."""
 
     def __init__(
         self,
@@ -113,6 +115,7 @@ class StudyApp:
         cfg: StudyConfig | None = None,
         hook: ShowHook | None = None,
         allowed_origins: tuple[str, ...] = (),
+        generated: Generator | None = None,
     ):
         self.db_path = str(db_path)
         self.engine = engine
@@ -120,7 +123,8 @@ class StudyApp:
         self.videos = videos
         self.admin_token = admin_token
         self.hook = hook
-        self.robot = StudyRobot(engine, self._history)
+        self.generated = generated
+        self.robot = StudyRobot(engine, self._history, cfg=self.cfg, generated=generated)
         # answers of one participant run one at a time; a fixed set of locks (by hash of the id, taken only after
         # the token is checked) keeps memory bounded whatever ids unauthenticated requests send
         self._locks = [threading.Lock() for _ in range(LOCK_STRIPES)]
@@ -268,8 +272,7 @@ class StudyApp:
                 "UPDATE steps SET first_shown_at=? WHERE participant_id=? AND seq=? AND first_shown_at IS NULL",
                 (time.time(), pid, step.seq),
             )
-        if self.hook is not None:
-            self.hook.show(pid, step.seq, step.kind, step.shown)
+        self._show(pid, step)
         return self.step_json(step, prow["resume_code"], p)
 
     def answer(self, pid: str, token: str | None, body: bytes) -> dict[str, Any]:
@@ -284,9 +287,18 @@ class StudyApp:
                 raise HttpError(exc.status, str(exc)) from None
             if ans.kind == "language" and not self.engine.gate.score(ans.value.text).ok:
                 raise HttpError(400, NOT_FEEDBACK)
+            if self.generated is not None and step.phase == "improve":
+                try:
+                    for index in step.shown:  # an answer about a trajectory still being made is not taken yet
+                        self.generated.phi(index)
+                except NotReady as exc:
+                    raise HttpError(503, str(exc), {"Retry-After": str(VIDEO_RETRY_S)}) from None
             received = time.time()
             try:
                 tr = advance(self.cfg, p, step, ans, self.robot)
+            except NotReady as exc:
+                self.robot.forget(pid)
+                raise HttpError(503, str(exc), {"Retry-After": str(VIDEO_RETRY_S)}) from None
             except LangprefError as exc:
                 self.robot.forget(pid)
                 raise HttpError(400, str(exc)) from None
@@ -298,9 +310,16 @@ class StudyApp:
             except BaseException:
                 self.robot.forget(pid)
                 raise
-            if self.hook is not None:
-                self.hook.show(pid, tr.next.seq, tr.next.kind, tr.next.shown)
+            if self.generated is not None:
+                self.generated.after_answer(p, step.seq, tr.records)
+            self._show(pid, tr.next)
             return self.step_json(tr.next, prow["resume_code"], p)
+
+    def _show(self, pid: str, step: Step) -> None:
+        """Tell the `--on-show` hook of a step handed out (a generated trajectory is not in the dataset it knows)."""
+        if self.hook is not None:
+            shown = [i for i in step.shown if self.generated is None or not self.generated.owns(i)]
+            self.hook.show(pid, step.seq, step.kind, shown)
 
     def _store(self, conn, p: Participant, step: Step, row: dict, ans, data: dict, tr, received: float) -> None:
         shown_at = row["first_shown_at"] or row["created_at"]
@@ -343,6 +362,8 @@ class StudyApp:
                 "VALUES (?, ?, ?, ?, ?, ?, ?)",
                 (p.id, nxt.seq, nxt.phase, nxt.kind, nxt.payload(), now, now),
             )
+            if nxt.selection is not None:
+                sdb.add_query(conn, p.id, nxt, now)
             if nxt.phase == "done":
                 conn.execute("UPDATE participants SET finished_at=? WHERE id=?", (now, p.id))
 
@@ -587,12 +608,12 @@ def create_app(state: StudyApp) -> FastAPI:
         if index is None:
             raise HttpError(404, "no such video")
         status, info = state.videos.request(index)
-        if status == "pending" and state.video_waiters < MAX_VIDEO_WAITERS:
+        if status in ("pending", "generating") and state.video_waiters < MAX_VIDEO_WAITERS:
             state.video_waiters += 1
             try:
                 loop = asyncio.get_running_loop()
                 deadline = loop.time() + VIDEO_WAIT_S
-                while status == "pending" and loop.time() < deadline:
+                while status in ("pending", "generating") and loop.time() < deadline:
                     await asyncio.sleep(0.05)
                     status, info = state.videos.request(index)
             finally:
@@ -604,6 +625,13 @@ def create_app(state: StudyApp) -> FastAPI:
         retry = {"Retry-After": str(VIDEO_RETRY_S), "Cache-Control": "no-store"}
         if status == "failed":
             raise HttpError(503, f"the video could not be made ({info}); it is being tried again", retry)
+        if status == "generating":
+            raise HttpError(
+                503,
+                f"the robot is making a new trajectory in the simulator ({info} ahead of it); "
+                f"retry in {VIDEO_RETRY_S} s",
+                retry,
+            )
         raise HttpError(503, f"the video is being made ({info} ahead of it); retry in {VIDEO_RETRY_S} s", retry)
 
     # admin
@@ -633,6 +661,7 @@ def create_app(state: StudyApp) -> FastAPI:
             "rows": counts,
             "engine": state.engine.describe(),
             "hooks": state.hook.status() if state.hook else None,
+            "generated": state.generated.progress() if state.generated else None,
         }
 
     return app

@@ -58,9 +58,16 @@ def prepare(work: Path, num_trajectories: int) -> tuple[Path, Path]:
 
 
 def start_server(
-    model: Path, data: Path, db: Path, split: str, env: dict[str, str] | None = None, quiet: bool = False
+    model: Path,
+    data: Path,
+    db: Path,
+    split: str,
+    env: dict[str, str] | None = None,
+    quiet: bool = False,
+    extra: tuple[str, ...] = (),
 ) -> tuple[subprocess.Popen, str]:
-    """`langpref study serve` in a subprocess on a free port, once it answers /healthz: (process, base URL)."""
+    """`langpref study serve` in a subprocess on a free port, once it answers /healthz: (process, base URL); `extra`:
+    more options of `study serve`."""
     import httpx
 
     cmd = [
@@ -80,6 +87,7 @@ def start_server(
         "--split",
         split,
         "--no-prerender",
+        *extra,
     ]
     proc = subprocess.Popen(
         cmd,
@@ -107,11 +115,17 @@ def start_server(
 
 
 def run(
-    model: Path, data: Path, db: Path, split: str, participants: int, think_ms: tuple[float, float]
+    model: Path,
+    data: Path,
+    db: Path,
+    split: str,
+    participants: int,
+    think_ms: tuple[float, float],
+    query_selection: str = "random",
 ) -> dict[str, Any]:
     from langpref.study.simulate import SimConfig, simulate
 
-    proc, url = start_server(model, data, db, split)
+    proc, url = start_server(model, data, db, split, extra=("--query-selection", query_selection))
     try:
         return simulate(
             url, SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0), data_dir=data, split=split
@@ -142,6 +156,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--participants", type=int, default=20)
     p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
     p.add_argument("--no-burst", action="store_true", help="only the paced run")
+    p.add_argument(
+        "--query-selection",
+        default="random",
+        help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
+    )
     p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
     p.add_argument(
         "--export-out",
@@ -159,11 +178,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         work = Path(tmp)
         data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
         val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
-        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0))
+        sel = args.query_selection
+        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel)
         print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
         burst = None
         if not args.no_burst:
-            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0))
+            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel)
             print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
         exported = export(work / "paced.sqlite", args.export_out)
         summary = json.loads(Path(exported["summary"]).read_text())
@@ -181,7 +201,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         (
             f"Measured {today} with `python -m langpref.study.bench` on this machine ({os.cpu_count()} cores, no GPU): "
             f"{n} simulated participants at once run whole sessions of the paper's protocol against "
-            f"`langpref study serve` on loopback (server in its own process; {model_note}). Latency per answer as the "
+            f"`langpref study serve --query-selection {sel}` on loopback (server in its own process; {model_note}). "
+            "Latency per answer as the "
             "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
             "query) under 150 ms.\n"
         ),

@@ -11,6 +11,7 @@ from langpref.study.hook import parse_command
 
 METHODS = ("language", "comparison")
 VIDEO_FORMATS = ("webm", "mp4")
+IMPROVE_CANDIDATES = ("split", "generated")
 ADMIN_TOKEN_ENV = "LANGPREF_STUDY_ADMIN_TOKEN"
 
 
@@ -22,6 +23,14 @@ class StudyConfig:
     """Dataset split whose trajectories the study shows and searches (`train`, `val`, `test` or `all`)."""
     improve_max_iterations: int = 10
     """Study 1: most rounds of feedback before the improvement survey."""
+    improve_candidates: str = "split"
+    """Study 1: where an improvement step looks: `split` (the study set, the paper's) or `generated` (a new trajectory
+    made in the simulator for each feedback, `langpref.propose`; simulated tasks only; the page shows progress while
+    it is made)."""
+    improve_rollouts: int = 6
+    """Study 1 with generated candidates: real rollouts per improvement step, the best of which is shown."""
+    improve_search_generations: int = 30
+    """Study 1 with generated candidates: CMA-ES generations on the surrogate per improvement step."""
     pref_queries: int = 20
     """Study 2: queries per method."""
     rating_every: int = 5
@@ -30,14 +39,56 @@ class StudyConfig:
     """k, implicit-negative utterances per language answer in reward learning (Eq. 9)."""
     seed: int = 0
     """Seed of the study: with the participant's own seed it fixes every trajectory drawn for them."""
+    query_selection: str = "random"
+    """Study 2: how each query is chosen from the study set, from the participant's answers so far
+    (`langpref.feedback.selection`): `random` (the paper's), `infogain` (both methods), or one per method as
+    `language=lal-infogain,comparison=volume-removal` (language: random, infogain, lal-infogain; comparisons: random,
+    infogain, volume-removal; a method left out is random)."""
+    query_candidates: int = 60
+    """Study 2, active query selection: score at most this many trajectories of the study set per query (drawn for
+    each query; comparisons score every pair of them), which bounds the time an answer waits for the next query."""
 
     def validate(self) -> None:
         if self.split not in ("train", "val", "test", "all"):
             raise LangprefError(f"--split must be train, val, test or all, got {self.split!r}")
-        for name in ("improve_max_iterations", "pref_queries", "rating_every", "num_negatives"):
+        if self.improve_candidates not in IMPROVE_CANDIDATES:
+            raise LangprefError(
+                f"--improve-candidates must be {' or '.join(IMPROVE_CANDIDATES)}, got {self.improve_candidates!r}"
+            )
+        names = ("improve_max_iterations", "pref_queries", "rating_every", "num_negatives", "improve_rollouts")
+        for name in (*names, "improve_search_generations"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise LangprefError(f"{name} must be an integer >= 1, got {value!r}")
+        if not isinstance(self.query_candidates, int) or self.query_candidates < 2:
+            raise LangprefError(f"--query-candidates must be an integer >= 2, got {self.query_candidates!r}")
+        self.selections()
+
+    def selections(self) -> dict[str, str]:
+        """The query selection strategy of each Study-2 method, checked (one line naming the choices otherwise)."""
+        from langpref.feedback.selection import STRATEGIES, check_strategy
+
+        text = str(self.query_selection).strip()
+        if "=" not in text:
+            out = dict.fromkeys(METHODS, text)
+        else:
+            out = dict.fromkeys(METHODS, "random")
+            for item in filter(None, (x.strip() for x in text.split(","))):
+                method, _, strategy = (x.strip() for x in item.partition("="))
+                if method not in METHODS:
+                    raise LangprefError(
+                        f"--query-selection {text}: {method!r} is no Study-2 method; name "
+                        f"{' or '.join(METHODS)}, e.g. language=infogain,comparison=volume-removal"
+                    )
+                out[method] = strategy
+        for method, strategy in out.items():
+            try:
+                check_strategy(strategy, method)
+            except LangprefError as exc:
+                per_method = "=" not in text and strategy in STRATEGIES
+                hint = " (or give one per method: language=NAME,comparison=NAME)" if per_method else ""
+                raise LangprefError(f"--query-selection {text}: {exc}{hint}") from None
+        return out
 
     def rating_points(self) -> list[int]:
         """Query counts after which the best trajectory is rated: every `rating_every`, and the last query."""
@@ -93,6 +144,9 @@ class ServeConfig:
     """SQLite database; created on first start, continued on later ones."""
     videos: str | None = None
     """Video cache folder; default `DB.videos/` beside the database."""
+    generated: str | None = None
+    """Where Study 1 stores the trajectories it makes with `--improve-candidates generated` (a dataset); default
+    `DB.generated/` beside the database."""
     host: str = "127.0.0.1"
     """Address to listen on: 127.0.0.1 is this machine only; 0.0.0.0 opens the study to the network."""
     port: int = 8000
@@ -105,7 +159,7 @@ class ServeConfig:
     prerender: bool = True
     """Render every study video in the background at start (with progress), so that no participant waits."""
     torch_threads: int = 1
-    """Torch threads per request; requests of different participants run in parallel threads."""
+    """Torch (and numpy's BLAS) threads per request; requests of different participants run in parallel threads."""
     on_show: str | None = None
     """Command line run (without a shell) before each trajectory is shown, e.g. to replay it on the real robot;
     what to show comes in LANGPREF_* environment variables (see `langpref.study.hook`)."""

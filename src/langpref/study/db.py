@@ -19,6 +19,14 @@ session in any browser, `POST /api/participants/resume`) and `excluded`/`exclude
 left out of the analyses), and the table `participant_tokens`: further tokens of a participant, issued on resume
 (never exported).
 
+Schema 3 adds the table `queries`: every Study-2 query shown, with what it shows (`a`, and `b` for a comparison) and
+why: the query selection strategy, the shown query's score (None for `random`) and how many candidates were scored.
+A database of an earlier schema gets a row (strategy `random`) for each query it has shown: it had no other. It also
+adds `generated`: the trajectories Study 1 made in the simulator (`--improve-candidates generated`,
+`langpref.study.generated`): the id shown, the participant, the feedback (seq) and round it answers, the trajectory
+it improves (`shown`), where the search started (`start`, `start_score`: Eq. 4's objective), its own `score`, its
+index in the generated dataset, the step's wall time, its controller parameters and phi (JSON).
+
 The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
 killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
 against a killed process (a power cut may lose the last commits, never corrupt the file).
@@ -37,7 +45,7 @@ from typing import Any
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 _V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -148,8 +156,39 @@ CREATE TABLE participant_tokens (
 );
 """
 
+_V3 = """
+CREATE TABLE queries (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    a INTEGER NOT NULL,
+    b INTEGER,
+    strategy TEXT NOT NULL,
+    score REAL,
+    candidates INTEGER,
+    created_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+CREATE TABLE generated (
+    id INTEGER PRIMARY KEY,
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    round INTEGER NOT NULL,
+    shown INTEGER NOT NULL,
+    start INTEGER NOT NULL,
+    start_score REAL NOT NULL,
+    score REAL NOT NULL,
+    store_index INTEGER NOT NULL,
+    wall_s REAL NOT NULL,
+    unit TEXT NOT NULL,
+    phi TEXT NOT NULL,
+    created_at REAL NOT NULL
+);
+"""
+
 # schema version -> SQL taking the database from the previous version to it
-MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2}
+MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3}
 RESUME_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
 """Resume codes: no 0/O, 1/I/L, so that a code read aloud or copied by hand is typed right."""
 TABLES = (
@@ -162,6 +201,8 @@ TABLES = (
     "comparisons",
     "satisfaction",
     "ratings",
+    "queries",
+    "generated",
 )
 
 
@@ -226,6 +267,8 @@ def init_db(path: str | Path, meta: dict[str, Any]) -> dict[str, Any]:
                 conn.execute("INSERT OR REPLACE INTO meta VALUES ('schema_version', ?)", (str(v),))
             for (pid,) in conn.execute("SELECT id FROM participants WHERE resume_code IS NULL").fetchall():
                 conn.execute("UPDATE participants SET resume_code=? WHERE id=?", (new_resume_code(conn), pid))
+            if 0 < version < 3:
+                _backfill_queries(conn)
             if version == 0:
                 for key, value in meta.items():
                     conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value)))
@@ -233,6 +276,46 @@ def init_db(path: str | Path, meta: dict[str, Any]) -> dict[str, Any]:
         return read_meta(conn)
     finally:
         conn.close()
+
+
+def add_query(conn: sqlite3.Connection, participant_id: str, step: Any, created_at: float) -> None:
+    """The `queries` row of a Study-2 query step (`flow.Step` with a `selection`), in the caller's transaction."""
+    sel, shown = step.selection, list(step.shown)
+    conn.execute(
+        "INSERT INTO queries (participant_id, seq, method, number, a, b, strategy, score, candidates, created_at) "
+        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+        (
+            participant_id,
+            step.seq,
+            step.kind,
+            step.number,
+            shown[0],
+            shown[1] if len(shown) > 1 else None,
+            sel["strategy"],
+            sel.get("score"),
+            sel.get("candidates"),
+            created_at,
+        ),
+    )
+
+
+def _backfill_queries(conn: sqlite3.Connection) -> None:
+    """Rows of `queries` for the query steps of a database made before schema 3: all drawn at random."""
+    from langpref.study.config import METHODS
+
+    marks = ", ".join("?" * len(METHODS))
+    for r in conn.execute(
+        f"SELECT participant_id, seq, kind, payload, created_at FROM steps WHERE kind IN ({marks}) "
+        f"AND phase IN ({marks})",
+        (*METHODS, *(f"pref_{m}" for m in METHODS)),
+    ).fetchall():
+        p = json.loads(r["payload"])
+        shown, b = p["shown"], (p["shown"][1:] or [None])[0]
+        conn.execute(
+            "INSERT OR IGNORE INTO queries (participant_id, seq, method, number, a, b, strategy, score, candidates, "
+            "created_at) VALUES (?, ?, ?, ?, ?, ?, 'random', NULL, NULL, ?)",
+            (r["participant_id"], r["seq"], r["kind"], p["number"], shown[0], b, r["created_at"]),
+        )
 
 
 def new_resume_code(conn: sqlite3.Connection) -> str:

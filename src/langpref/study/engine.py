@@ -8,7 +8,8 @@
 - one reward learner per participant and method (`langpref.reward.RewardLearner`), fed by the method's feedback kind
   (`langpref.feedback.kind`: its `pairs`, explicit + implicit losses for language, Bradley-Terry for comparisons),
   refit after every answer;
-- which trajectories each query shows (random, as in the paper, fixed by the study and participant seeds).
+- which trajectories each query shows (`langpref.study.queries`: random, as in the paper, or an active strategy of
+  `langpref.feedback.selection` over the participant's learner; fixed by the study and participant seeds).
 
 The database is the only state that counts: a learner lost with a restart is rebuilt by replaying the participant's
 stored answers (`history`), with the same seeds, so it learns what it had learned.
@@ -21,7 +22,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +34,10 @@ from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.study.config import METHODS, StudyConfig
 from langpref.study.flow import Participant
+from langpref.study.queries import Chosen, QueryChooser
+
+if TYPE_CHECKING:
+    from langpref.study.generated import Generator
 
 History = Callable[[str, str], list[Any]]
 """(participant id, method) -> the participant's stored answers of that method, in order, as the kind's answers."""
@@ -150,15 +155,27 @@ class StudyEngine:
 
 
 class StudyRobot:
-    """The `flow.Robot` of a running study: per-participant reward learners over a shared `StudyEngine`."""
+    """The `flow.Robot` of a running study: per-participant reward learners over a shared `StudyEngine`. `cfg` is the
+    study's protocol (default the engine's): its seed and query selection; `generated`, Study 1's generated
+    candidates (`--improve-candidates generated`)."""
 
-    def __init__(self, engine: StudyEngine, history: History, max_cached: int = 512):
+    def __init__(
+        self,
+        engine: StudyEngine,
+        history: History,
+        max_cached: int = 512,
+        cfg: StudyConfig | None = None,
+        generated: Generator | None = None,
+    ):
         self.engine = engine
-        self.cfg = engine.cfg
+        self.generated = generated
+        self.cfg = cfg or engine.cfg
         self.history = history
         self.max_cached = max_cached
-        self._learners: OrderedDict[tuple[str, str], tuple[RewardLearner, int]] = OrderedDict()
+        # (participant, method) -> (learner, answers it has seen, those answers)
+        self._learners: OrderedDict[tuple[str, str], tuple[RewardLearner, int, tuple]] = OrderedDict()
         self._lock = threading.Lock()
+        self.chooser = QueryChooser(engine.space, engine.study, self.cfg, engine.reward_cfg)
 
     # ---- which trajectories are shown (fixed by the seeds) ----
 
@@ -169,19 +186,26 @@ class StudyRobot:
         """Study 1 starts from a random trajectory that fails the task (any, if none fails)."""
         return int(self._rng(p, 0).choice(self.engine.failed))
 
-    def query(self, p: Participant, method: str, number: int) -> tuple[int, ...]:
-        """What query `number` (1-based) of `method` shows. One trajectory (language): one pass over the study set in
-        a random order, then another; several (comparison): distinct ones drawn afresh for every query."""
-        study, shows = self.engine.study, get_kind(method).shows
-        if shows == 1:
-            cycle, pos = divmod(number - 1, len(study))
-            return (int(self._rng(p, 1, cycle).permutation(study)[pos]),)
-        return tuple(int(i) for i in self._rng(p, 2, number).choice(study, size=shows, replace=False))
+    def query(self, p: Participant, method: str, number: int) -> Chosen:
+        """What query `number` (1-based) of `method` shows, and why (`langpref.study.queries`); an active strategy
+        reads the learner that has seen the first `number - 1` answers."""
+        return self.chooser.choose(
+            method,
+            number,
+            lambda *keys: self._rng(p, *keys),
+            lambda: self._learner(p, method, number - 1),
+            lambda: self._answers(p, method, number - 1),
+        )
 
     # ---- Study 1 ----
 
-    def improve(self, p: Participant, shown: int, text: str) -> tuple[int, dict[str, Any]]:
-        return self.engine.improve(shown, text), self.engine.understand(text)
+    def improve(self, p: Participant, shown: int, text: str, round_: int) -> tuple[int, dict[str, Any]]:
+        """Round `round_` of Study 1: Eq. 4 over the study set, or (generated candidates) the id of the trajectory
+        the simulator will make for it (`langpref.study.generated`; NotReady while `shown` is being made)."""
+        if self.generated is None:
+            return self.engine.improve(shown, text), self.engine.understand(text)
+        self.generated.phi(shown)
+        return self.generated.id_for(p, round_), self.engine.understand(text)
 
     # ---- Study 2: reward learning ----
 
@@ -201,7 +225,7 @@ class StudyRobot:
         learner.add(pairs)
 
     def _learner(self, p: Participant, method: str, answered: int) -> RewardLearner:
-        """The learner of (participant, method) that has seen the first `answered` stored answers."""
+        """The learner of (participant, method) that has seen the first `answered` stored answers (kept)."""
         key = (p.id, method)
         with self._lock:
             hit = self._learners.get(key)
@@ -214,11 +238,21 @@ class StudyRobot:
         for i, answer in enumerate(past, start=1):
             self._add(learner, p, method, i, answer)
         learner.fit()
+        self._keep(p, method, learner, past)
         return learner
 
-    def _keep(self, p: Participant, method: str, learner: RewardLearner, answered: int) -> None:
+    def _answers(self, p: Participant, method: str, answered: int) -> list[Any]:
+        """The first `answered` answers of (participant, method): those the kept learner has seen (the last may not
+        be stored yet: the next query is chosen before its answer is), else the stored ones."""
         with self._lock:
-            self._learners[(p.id, method)] = (learner, answered)
+            hit = self._learners.get((p.id, method))
+        if hit is not None and hit[1] == answered:
+            return list(hit[2])
+        return self.history(p.id, method)[:answered]
+
+    def _keep(self, p: Participant, method: str, learner: RewardLearner, past: list[Any]) -> None:
+        with self._lock:
+            self._learners[(p.id, method)] = (learner, len(past), tuple(past))
             self._learners.move_to_end((p.id, method))
             while len(self._learners) > self.max_cached:
                 self._learners.popitem(last=False)
@@ -226,9 +260,10 @@ class StudyRobot:
     def learn(self, p: Participant, method: str, number: int, answer: Any) -> dict[str, Any] | None:
         """Refit the learner of `method` with answer `number`; how the model read it, for language (else None)."""
         learner = self._learner(p, method, number - 1)
+        past = self._answers(p, method, number - 1)
         self._add(learner, p, method, number, answer)
         learner.fit()
-        self._keep(p, method, learner, number)
+        self._keep(p, method, learner, [*past, answer])
         return self.engine.understand(answer.text) if isinstance(answer, LanguageAnswer) else None
 
     def best(self, p: Participant, method: str) -> int:

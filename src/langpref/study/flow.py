@@ -20,12 +20,15 @@ import json
 import math
 import re
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 from langpref.study.config import METHODS, StudyConfig
 from langpref.study.surveys import SURVEYS, validate_answers
+
+if TYPE_CHECKING:
+    from langpref.study.queries import Chosen
 
 PHASES = ("pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey", "done")
 KINDS = ("survey", "language", "comparison", "satisfaction", "rating", "done")
@@ -60,7 +63,8 @@ class Participant:
 @dataclass(frozen=True)
 class Step:
     """One screen. `number`: Study 1 rounds of feedback given so far; Study 2 the query number (1-based), or for a
-    rating the queries it follows. `extra` is shown as is (e.g. how the last feedback was understood)."""
+    rating the queries it follows. `extra` is shown as is (e.g. how the last feedback was understood); `selection`
+    (Study-2 queries: strategy, score, candidates scored) is stored, never shown."""
 
     seq: int
     phase: str
@@ -69,11 +73,13 @@ class Step:
     survey: str | None = None
     number: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
+    selection: dict[str, Any] | None = None
 
     def payload(self) -> str:
-        return json.dumps(
-            {"shown": list(self.shown), "survey": self.survey, "number": self.number, "extra": self.extra}
-        )
+        out = {"shown": list(self.shown), "survey": self.survey, "number": self.number, "extra": self.extra}
+        if self.selection is not None:
+            out["selection"] = self.selection
+        return json.dumps(out)
 
     @classmethod
     def from_row(cls, row: dict[str, Any]) -> Step:
@@ -86,6 +92,7 @@ class Step:
             p["survey"],
             int(p["number"]),
             p.get("extra") or {},
+            p.get("selection"),
         )
 
     @property
@@ -128,10 +135,12 @@ class Robot(Protocol):
 
     def start_trajectory(self, p: Participant) -> int: ...
 
-    def improve(self, p: Participant, shown: int, text: str) -> tuple[int, dict[str, Any]]: ...
+    def improve(self, p: Participant, shown: int, text: str, round_: int) -> tuple[int, dict[str, Any]]:
+        """Round `round_` (1-based) of Study 1: the trajectory shown next, and how the feedback was read."""
 
-    def query(self, p: Participant, method: str, number: int) -> tuple[int, ...]:
-        """The trajectories query `number` (1-based) of a Study-2 method shows."""
+    def query(self, p: Participant, method: str, number: int) -> Chosen:
+        """What query `number` (1-based) of a Study-2 method shows, and why; asked before answer `number - 1` is
+        stored, right after `learn` has taken it."""
 
     def learn(self, p: Participant, method: str, number: int, answer: Any) -> dict[str, Any] | None:
         """Learn from answer `number` of `method`; how the robot read it (language), or None."""
@@ -235,7 +244,8 @@ class Transition:
 
 def _query(p: Participant, robot: Robot, seq: int, method: str, q: int) -> Step:
     """Query number `q` (1-based) of a Study-2 method; the kind of step is the method's name."""
-    return Step(seq, f"pref_{method}", method, tuple(robot.query(p, method, q)), number=q)
+    chosen = robot.query(p, method, q)
+    return Step(seq, f"pref_{method}", method, chosen.shown, number=q, selection=chosen.record())
 
 
 def _pref_start(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, method: str) -> Step:
@@ -278,7 +288,7 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
         shown = step.shown[0]
         if step.kind == "language":
             text = answer.value.text
-            improved, understood = robot.improve(p, shown, text)
+            improved, understood = robot.improve(p, shown, text, step.number + 1)
             row = {
                 "phase": "improve",
                 "number": step.number + 1,

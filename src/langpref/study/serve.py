@@ -24,6 +24,7 @@ from langpref.study import db as sdb
 from langpref.study.app import StudyApp, create_app
 from langpref.study.config import ServeConfig, StudyConfig
 from langpref.study.engine import StudyEngine
+from langpref.study.generated import Generator, check_generation
 from langpref.study.hook import ShowHook
 from langpref.study.videos import VideoCache
 
@@ -66,9 +67,13 @@ def resolve_study_config(db_path: str | Path, overrides: dict[str, Any]) -> Stud
 def build_state(
     cfg: ServeConfig, engine: StudyEngine | None = None, progress: bool = True, admin_token: str | None = None
 ) -> StudyApp:
-    """Engine, database (created or checked), video cache and `--on-show` hook of a study."""
+    """Engine, database (created or checked), video cache, `--on-show` hook and (`--improve-candidates generated`)
+    Study 1's generated candidates of a study."""
     cfg.validate()
     check_db_path(cfg.db)
+    generating = cfg.study.improve_candidates == "generated"
+    if generating:
+        check_generation(cfg.data)  # before the model is loaded: a recorded task fails in a second
     engine = engine or StudyEngine.load(cfg.model, cfg.data, cfg.study)
     model_dir, data_dir = Path(cfg.model).resolve(), Path(cfg.data).resolve()
     meta = {
@@ -82,7 +87,8 @@ def build_state(
         "langpref_version": __version__,
     }
     stored = sdb.init_db(cfg.db, meta)
-    if stored.get("study") != cfg.study.to_dict():
+    # a protocol stored before an option existed has that option's default (what the study then did)
+    if StudyConfig.from_dict(stored.get("study") or {}).to_dict() != cfg.study.to_dict() or "study" not in stored:
         raise LangprefError(
             f"{cfg.db} holds a study with protocol {stored.get('study')}; pass a new --db for another protocol"
         )
@@ -93,9 +99,16 @@ def build_state(
                 f"that {what} again, or a new --db for a new study"
             )
     videos = VideoCache(cfg.data, cfg.videos or f"{cfg.db}.videos", cfg.video, engine.study, progress=progress)
+    generated = None
+    if generating:
+        store = cfg.generated or f"{cfg.db}.generated"
+        generated = Generator(engine, cfg.study, cfg.db, store, cfg.model, cfg.data)
+        videos.attach(generated)
     hook = ShowHook(cfg.on_show, engine.dataset, cfg.on_show_timeout) if cfg.on_show else None
     token = admin_token or cfg.resolve_admin_token() or secrets.token_urlsafe(24)
-    return StudyApp(cfg.db, engine, videos, token, cfg.study, hook=hook, allowed_origins=cfg.allowed_origins)
+    return StudyApp(
+        cfg.db, engine, videos, token, cfg.study, hook=hook, allowed_origins=cfg.allowed_origins, generated=generated
+    )
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -135,6 +148,18 @@ class _Stopped(BaseException):
 
 def _on_sigterm(signum, frame) -> None:
     raise _Stopped
+
+
+def limit_blas_threads(threads: int) -> bool:
+    """Hold numpy's and scipy's BLAS to `threads` threads, as torch is: requests run in parallel threads, and a BLAS
+    spinning threads of its own in each made choosing an active query 10-20x slower on 2 busy cores (p95 8 -> 160
+    ms). Needs `threadpoolctl` (there with scikit-learn); False, and BLAS as it was, without it."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return False
+    threadpool_limits(limits=threads)
+    return True
 
 
 def check_db_path(db: str | Path) -> None:
@@ -186,6 +211,7 @@ def serve(cfg: ServeConfig) -> None:
         import torch
 
         torch.set_num_threads(max(1, cfg.torch_threads))
+        limit_blas_threads(max(1, cfg.torch_threads))
         state = build_state(cfg, admin_token=admin_token)
         host, port = sock.getsockname()[:2]
         shown = f"[{host}]" if ":" in host else host
@@ -197,6 +223,12 @@ def serve(cfg: ServeConfig) -> None:
         )
         if state.hook is not None:
             print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
+        if state.generated is not None:
+            print(
+                f"study 1: new trajectories made in the simulator, stored in {state.generated.store.root}",
+                file=sys.stderr,
+            )
+            state.generated.start()
         print(f"participants: {url}/", flush=True)
         print(
             f"admin:        {url}/admin   token: {state.admin_token if admin_token is None else '(as given)'}",
@@ -208,6 +240,8 @@ def serve(cfg: ServeConfig) -> None:
         print("stopped (SIGTERM)", file=sys.stderr, flush=True)
     finally:
         if state is not None:
+            if state.generated is not None:
+                state.generated.close()
             state.videos.close()
             if state.hook is not None:
                 state.hook.close()

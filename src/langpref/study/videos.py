@@ -9,6 +9,11 @@ its env between trajectories. At start every study trajectory is queued (`preren
 its turn goes to the front of the queue (`request`); no server thread waits for it: the app answers 503 with
 Retry-After, or waits asynchronously for a short while (`langpref.study.app`). The worker exits by itself when the
 server process dies (it watches its parent), and `close` kills it rather than waiting for a render to finish.
+
+Study 1 with generated candidates (`langpref.study.generated`, `attach`): a generated trajectory's video is named
+`gen000123-<tag>.webm` (the tag also hashes the folder of the generated dataset, so a video folder shared by two
+studies never mixes their generated trajectories); until the trajectory is made, `request` says `generating`, then
+it is rendered from the generated dataset like any other.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from langpref.errors import LangprefError
 from langpref.study.config import VideoConfig
 
 MEDIA_TYPES = {"webm": "video/webm", "mp4": "video/mp4"}
-_NAME = re.compile(r"^traj(\d{6})-([0-9a-f]{10})\.(webm|mp4)$")
+_NAME = re.compile(r"^(traj|gen)(\d{6})-([0-9a-f]{10})\.(webm|mp4)$")
 
 # ---- the worker process ----------------------------------------------------------------------------------------
 
@@ -71,13 +76,18 @@ def _worker_init(parent: int | None = None) -> None:
         pass
 
 
-def make_video(data_dir: str, index: int, out: str, width: int, height: int, fps: int, stride: int) -> str:
+def make_video(
+    data_dir: str, index: int, out: str, width: int, height: int, fps: int, stride: int, reload: bool = False
+) -> str:
     """Write the video of trajectory `index` into `out` (runs in the worker process): a recorded dataset's own video
-    (the render settings do not apply), else a replay of the stored states (the env is kept for the next one)."""
+    (the render settings do not apply), else a replay of the stored states (the env is kept for the next one).
+    `reload`: read the dataset's metadata again (a generated dataset grows)."""
     from langpref.dataset.render import recorded_video, replay_video
 
     if data_dir not in _WORKER_STATE:
         _WORKER_STATE[data_dir] = (load_dataset(data_dir), None)
+    elif reload:
+        _WORKER_STATE[data_dir] = (load_dataset(data_dir), _WORKER_STATE[data_dir][1])
     ds, env = _WORKER_STATE[data_dir]
     if ds.meta.videos:
         return str(recorded_video(ds, index, Path(out)))
@@ -120,9 +130,23 @@ class VideoCache:
         self._stopped = False
         self._rendering: int | None = None
         self._active = False  # a render thread is running (changed only under `_cond`)
+        self.generated = None  # langpref.study.generated.Generator, with `attach`
+        self.gen_tag = ""
+
+    def attach(self, generated) -> None:
+        """Serve the trajectories of a `langpref.study.generated.Generator` too; each is rendered once it is made."""
+        self.generated = generated
+        ident = {"tag": self.tag, "store": str(Path(generated.store.root).resolve())}
+        self.gen_tag = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:10]
+        generated.on_made = self.request
+
+    def _is_generated(self, index: int) -> bool:
+        return self.generated is not None and self.generated.owns(index)
 
     # names and paths
     def name(self, index: int) -> str:
+        if self._is_generated(index):
+            return f"gen{int(index):06d}-{self.gen_tag}.{self.cfg.format}"
         return f"traj{int(index):06d}-{self.tag}.{self.cfg.format}"
 
     def url(self, index: int) -> str:
@@ -134,10 +158,13 @@ class VideoCache:
     def index_of(self, name: str) -> int | None:
         """The study trajectory a video name stands for; None for anything else (other tags, `../`, unknown)."""
         m = _NAME.match(name)
-        if not m or m.group(2) != self.tag or m.group(3) != self.cfg.format:
+        if not m or m.group(4) != self.cfg.format:
             return None
-        index = int(m.group(1))
-        if index not in self._allowed:
+        index = int(m.group(2))
+        if m.group(1) == "gen":
+            if m.group(3) != self.gen_tag or not self._is_generated(index) or not self.generated.known(index):
+                return None
+        elif m.group(3) != self.tag or index not in self._allowed:
             return None
         path = (self.dir / name).resolve()
         return index if path.parent == self.dir else None
@@ -216,10 +243,15 @@ class VideoCache:
                             initializer=_worker_init,
                             initargs=(os.getpid(),),
                         )
-                    c = self.cfg
-                    self._pool.submit(
-                        make_video, self.data_dir, index, str(self.path(index)), c.width, c.height, c.fps, c.stride
-                    ).result()
+                    c, source, row = self.cfg, self.data_dir, index
+                    if self._is_generated(index):
+                        made, row = self.generated.status(index)
+                        if made != "ready":
+                            raise LangprefError(f"generated trajectory {index} is not made yet ({made})")
+                        source = str(Path(self.generated.store.root).resolve())
+                    out = str(self.path(index))
+                    gen = source != self.data_dir
+                    self._pool.submit(make_video, source, row, out, c.width, c.height, c.fps, c.stride, gen).result()
                     self._errors.pop(index, None)
                 except Exception as exc:  # noqa: BLE001 (reported per video, the server keeps running)
                     self._errors[index] = f"{type(exc).__name__}: {exc}"[:300]
@@ -243,10 +275,15 @@ class VideoCache:
 
     def request(self, index: int) -> tuple[str, Any]:
         """Ask for the video of `index` without waiting: `("ready", path)`, `("pending", videos ahead of it)` (it is
-        now at the front of the queue) or `("failed", message)` (the last try failed; asking again retries it)."""
+        now at the front of the queue) or `("failed", message)` (the last try failed; asking again retries it); a
+        generated trajectory not made yet: `("generating", trajectories ahead of it)`, or `("failed", message)`."""
         path = self.path(index)
         if path.is_file():
             return "ready", path
+        if self._is_generated(index):
+            status, info = self.generated.status(index)
+            if status != "ready":
+                return ("failed", info) if status == "failed" else ("generating", info or 0)
         with self._cond:
             if index in self._errors and index not in self._urgent and self._rendering != index:
                 message = self._errors.pop(index)

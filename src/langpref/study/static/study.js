@@ -88,7 +88,8 @@ function setHeader(step) {
   bar.value = step.kind === "done" ? bar.max : p.done;
 }
 
-// A video that is not made yet is answered 503 (Retry-After): the figure says it is being prepared and asks again.
+// A video that is not made yet is answered 503 (Retry-After): the figure says it is being prepared (or, in Study 1
+// with generated candidates, that the robot is making the trajectory) and asks again.
 async function whenVideoFails(v, url, status) {
   if (!document.body.contains(v)) return;
   let wait = 2;
@@ -99,7 +100,9 @@ async function whenVideoFails(v, url, status) {
     wait = parseInt(res.headers.get("Retry-After") || "2", 10) || 2;
     const data = await res.json().catch(() => ({}));
     const ahead = /\((\d+) ahead/.exec(data.error || "");
-    if (ahead && ahead[1] !== "0") text = `Preparing the video (${ahead[1]} before it)\u2026`;
+    const making = /new trajectory/.test(data.error || "");  // Study 1 with trajectories made in the simulator
+    const what = making ? "The robot is making a new trajectory in the simulator" : "Preparing the video";
+    text = what + (ahead && ahead[1] !== "0" ? ` (${ahead[1]} before it)` : "") + "\u2026";
   } catch (e) { text = "Waiting for the connection\u2026"; }
   status.textContent = text;
   setTimeout(() => { if (document.body.contains(v)) { v.src = url; v.load(); } }, wait * 1000);

@@ -1,0 +1,110 @@
+"""Study 1 with generated candidates (`--improve-candidates generated`): each improvement step makes a new trajectory
+in the simulator in the background (tiny search budget here), the page's video asks again (503, Retry-After) until
+it is made and rendered, the trajectory is stored as a dataset with its row in the database, and a restarted server
+makes the one it had not finished and serves the ones it had."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+
+from langpref.errors import LangprefError
+from langpref.study import db as sdb
+from langpref.study.app import create_app
+from langpref.study.config import StudyConfig
+from langpref.study.serve import build_state
+
+GENERATED = {"improve_candidates": "generated", "improve_rollouts": 2, "improve_search_generations": 3}
+
+
+def _post(client, pid, headers, body):
+    return client.post(f"/api/participants/{pid}/answer", json=body, headers=headers)
+
+
+def _video(client, url: str, timeout: float = 120.0) -> bytes:
+    """The video at `url`, asking again while it is answered 503 (as the page does)."""
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        r = client.get(url)
+        if r.status_code == 200:
+            return r.content
+        assert r.status_code == 503 and r.headers["Retry-After"], r.text
+        time.sleep(0.5)
+    raise AssertionError(f"{url} was not made within {timeout} s")
+
+
+def _close(state) -> None:
+    state.generated.close()
+    state.videos.close()
+
+
+def test_study_1_shows_trajectories_made_in_the_simulator_and_a_restart_continues(engine, h, tmp_path):
+    from langpref.dataset.storage import load_dataset
+
+    db = tmp_path / "gen.sqlite"
+    n = len(engine.dataset)
+    state = build_state(h.serve_config(db, **GENERATED), engine=engine, progress=False)
+    try:
+        with TestClient(create_app(state)) as client:
+            pid, headers = h.join(client)
+            step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
+            step = _post(client, pid, headers, h.answer_for(step)).json()
+            assert (step["phase"], step["kind"]) == ("improve", "language")
+            start = step["videos"][0]
+            t0 = time.time()
+            step = _post(client, pid, headers, h.answer_for(step, "Move faster.")).json()
+            assert time.time() - t0 < 5  # the answer does not wait for the simulator
+            assert step["kind"] == "satisfaction" and step["previous_video"] == start and not step["unchanged"]
+            new = step["videos"][0]
+            assert new.startswith("/videos/gen") and new != start
+            # the worker is still starting: the video and an answer about it are "come back later", nothing stored
+            r = client.get(new)
+            assert r.status_code == 503 and "new trajectory" in r.json()["error"] and r.headers["Retry-After"]
+            r = _post(client, pid, headers, h.answer_for(step))
+            assert r.status_code == 503 and r.headers["Retry-After"]
+            assert _video(client, new)[:4] == b"\x1a\x45\xdf\xa3"  # webm (EBML)
+            conn = sdb.connect(db)
+            made = sdb.rows(conn, "SELECT * FROM generated")
+            improved = conn.execute("SELECT improved FROM feedback WHERE phase='improve'").fetchone()[0]
+            conn.close()
+            assert len(made) == 1 and made[0]["id"] == improved == n and made[0]["round"] == 1
+            assert made[0]["store_index"] == 0 and isinstance(made[0]["score"], float)
+            step = _post(client, pid, headers, h.answer_for(step)).json()  # not satisfied: another round
+            assert step["kind"] == "language" and step["videos"] == [new]
+            step = _post(client, pid, headers, h.answer_for(step, "Go up more.")).json()
+            second = step["videos"][0]
+            assert step["kind"] == "satisfaction" and step["previous_video"] == new and second != new
+    finally:
+        _close(state)  # stopped before the second trajectory is made
+    assert sdb.rows(sdb.connect(db), "SELECT count(*) AS n FROM generated")[0]["n"] == 1
+
+    state = build_state(h.serve_config(db, **GENERATED), engine=engine, progress=False)  # a new server process
+    try:
+        with TestClient(create_app(state)) as client:
+            step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
+            assert step["videos"] == [second] and step["previous_video"] == new
+            assert client.get(new).status_code == 200  # made before the restart: its video is kept
+            _video(client, second)
+            step = _post(client, pid, headers, {"satisfied": True, "seq": step["seq"]}).json()
+            assert step["kind"] == "survey"
+    finally:
+        _close(state)
+    conn = sdb.connect(db)
+    made = sdb.rows(conn, "SELECT id, round, shown, store_index FROM generated ORDER BY id")
+    conn.close()
+    assert made == [
+        {"id": n, "round": 1, "shown": made[0]["shown"], "store_index": 0},
+        {"id": n + 1, "round": 2, "shown": n, "store_index": 1},
+    ]
+    store = load_dataset(f"{db}.generated")
+    assert len(store) == 2 and store.split("generated") == [0, 1]
+    params = store.load(1).controller_params
+    assert params["round"] == 2 and params["study_id"] == n + 1 and len(params["unit"]) > 0
+
+
+def test_improve_candidates_are_checked_in_one_line():
+    with pytest.raises(LangprefError, match="--improve-candidates must be split or generated") as err:
+        StudyConfig(improve_candidates="test").validate()
+    assert "\n" not in str(err.value)
