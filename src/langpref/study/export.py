@@ -296,10 +296,9 @@ def _bar_err(ax, x, stats_list, label=None, width=0.8, offset=0.0, color=None):
 
 
 def figures(summary: dict[str, Any], out: Path) -> dict[str, str]:
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the study's figures")
 
     colors = {"language": "#1f77b4", "comparison": "#ff7f0e"}
     made = {}
