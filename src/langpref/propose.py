@@ -111,10 +111,11 @@ class Surrogate:
 
 
 def model_embedder(model) -> Embedder:
-    """phi of a rollout from a trained `LatentModel`'s trajectory encoder (as `encode_dataset` embeds the dataset)."""
+    """phi of a rollout from a trained `LatentModel`'s trajectory encoder (as `encode_dataset` embeds the dataset; a
+    model that sees images renders the rollout's frames from its simulator states)."""
 
     def embed(traj) -> np.ndarray:
-        phi = model.encode_trajectories(traj.observations[None], traj.actions[None])
+        phi = model.encode_rollouts([traj])
         return phi.detach().cpu().numpy().astype(np.float64)[0]
 
     return embed

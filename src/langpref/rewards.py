@@ -48,6 +48,12 @@ def save_learned_reward(
         )
     model = Path(model).resolve()
     cfg = read_config(model)
+    seen = cfg["model"].get("observations") or "state"  # None or absent: a state model
+    if seen != "state":
+        raise LangprefError(
+            f"--save-reward: the model in {model} sees camera frames ({seen}); the Gymnasium "
+            "wrapper rebuilds phi from the state alone, so only a state model's reward can be saved"
+        )
     params = [p.detach().cpu().numpy().astype(np.float64).tolist() for p in learner.params]
     doc = {
         "format": FORMAT,

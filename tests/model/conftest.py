@@ -2,6 +2,9 @@
 
 Each trajectory wanders around its own random level per observation dimension; the three features are the means of
 observation dimensions 0, 1, 2, so a per-step MLP averaged over time can learn them exactly.
+
+`make_image_dataset` is the toy task of the image encoder: the answer is only in the pixels (a coloured square's
+position and brightness in 32x32 frames), the observations and actions are noise.
 """
 
 from __future__ import annotations
@@ -71,6 +74,69 @@ def make_dataset(
     )
     write_meta(root, meta, np.array(feats))
     return root
+
+
+def square_frame(x: float, y: float, red: float, size: int = 32, side: int = 6) -> np.ndarray:
+    """A black frame with a square of `side` pixels whose corner is at (x, y) in [0, 1] of the free range, its red
+    channel `red` in [0, 1] (green and blue fixed)."""
+    frame = np.zeros((size, size, 3), np.uint8)
+    free = size - side
+    col, row = int(round(x * free)), int(round(y * free))
+    frame[row : row + side, col : col + side] = (int(80 + 175 * red), 200, 60)
+    return frame
+
+
+def make_image_dataset(
+    root: Path, *, n: int = 24, horizon: int = 8, stride: int = 2, size: int = 32, seed: int = 0
+) -> Path:
+    """A dataset with frames whose features are only in the pixels: per step, the square's row (`height`), its
+    brightness (`speed`) and its column (`distance_to_button`) of the frame the step is shown; observations and
+    actions are noise."""
+    from langpref.dataset.frames import FrameSpec, save_frames
+
+    rng = np.random.default_rng(seed)
+    spec = FrameSpec(width=size, height=size, stride=stride, source="render")
+    feats = []
+    for i in range(n):
+        level = rng.uniform(0.1, 0.9, size=3)
+        kept = range(0, horizon, stride)
+        values = np.clip(level + 0.05 * rng.standard_normal((len(kept), 3)), 0, 1)
+        save_frames(root, i, np.stack([square_frame(x, y, r, size) for y, r, x in values]))
+        step_features = values[np.arange(horizon) // stride]
+        traj = Trajectory(
+            index=i,
+            observations=rng.standard_normal((horizon, 4)).astype(np.float32),
+            actions=rng.standard_normal((horizon, 2)).astype(np.float32),
+            step_features=step_features,
+            qpos=None,
+            qvel=None,
+            success=False,
+            seed=None,
+        )
+        save_trajectory(root, traj)
+        feats.append(traj.features)
+    n_train, n_val = int(n * 0.625), (n - int(n * 0.625)) // 2
+    meta = DatasetMeta(
+        env="metaworld",
+        horizon=horizon,
+        obs_layout=[{"name": "noise", "start": 0, "stop": 4}],
+        action_dim=2,
+        feature_names=MW_FEATURES,
+        splits={
+            "train": list(range(n_train)),
+            "val": list(range(n_train, n_train + n_val)),
+            "test": list(range(n_train + n_val, n)),
+        },
+        num_trajectories=n,
+        frames=spec.to_dict(),
+    )
+    write_meta(root, meta, np.array(feats))
+    return root
+
+
+@pytest.fixture(scope="session")
+def image_data(tmp_path_factory) -> Path:
+    return make_image_dataset(tmp_path_factory.mktemp("data") / "squares")
 
 
 @pytest.fixture(scope="session")

@@ -15,7 +15,12 @@ from langpref.errors import LangprefError
     "roll out scripted policies in the simulator and store a trajectory dataset",
     [
         config(
-            "langpref.dataset.generate:GenerateConfig", {"env": {"metavar": "TASK"}, "backend": {"choices": BACKENDS}}
+            "langpref.dataset.generate:GenerateConfig",
+            {
+                "env": {"metavar": "TASK"},
+                "backend": {"choices": BACKENDS},
+                "frames.frame_size": {"metavar": "WIDTH,HEIGHT"},
+            },
         ),
         JSON,
     ],
@@ -44,7 +49,11 @@ def cmd_generate(args: argparse.Namespace) -> None:
     [
         config(
             "langpref.dataset.importer:ImportConfig",
-            {"src": {"positional": True}, "splits": {"metavar": "TRAIN,VAL,TEST"}},
+            {
+                "src": {"positional": True},
+                "splits": {"metavar": "TRAIN,VAL,TEST"},
+                "frames.frame_size": {"metavar": "WIDTH,HEIGHT"},
+            },
         ),
         JSON,
     ],

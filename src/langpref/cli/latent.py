@@ -16,7 +16,7 @@ from langpref.cli_config import beside, command, config, emit, from_args, opt, p
     [
         config(
             "langpref.model.config:TrainConfig",
-            {
+            lambda: {
                 "model.lang_model": {"metavar": "NAME_OR_PATH"},
                 "device": {"choices": ("auto", "cpu", "cuda")},
                 "stage1_epochs": "--epochs",
@@ -29,6 +29,8 @@ from langpref.cli_config import beside, command, config, emit, from_args, opt, p
                 "stage2_lr": "--finetune-lr",
                 "stage2_lm_lr": "--lm-lr",
                 "model.traj_hidden": {"metavar": "H1,H2,..."},
+                "model.observations": {"choices": importlib.import_module("langpref.model.config").OBSERVATIONS},
+                "model.frame_channels": {"metavar": "C1,C2,..."},
             },
         ),
         JSON,
@@ -209,3 +211,20 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
     summary = run_alignment_experiment(args.env, args.data, args.out, force=args.force)
     record(args, Path(args.out) / "alignment.config.json")
     emit(summary, args.json, lambda s: alignment_table([s]) + f"\n(wrote {args.out}/alignment.md and alignment.json)")
+
+
+@command(
+    "experiment observations",
+    "issue 19: state vs camera images vs both as the trajectory encoder's input",
+    [config("langpref.experiments.observations:ObservationsConfig", {"env": {"metavar": "TASK"}}), JSON],
+    "Trains one model per observation kind (state, images, images+state) on a dataset with frames (made with "
+    "`generate --images` when missing), each in a fresh process, and writes observations.md/.json with test "
+    "(and --heldout) accuracy, per-feature accuracy, training time, peak memory and a latent-space figure per model.",
+)
+def cmd_experiment_observations(args: argparse.Namespace) -> None:
+    from langpref.experiments.observations import ObservationsConfig, observations_table, run_observations_experiment
+
+    cfg = from_args(ObservationsConfig, args).resolved()
+    summary = run_observations_experiment(cfg)
+    record(args, Path(str(cfg.out)) / "observations.config.json", cfg)
+    emit(summary, args.json, lambda s: observations_table(s) + f"\n(wrote {cfg.out}/observations.md and .json)")

@@ -15,7 +15,7 @@ import json
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from langpref.backends import run_jobs
+from langpref.dataset.frames import FrameOptions, FrameSpec, load_frames, render_trajectory_frames, save_frames
 from langpref.dataset.storage import (
     DatasetMeta,
     Trajectory,
@@ -58,6 +59,12 @@ class GenerateConfig:
     'langpref[ray]')."""
     ray_address: str | None = None
     """With --backend ray: a running cluster to join (e.g. auto or HOST:6379); default a local instance."""
+    frames: FrameOptions = field(default_factory=FrameOptions)
+    """Camera frames (--images, --frame-size, --frame-stride), rendered from each trajectory's simulator states."""
+
+    @property
+    def frame_spec(self) -> FrameSpec | None:
+        return self.frames.spec("render")
 
     def resolved(self) -> GenerateConfig:
         sim = get_simulator(self.env)
@@ -71,7 +78,9 @@ class GenerateConfig:
             force=self.force,
             backend=self.backend,
             ray_address=self.ray_address,
+            frames=self.frames,
         )
+        self.frames.validate()
         if cfg.num_trajectories < 3:
             raise LangprefError("--num-trajectories must be at least 3 (one per split)")
         if cfg.horizon < 2:
@@ -81,8 +90,18 @@ class GenerateConfig:
         return cfg
 
     def identity(self) -> dict[str, Any]:
-        """What fixes the dataset's content (not where or how fast it is made)."""
-        return {"env": self.env, "num_trajectories": self.num_trajectories, "horizon": self.horizon, "seed": self.seed}
+        """What fixes the dataset's content (not where or how fast it is made); frames only when there are some,
+        so a dataset without them is stamped as before."""
+        out: dict[str, Any] = {
+            "env": self.env,
+            "num_trajectories": self.num_trajectories,
+            "horizon": self.horizon,
+            "seed": self.seed,
+        }
+        spec = self.frame_spec
+        if spec is not None:
+            out["frames"] = spec.to_dict()
+        return out
 
 
 def split_sizes(env: str, n: int) -> dict[str, int]:
@@ -151,10 +170,14 @@ def make_worker_env(env_name: str, horizon: int) -> tuple[Any, Any]:
     return task, get_simulator(env_name).make_env(horizon)
 
 
-def _rollout_job(state: tuple[Task, Any], job: tuple[int, np.ndarray, int, int]) -> Trajectory:
+def _rollout_job(
+    state: tuple[Task, Any], job: tuple[int, np.ndarray, int, int, FrameSpec | None]
+) -> tuple[Trajectory, np.ndarray | None]:
+    """One rollout, and its camera frames when the dataset keeps them (replayed after it, in the same env)."""
     task, env = state
-    index, unit, traj_seed, horizon = job
-    return rollout(env, task, unit, traj_seed, horizon, index)
+    index, unit, traj_seed, horizon, spec = job
+    traj = rollout(env, task, unit, traj_seed, horizon, index)
+    return traj, None if spec is None else render_trajectory_frames(env, traj, spec)
 
 
 def _prepare_out(cfg: GenerateConfig) -> None:
@@ -190,6 +213,8 @@ def _finished(cfg: GenerateConfig, index: int) -> tuple[np.ndarray, bool] | None
     )
     try:
         traj = load_trajectory(cfg.out, index, meta)
+        if cfg.frame_spec is not None:
+            load_frames(cfg.out, index, cfg.frame_spec, cfg.horizon)
     except LangprefError:
         return None
     return traj.features, traj.success
@@ -208,7 +233,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
     for i in range(n):
         done = _finished(cfg, i)
         if done is None:
-            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon))
+            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon, cfg.frame_spec))
         else:
             features[i], success[i] = done
     start = time.time()
@@ -223,7 +248,9 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
         ray_address=cfg.ray_address,
         chunk=4,
     )
-    for traj in results:
+    for traj, frames in results:
+        if frames is not None:  # frames first: a trajectory file without its frames would pass for finished
+            save_frames(cfg.out, traj.index, frames)
         save_trajectory(cfg.out, traj)  # one file per trajectory, written as it arrives: a rerun skips it
         features[traj.index], success[traj.index] = traj.features, traj.success
         bar.update(1)
@@ -246,6 +273,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
             "backend": cfg.backend,
             "success_rate": float(success.mean()),
         },
+        frames=None if cfg.frame_spec is None else cfg.frame_spec.to_dict(),
     )
     write_meta(cfg.out, meta, features)
     return {
@@ -258,4 +286,5 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
         "workers": cfg.workers,
         "backend": cfg.backend,
         "steps_per_s": len(jobs) * cfg.horizon / wall if jobs else None,
+        **({} if cfg.frame_spec is None else {"frames": cfg.frame_spec.to_dict()}),
     }

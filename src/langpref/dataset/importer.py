@@ -3,7 +3,8 @@
 The recording brings observations, actions, and optionally features, success and a camera video per episode; the
 task file (`langpref.tasks.taskfile`) brings the task's name, features, text and bank. Features come from the task
 file's `features_from` function when it names one, else from the episodes' own `features`. Episodes may differ in
-length. Videos are copied when a browser plays them as they are, else cut and transcoded once, here.
+length. Videos are copied when a browser plays them as they are, else cut and transcoded once, here. With
+`--images`, small camera frames are decoded from every episode's video too (`langpref.dataset.frames`).
 
 Everything is written into a temporary folder beside `out` and renamed into place at the end, so a bad episode
 (one line naming its file and key) never leaves half a dataset.
@@ -14,13 +15,14 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
+from langpref.dataset.frames import FrameOptions, save_frames
 from langpref.dataset.recording import RecordedEpisode, plain_episode_files, read_plain_episode
 from langpref.dataset.storage import (
     DatasetMeta,
@@ -56,6 +58,8 @@ class ImportConfig:
     """LeRobotDataset: the video feature kept as each episode's video (default the first; '' for none)."""
     force: bool = False
     """Overwrite an existing dataset in `out`."""
+    frames: FrameOptions = field(default_factory=FrameOptions)
+    """Camera frames (--images, --frame-size, --frame-stride), decoded from every episode's video."""
 
 
 def is_lerobot(src: Path) -> bool:
@@ -142,6 +146,7 @@ def _prepare(cfg: ImportConfig) -> Path:
 def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """Import the recording `cfg.src` as a dataset of `task`, storing `bank` (split, checked) as its bank."""
     start = time.time()
+    spec = cfg.frames.spec("video")
     tmp = _prepare(cfg)
     try:
         layout, loaders = _episodes(cfg)
@@ -187,13 +192,21 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
                 f"episode {wheres[missing]} has no video while others have one; give every "
                 "episode its video (NAME.mp4 or NAME.webm) or none"
             )
+        if spec is not None and not all(with_video):
+            raise LangprefError(
+                f"--images takes each episode's camera frames from its video, and {wheres[0]} has none; give every "
+                "episode its video (NAME.mp4 or NAME.webm) or import without --images"
+            )
         if all(with_video):
-            from langpref.dataset.video import write_clip
+            from langpref.dataset.video import decode_frames, write_clip
 
             for i, clip in enumerate(
                 tqdm(videos, desc="videos", unit="video", disable=not progress, dynamic_ncols=True)
             ):
                 write_clip(clip, video_path(tmp, i))
+                if spec is not None:
+                    frames = decode_frames(clip, lengths[i], spec.stride, spec.width, spec.height)
+                    save_frames(tmp, i, frames)
         splits = shuffle_into_splits(n, counts, cfg.seed)
         task_obj = task.task(obs_dim, action_dim, tmp / "utterances.json")
         save_task(task_obj, tmp, bank)
@@ -217,6 +230,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
             },
             lengths=None if min(lengths) == horizon else lengths,
             videos=all(with_video),
+            frames=None if spec is None else spec.to_dict(),
         )
         write_meta(tmp, meta, features)
         out = Path(cfg.out)
@@ -236,6 +250,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         "horizon": horizon,
         "min_length": min(lengths),
         "videos": meta.videos,
+        "frames": meta.frames,
         "features_from": meta.config["features_from"],
         "wall_s": wall,
         "episodes_per_s": n / wall if wall > 0 else None,

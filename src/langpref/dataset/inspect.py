@@ -24,6 +24,7 @@ def describe(root: str | Path) -> dict[str, Any]:
         "obs_dim": ds.meta.obs_dim,
         "action_dim": ds.meta.action_dim,
         "splits": {name: len(idx) for name, idx in ds.meta.splits.items()},
+        "frames": ds.meta.frames,
         "success_rate": float(ds.success.mean()),
         "features": {
             name: {"min": float(col.min()), "max": float(col.max()), "mean": float(col.mean()), "std": float(col.std())}
@@ -37,11 +38,19 @@ def describe(root: str | Path) -> dict[str, Any]:
     }
 
 
+def _frames_line(frames: dict[str, Any] | None) -> str:
+    if not frames:
+        return "none"
+    where = "rendered in the simulator" if frames["source"] == "render" else "decoded from the recorded videos"
+    return f"{frames['width']}x{frames['height']}, every {frames['stride']} steps, {where}"
+
+
 def format_description(d: dict[str, Any]) -> str:
     lines = [
         f"{d['path']}: {d['env']} dataset, {d['num_trajectories']} trajectories x {d['horizon']} steps "
         f"(obs {d['obs_dim']}, action {d['action_dim']})",
         "splits: " + ", ".join(f"{k} {v}" for k, v in d["splits"].items()),
+        f"camera frames: {_frames_line(d.get('frames'))}",
         f"task success: {d['success_rate']:.1%}",
         f"{'feature':<20}{'min':>9}{'max':>9}{'mean':>9}{'std':>9}",
     ]

@@ -1,6 +1,6 @@
 """On-disk trajectory datasets: one compressed `.npz` per trajectory plus `meta.json` and a feature table.
 
-Layout of a dataset directory (schema 2):
+Layout of a dataset directory (schema 2; schema 3 when it holds camera frames):
 
     meta.json              schema version, task (`env`), horizon (the longest episode), per-trajectory lengths when
                            they differ, observation layout, feature names, splits, how it was made
@@ -9,9 +9,13 @@ Layout of a dataset directory (schema 2):
                              the trajectory was simulated: qpos (T, nq), qvel (T, nv), seed (), controller_params
                              (JSON string); when it was recorded: source (the recording's episode name)
     videos/000123.mp4      the recorded camera video of a trajectory (recorded datasets; simulated ones re-render)
+    frames/000123.npz      small camera frames of a trajectory, every k-th step (`generate --images`, `import
+                           --images`; see `langpref.dataset.frames`), read only by models that see images
     task.json, utterances.json   the task and its bank, for a recorded task (see `langpref.tasks.taskfile`)
 
-Schema-1 datasets (every trajectory simulated, all of one length) load unchanged. Every load checks what it reads
+Schema-1 datasets (every trajectory simulated, all of one length) load unchanged. A dataset with frames is written
+as schema 3, so an older langpref refuses it with its version message instead of misreading it; one without frames
+is written exactly as before (schema 2). Every load checks what it reads
 and fails with a one-line `LangprefError` saying what is wrong.
 """
 
@@ -26,12 +30,14 @@ from typing import Any
 
 import numpy as np
 
+from langpref.dataset.frames import FrameSpec, load_frames, stack_frames
 from langpref.errors import LangprefError
 from langpref.tasks import register_task
 from langpref.tasks.taskfile import load_stored_task
 
 SCHEMA_VERSION = 2
-READABLE_SCHEMAS = (1, 2)
+FRAMES_SCHEMA_VERSION = 3
+READABLE_SCHEMAS = (1, 2, 3)
 SPLITS = ("train", "val", "test")
 _ARRAYS = ("observations", "actions", "step_features")
 _STATE = ("qpos", "qvel")
@@ -78,6 +84,8 @@ class DatasetMeta:
     """Steps of each trajectory when they differ (recordings); None when every one has `horizon` steps."""
     videos: bool = False
     """Whether every trajectory has a recorded video under `videos/` (else videos are rendered from the state)."""
+    frames: dict[str, Any] | None = None
+    """The camera frames under `frames/` (`FrameSpec`: width, height, stride, source), None when it has none."""
 
     @property
     def obs_dim(self) -> int:
@@ -121,10 +129,16 @@ def save_trajectory(root: Path, traj: Trajectory) -> Path:
 
 
 def write_meta(root: Path, meta: DatasetMeta, features: np.ndarray) -> None:
+    """Write meta.json and features.npy; a dataset with frames as schema 3, one without exactly as before."""
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     np.save(root / "features.npy", features.astype(np.float64))
-    (root / "meta.json").write_text(json.dumps(asdict(meta), indent=2) + "\n")
+    raw = asdict(meta)
+    if meta.frames is None:
+        del raw["frames"]
+    else:
+        raw["schema_version"] = max(meta.schema_version, FRAMES_SCHEMA_VERSION)
+    (root / "meta.json").write_text(json.dumps(raw, indent=2) + "\n")
 
 
 def _read_meta(root: Path) -> DatasetMeta:
@@ -151,6 +165,8 @@ def _read_meta(root: Path) -> DatasetMeta:
         raise LangprefError(f"{path} is not a valid dataset description ({exc}); regenerate the dataset") from None
     if meta.lengths is not None and (len(meta.lengths) != meta.num_trajectories or max(meta.lengths) != meta.horizon):
         raise LangprefError(f"{path}: 'lengths' must give one length per trajectory, the longest equal to 'horizon'")
+    if meta.frames is not None:
+        FrameSpec.from_dict(meta.frames, str(path))
     return meta
 
 
@@ -191,7 +207,7 @@ class Dataset:
         float32. Shorter trajectories are padded to the horizon by repeating their last step: `lengths` says how
         many steps are real, and the encoder averages over those only."""
         trajs = self.trajectories(split)
-        return _stack([t.observations for t in trajs]), _stack([t.actions for t in trajs])
+        return stack_steps([t.observations for t in trajs]), stack_steps([t.actions for t in trajs])
 
     def lengths(self, split: str | None = None) -> np.ndarray | None:
         """Steps of each trajectory of a split, or None when they all have `horizon` steps."""
@@ -199,6 +215,23 @@ class Dataset:
             return None
         indices = range(len(self)) if split is None else self.split(split)
         return np.array([self.meta.lengths[i] for i in indices], dtype=np.int64)
+
+    @property
+    def frame_spec(self) -> FrameSpec | None:
+        """The camera frames this dataset holds (size, stride, source), or None when it has none."""
+        return None if self.meta.frames is None else FrameSpec.from_dict(self.meta.frames, str(self.root))
+
+    def frames(self, split: str | None = None) -> np.ndarray:
+        """Camera frames (N, K, height, width, 3) uint8 of a split (every trajectory when None), read from disk now;
+        shorter trajectories are padded with their last frame. Frame k shows step k * stride."""
+        spec = self.frame_spec
+        if spec is None:
+            raise LangprefError(
+                f"dataset {self.root} has no camera frames; make one with `langpref generate --images` or "
+                "`langpref import --images` (a recording with videos)"
+            )
+        indices = range(len(self)) if split is None else self.split(split)
+        return stack_frames([load_frames(self.root, i, spec, self.meta.length(i)) for i in indices])
 
     def video_path(self, index: int) -> Path | None:
         """The recorded video of a trajectory, or None when videos are rendered from the simulator state."""
@@ -209,7 +242,8 @@ class Dataset:
         return np.array([self.load(i).success for i in range(len(self))], dtype=bool)
 
 
-def _stack(arrays: list[np.ndarray]) -> np.ndarray:
+def stack_steps(arrays: list[np.ndarray]) -> np.ndarray:
+    """(N, T, d) float32 of per-step arrays (T_i, d), the shorter ones padded to the longest with their last step."""
     horizon = max(len(a) for a in arrays)
     return np.stack(
         [a if len(a) == horizon else np.concatenate([a, np.repeat(a[-1:], horizon - len(a), axis=0)]) for a in arrays]

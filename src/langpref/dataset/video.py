@@ -1,4 +1,5 @@
-"""Recorded camera videos: check that they decode, and cut an episode's span into a file a browser plays.
+"""Recorded camera videos: check that they decode, cut an episode's span into a file a browser plays, and take
+small camera frames from it for models that see images (`decode_frames`, used by `langpref import --images`).
 
 A recording's video may hold one episode or several back to back (LeRobotDataset v3 packs episodes into one mp4,
 often AV1, which not every browser plays). The study serves H.264 mp4 or VP8/VP9 webm, so `write_clip` copies a
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import av
 import av.error
+import numpy as np
 
 from langpref.errors import LangprefError
 
@@ -207,3 +209,29 @@ def write_clip(clip: VideoClip, dest: Path) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return dest
+
+
+def decode_frames(clip: VideoClip, steps: int, stride: int, width: int, height: int) -> np.ndarray:
+    """Frames (ceil(steps / stride), height, width, 3) uint8 of a recorded clip, one for every `stride`-th step of
+    its episode of `steps` steps, resized (area averaging; the aspect ratio is not kept).
+
+    The clip's F frames span the episode: step t shows frame floor(t * F / steps) (frame t when the camera
+    recorded once per step). Every frame is decoded and shrunk as it comes, so a long clip costs little memory.
+    """
+    path = Path(clip.path)
+    if not path.is_file():
+        raise LangprefError(f"{path}: video file not found")
+    codec, fps, _ = _probe(path)
+    frame_s = float(1 / fps) if fps else 0.0
+    small: list[np.ndarray] = []
+    try:
+        with av.open(str(path)) as container:
+            for frame in _clip_frames(container, clip, frame_s):
+                image = frame.reformat(width=width, height=height, format="rgb24", interpolation="AREA")
+                small.append(image.to_ndarray())
+    except (av.error.FFmpegError, OSError, ValueError) as exc:
+        raise LangprefError(f"{path}: video does not decode ({_one_line(exc)})") from exc
+    if not small:
+        raise LangprefError(f"{path}: no video frames to take the episode's camera frames from ({codec})")
+    kept = np.arange(0, steps, stride)
+    return np.stack([small[i] for i in (kept * len(small)) // steps]).astype(np.uint8)

@@ -1,11 +1,13 @@
 """A trained latent-space model on disk: one directory, self-describing, checked when loaded.
 
     MODEL/
-      config.json            format version, the full TrainConfig, the architecture, the language model's original
-                             name, the data it was trained on (env, features, observation layout, action size,
-                             dataset schema version, tie thresholds), normalisation stats, history, results, and
-                             the size and sha256 of every other file
-      encoders.safetensors   trajectory encoder (with its normalisation buffers), language head, meaning prototypes
+      config.json            format version, the full TrainConfig, the architecture (with what the trajectory
+                             encoder sees: state, images or images+state), the language model's original name, the
+                             data it was trained on (env, features, observation layout, action size, dataset schema
+                             version, tie thresholds, frame size and stride), normalisation stats, history,
+                             results, and the size and sha256 of every other file
+      encoders.safetensors   trajectory encoder (with its normalisation buffers and, seeing images, its frame CNN),
+                             language head, meaning prototypes
       language_model/        the fine-tuned transformer and its tokenizer (save_pretrained); absent when the
                              transformer was frozen, which then loads again from its original name
       training_curve.png     loss and accuracy per epoch (written by training)
@@ -30,7 +32,9 @@ from langpref.errors import LangprefError
 from langpref.language.transformer import load_transformer
 from langpref.model.config import ModelConfig
 from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, save_transformer, step_input_dim
+from langpref.model.inputs import numeric_dim, sees_images
 from langpref.model.latent import DataInfo, LatentModel
+from langpref.model.vision import ImageTrajectoryEncoder
 from langpref.tasks import register_task
 from langpref.tasks.taskfile import load_stored_task
 
@@ -42,17 +46,32 @@ CONFIG = "config.json"
 
 
 def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: str | None = None) -> LatentModel:
-    """A fresh model (random trajectory encoder and head, pretrained transformer from `lang_source` or the name)."""
+    """A fresh model (random trajectory encoder and head, pretrained transformer from `lang_source` or the name).
+    `model_cfg.observations` says what the trajectory encoder sees (None, from before the option: state)."""
     tokenizer, transformer = load_transformer(lang_source or model_cfg.lang_model)
-    deltas = model_cfg.observation_deltas
-    traj = TrajectoryEncoder(
-        step_input_dim(info.obs_dim, info.action_dim, deltas),
-        model_cfg.traj_hidden,
-        model_cfg.latent_dim,
-        mean,
-        std,
-        observation_deltas=deltas,
-    )
+    observations, deltas = model_cfg.observations or "state", model_cfg.observation_deltas
+    traj: TrajectoryEncoder | ImageTrajectoryEncoder
+    if not sees_images(observations):
+        traj = TrajectoryEncoder(
+            step_input_dim(info.obs_dim, info.action_dim, deltas),
+            model_cfg.traj_hidden,
+            model_cfg.latent_dim,
+            mean,
+            std,
+            observation_deltas=deltas,
+        )
+    else:
+        traj = ImageTrajectoryEncoder(
+            numeric_dim(observations, info.obs_dim, info.action_dim, deltas),
+            model_cfg.traj_hidden,
+            model_cfg.latent_dim,
+            observations,
+            model_cfg.frame_channels,
+            model_cfg.frame_features,
+            mean,
+            std,
+            observation_deltas=deltas,
+        )
     lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
     return LatentModel(traj, lang, info, model_cfg.lang_model)
 
@@ -113,6 +132,7 @@ def save_model(
             "model": {
                 **model_cfg.__dict__,
                 "traj_hidden": list(model_cfg.traj_hidden),
+                "frame_channels": list(model_cfg.frame_channels),
                 "lang_hidden": model.lang.hidden_size,
             },
             "lang_model": model.lang_model_name,
@@ -202,7 +222,10 @@ def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=Non
         mc = dict(cfg["model"])
         mc.pop("lang_hidden", None)
         mc.setdefault("observation_deltas", False)  # checkpoints from before the option: (observation, action)
+        mc.setdefault("observations", "state")  # checkpoints from before image observations
         mc["traj_hidden"] = tuple(mc["traj_hidden"])
+        if "frame_channels" in mc:
+            mc["frame_channels"] = tuple(mc["frame_channels"])
         model_cfg = ModelConfig(**mc)
         info = DataInfo(**cfg["data"])
     except (TypeError, KeyError) as exc:

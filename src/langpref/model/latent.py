@@ -2,8 +2,12 @@
 
 model = load_model("runs/mw")                   # langpref.model.checkpoint
 phi = model.encode_dataset(dataset, "test")     # (N, D) trajectory embeddings
+phi = model.encode_rollouts([traj])             # (1, D) of trajectories in memory (new rollouts)
 psi = model.encode_texts(["Move faster."])       # (1, D) language embeddings
 model.check_dataset(dataset)                    # LangprefError if env or observation layout differ
+
+A model that sees camera frames (`model.sees_images`) embeds a dataset's stored frames, and renders those of new
+simulated rollouts; every path goes through `encode_input` (see `langpref.model.inputs`).
 """
 
 from __future__ import annotations
@@ -18,7 +22,9 @@ from torch import nn
 
 from langpref.errors import LangprefError
 from langpref.language.pairs import DIRECTIONS
-from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, step_inputs
+from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder
+from langpref.model.inputs import EncoderInput, dataset_input, sees_images, trajectories_input
+from langpref.model.vision import ImageTrajectoryEncoder
 
 
 @dataclass
@@ -35,6 +41,8 @@ class DataInfo:
     tie_thresholds: list[float]
     """Absolute per-feature tie thresholds (tie_fraction * train std): evaluation uses the same ones."""
     feature_std: list[float] = field(default_factory=list)
+    frames: dict[str, Any] | None = None
+    """The dataset's camera frames (width, height, stride, source) for a model that sees images; else None."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -43,7 +51,13 @@ class DataInfo:
 class LatentModel(nn.Module):
     """Trajectory encoder + language encoder + the data facts; `prototypes` are the mean psi of each meaning."""
 
-    def __init__(self, traj: TrajectoryEncoder, lang: LanguageEncoder, info: DataInfo, lang_model_name: str):
+    def __init__(
+        self,
+        traj: TrajectoryEncoder | ImageTrajectoryEncoder,
+        lang: LanguageEncoder,
+        info: DataInfo,
+        lang_model_name: str,
+    ):
         super().__init__()
         self.traj = traj
         self.lang = lang
@@ -59,6 +73,15 @@ class LatentModel(nn.Module):
     @property
     def feature_names(self) -> list[str]:
         return list(self.info.feature_names)
+
+    @property
+    def observations(self) -> str:
+        """What the trajectory encoder sees: state, images or images+state."""
+        return self.traj.observations
+
+    @property
+    def sees_images(self) -> bool:
+        return sees_images(self.observations)
 
     @property
     def meanings(self) -> list[tuple[str, str]]:
@@ -86,37 +109,109 @@ class LatentModel(nn.Module):
                 f"action {meta.action_dim}) than the model was trained on (obs {self.info.obs_dim}, "
                 f"action {self.info.action_dim}); regenerate the data or retrain the model"
             )
+        if self.sees_images:
+            self._check_frames(dataset)
+
+    def _check_frames(self, dataset) -> None:
+        spec, want = dataset.frame_spec, self.info.frames or {}
+        if spec is None:
+            raise LangprefError(
+                f"the model sees camera frames (observations {self.observations}) and dataset {dataset.root} has "
+                "none; use a dataset made with `langpref generate --images` (or `import --images`) or a state model"
+            )
+        if (spec.width, spec.height) != (want.get("width"), want.get("height")):
+            raise LangprefError(
+                f"dataset {dataset.root} has {spec.width}x{spec.height} frames, the model was trained on "
+                f"{want.get('width')}x{want.get('height')}; regenerate the data with --frame-size "
+                f"{want.get('width')},{want.get('height')} or retrain the model"
+            )
 
     @torch.no_grad()
+    def encode_input(self, inp: EncoderInput, batch_size: int = 64) -> torch.Tensor:
+        """phi (N, D) of trajectories made into encoder input (`langpref.model.inputs`), `batch_size` at a time."""
+        was_training = self.training
+        self.eval()
+        out = [self._encode_rows(inp.rows(i, i + batch_size)) for i in range(0, len(inp), batch_size)]
+        self.train(was_training)
+        return torch.cat(out) if out else torch.zeros(0, self.prototypes.shape[1], device=self.device)
+
+    def _encode_rows(self, inp: EncoderInput) -> torch.Tensor:
+        lens = None if inp.lengths is None else torch.as_tensor(inp.lengths, device=self.device)
+        steps = torch.from_numpy(inp.steps).to(self.device)
+        if inp.frames is None:
+            return self.traj(steps, lens)
+        return self.traj(
+            steps,
+            lens,
+            frames=torch.from_numpy(inp.frames).to(self.device),
+            frame_index=torch.from_numpy(inp.frame_index).to(self.device),
+        )
+
     def encode_trajectories(
-        self, obs: np.ndarray, actions: np.ndarray, batch_size: int = 64, lengths: np.ndarray | None = None
+        self,
+        obs: np.ndarray,
+        actions: np.ndarray,
+        batch_size: int = 64,
+        lengths: np.ndarray | None = None,
+        frames: np.ndarray | list[np.ndarray] | None = None,
     ) -> torch.Tensor:
         """phi (N, D) of raw observations (N, T, obs_dim) and actions (N, T, A); with `lengths`, trajectory i has
-        lengths[i] real steps and padding after them (`Dataset.arrays`)."""
+        lengths[i] real steps and padding after them (`Dataset.arrays`). A model that sees images also needs the
+        trajectories' `frames` (N, K, h, w, 3), one every `info.frames["stride"]` steps."""
         if obs.shape[-1] != self.info.obs_dim or actions.shape[-1] != self.info.action_dim:
             raise LangprefError(
                 f"trajectories have obs {obs.shape[-1]} / action {actions.shape[-1]} dims, the model "
                 f"expects {self.info.obs_dim} / {self.info.action_dim}"
             )
-        was_training = self.training
-        self.eval()
-        steps = step_inputs(obs, actions, self.traj.observation_deltas)
-        lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
-        out = [
-            self.traj(
-                torch.from_numpy(steps[i : i + batch_size]).to(self.device),
-                None if lens is None else lens[i : i + batch_size],
-            )
-            for i in range(0, len(steps), batch_size)
-        ]
-        self.train(was_training)
-        return torch.cat(out) if out else torch.zeros(0, self.prototypes.shape[1], device=self.device)
+        want = self.info.frames or {}
+        stride = want.get("stride")
+        if frames is not None and self.sees_images:
+            shape = tuple(frames[0].shape[-3:-1]) if len(frames) else ()
+            if shape != (want.get("height"), want.get("width")):
+                raise LangprefError(
+                    f"frames of height x width {shape} given, the model was trained on "
+                    f"{want.get('height')} x {want.get('width')}"
+                )
+        inp = trajectories_input(
+            obs, actions, self.observations, self.traj.observation_deltas, lengths, frames, frame_stride=stride
+        )
+        return self.encode_input(inp, batch_size)
 
     def encode_dataset(self, dataset, split: str | None = None) -> torch.Tensor:
         """phi of the trajectories of one split (all of them when `split` is None), in dataset order."""
         self.check_dataset(dataset)
-        obs, act = dataset.arrays(split)
-        return self.encode_trajectories(obs, act, lengths=dataset.lengths(split))
+        return self.encode_input(dataset_input(dataset, split, self.observations, self.traj.observation_deltas))
+
+    def encode_rollouts(self, trajs: Sequence[Any], env: Any = None) -> torch.Tensor:
+        """phi (N, D) of `Trajectory` objects in memory (new rollouts, as `langpref improve` makes). A model that
+        sees images renders their frames from their simulator states, as `generate --images` does, in `env` (a live
+        env of the task, kept by the caller) or in one made and closed here."""
+        from langpref.dataset.storage import stack_steps
+
+        obs, act = stack_steps([t.observations for t in trajs]), stack_steps([t.actions for t in trajs])
+        lens = np.array([t.horizon for t in trajs])
+        lengths = None if (lens == obs.shape[1]).all() else lens
+        if not self.sees_images:
+            return self.encode_trajectories(obs, act, lengths=lengths)
+        return self.encode_trajectories(obs, act, lengths=lengths, frames=self._render(trajs, env))
+
+    def _render(self, trajs: Sequence[Any], env: Any) -> list[np.ndarray]:
+        from langpref.dataset.frames import FrameSpec, render_trajectory_frames
+        from langpref.tasks import make_env
+
+        spec = FrameSpec.from_dict(self.info.frames or {}, "the model's config.json")
+        if spec.source != "render":
+            raise LangprefError(
+                f"the model saw frames decoded from recorded videos ({self.info.env}); new trajectories need their "
+                "own frames: pass them to encode_trajectories(..., frames=...)"
+            )
+        own = env is None
+        env = make_env(self.info.env, max(t.horizon for t in trajs)) if own else env
+        try:
+            return [render_trajectory_frames(env, t, spec) for t in trajs]
+        finally:
+            if own:
+                env.close()
 
     @torch.no_grad()
     def encode_texts(self, texts: Sequence[str]) -> torch.Tensor:

@@ -13,6 +13,10 @@ validation and every later use take all steps), and, in stage 2, psi once per di
 dominates, so stage 2 draws a few phrasings per (feature, direction) group for each step (`stage2_phrasings_per_step`)
 and lets each pair pick among its group's; a pair's phrasing stays uniform over its group. Pairs themselves cost
 almost nothing, which is why stage 2 takes large batches of them.
+
+A model that sees camera frames (`ModelConfig.observations`, default images+state when the dataset has frames)
+trains the same way; its frame CNN runs on the frames of the sampled steps only (`image_time_samples` of them per
+trajectory, as its cost dominates), and the frames of the train and val splits are held on the device as uint8.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,9 +47,10 @@ from langpref.language.pairs import (
     tie_thresholds,
 )
 from langpref.model.checkpoint import build_model, save_model
-from langpref.model.config import TrainConfig
-from langpref.model.encoders import freeze, normalisation_stats, step_inputs
+from langpref.model.config import ModelConfig, TrainConfig
+from langpref.model.encoders import freeze, normalisation_stats
 from langpref.model.evaluate import alignment_counts
+from langpref.model.inputs import dataset_input, resolve_observations, sees_images
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import latent_loss
 from langpref.tasks.taskfile import stored_task_files
@@ -89,22 +94,39 @@ def load_phrasings(cfg: TrainConfig, env: str, feature_names: list[str]) -> tupl
 
 
 class _Split:
-    """One split on the device: raw encoder inputs (N, T, in_dim, see `step_inputs`), features, pairs."""
+    """One split on the device: raw encoder inputs (N, T, in_dim, see `langpref.model.inputs`), for a model that
+    sees images its frames (N, K, h, w, 3) uint8 and the frame of each step, features, pairs."""
 
-    def __init__(self, dataset, name: str, thresholds: np.ndarray, device: torch.device, observation_deltas: bool):
+    def __init__(self, dataset, name: str, thresholds: np.ndarray, device: torch.device, model_cfg: ModelConfig):
         idx = dataset.split(name)
         if len(idx) < 2:
             raise LangprefError(
                 f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
                 "least 2 in train and val"
             )
-        obs, act = dataset.arrays(name)
-        self.steps = torch.from_numpy(step_inputs(obs, act, observation_deltas)).to(device)
-        self.lengths = dataset.lengths(name)  # None: every trajectory has `horizon` steps
+        inp = dataset_input(dataset, name, model_cfg.observations, model_cfg.observation_deltas)
+        self.steps = torch.from_numpy(inp.steps).to(device)
+        self.lengths = inp.lengths  # None: every trajectory has `horizon` steps
+        self.frames = None if inp.frames is None else torch.from_numpy(inp.frames).to(device)
+        self.frame_index = None if inp.frame_index is None else torch.from_numpy(inp.frame_index).to(device)
         self.features = dataset.features[idx]
         self.pairs: Pairs = build_pairs(self.features, thresholds)
         if len(self.pairs) == 0:
             raise LangprefError(f"split {name!r} has no pair of trajectories whose features differ")
+
+    def frame_args(self, rows: torch.Tensor | None = None, t: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """The encoder's frame arguments for trajectories `rows` (all when None), at time steps `t` (n, k) when
+        given: then only the frames those steps are shown, so the CNN sees no frame it does not need. Empty for a
+        model that sees no images."""
+        if self.frames is None or self.frame_index is None:
+            return {}
+        if rows is None:
+            return {"frames": self.frames, "frame_index": self.frame_index}
+        if t is None:
+            return {"frames": self.frames[rows], "frame_index": self.frame_index[rows]}
+        shown = self.frame_index[rows.unsqueeze(1), t]
+        order = torch.arange(t.shape[1], device=t.device).expand_as(t)
+        return {"frames": self.frames[rows.unsqueeze(1), shown], "frame_index": order}
 
 
 def _own_params(model: LatentModel) -> list[torch.nn.Parameter]:
@@ -144,12 +166,14 @@ class Trainer:
         self.train_phr, self.val_phr = train_phr, val_phr
         self.rng = np.random.default_rng(cfg.seed)
         torch.manual_seed(cfg.seed)
+        # what the encoder sees, resolved against the dataset; the checkpoint records it
+        observations = resolve_observations(cfg.model.observations, meta.frames is not None, str(self.dataset.root))
+        self.cfg = cfg = replace(cfg, model=replace(cfg.model, observations=observations))
 
         train_idx = self.dataset.split("train")
         thresholds = tie_thresholds(self.dataset.features[train_idx], cfg.tie_fraction)
-        deltas = cfg.model.observation_deltas
-        self.train = _Split(self.dataset, "train", thresholds, self.device, deltas)
-        self.val = _Split(self.dataset, "val", thresholds, self.device, deltas)
+        self.train = _Split(self.dataset, "train", thresholds, self.device, cfg.model)
+        self.val = _Split(self.dataset, "val", thresholds, self.device, cfg.model)
         mean, std = normalisation_stats(self.train.steps.cpu().numpy(), self.train.lengths)
         info = DataInfo(
             env=meta.env,
@@ -161,11 +185,12 @@ class Trainer:
             schema_version=meta.schema_version,
             tie_thresholds=thresholds.tolist(),
             feature_std=self.dataset.features[train_idx].std(axis=0).tolist(),
+            frames=meta.frames if sees_images(observations) else None,
         )
         self.model = build_model(cfg.model, info, mean, std)
         torch.manual_seed(cfg.seed)  # whatever loading the transformer drew, the fresh layers start the same
         for m in [*self.model.traj.modules(), self.model.lang.head]:
-            if isinstance(m, torch.nn.Linear):
+            if isinstance(m, (torch.nn.Linear, torch.nn.Conv2d)):
                 m.reset_parameters()
         self.model.to(self.device)
         self.history: list[dict[str, Any]] = []
@@ -174,12 +199,18 @@ class Trainer:
 
     # ---- pieces shared by both stages ------------------------------------------------------------------------------
 
+    @property
+    def time_samples(self) -> int:
+        """Time steps per trajectory in a training step: fewer for a model that sees images (its CNN dominates)."""
+        cfg = self.cfg
+        return cfg.image_time_samples if sees_images(cfg.model.observations or "state") else cfg.time_samples
+
     def _time_index(self, n: int, horizon: int, lengths: np.ndarray | None = None) -> torch.Tensor | None:
         """Stratified time steps for a training step: one random step in each of `time_samples` equal segments of
         the horizon (of each trajectory's own length when they differ), drawn afresh per trajectory (None: every
         step). The mean of the per-step embeddings over them is an unbiased estimate of the mean over all steps, at
         a fraction of the cost; evaluation always uses all."""
-        k = self.cfg.time_samples
+        k = self.time_samples
         if k <= 0 or (k >= horizon and lengths is None):
             return None
         if lengths is None:
@@ -200,16 +231,16 @@ class Trainer:
         t = self._time_index(len(uniq), split.steps.shape[1], lengths)
         if t is None:
             lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
-            phi = self.model.traj(split.steps[rows], lens)
+            phi = self.model.traj(split.steps[rows], lens, **split.frame_args(rows))
         else:
-            phi = self.model.traj(split.steps[rows.unsqueeze(1), t])
+            phi = self.model.traj(split.steps[rows.unsqueeze(1), t], **split.frame_args(rows, t))
         inv_t = torch.as_tensor(inv, device=self.device)
         return phi[inv_t[: len(a)]], phi[inv_t[len(a) :]]
 
     @torch.no_grad()
     def _val_accuracy(self, pooled_val: torch.Tensor) -> float:
         lens = None if self.val.lengths is None else torch.as_tensor(self.val.lengths, device=self.device)
-        phi = self.model.traj(self.val.steps, lens).double().cpu()
+        phi = self.model.traj(self.val.steps, lens, **self.val.frame_args()).double().cpu()
         psi = self.model.lang.head(pooled_val).double().cpu()
         correct, total = alignment_counts(
             phi, psi, self.val.pairs, self.val_phr.group_ids, len(self.val_phr.feature_names)

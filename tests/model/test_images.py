@@ -1,0 +1,154 @@
+"""Models that see camera frames: the image encoder learns what only the pixels show, round-trips through a
+checkpoint, and refuses data without frames (or with other frames) in one line."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import make_image_dataset, tiny_config
+from langpref.dataset.storage import load_dataset
+from langpref.errors import LangprefError
+from langpref.model.checkpoint import load_model
+from langpref.model.evaluate import evaluate_split
+from langpref.model.inputs import dataset_input, resolve_observations
+from langpref.model.vision import ImageTrajectoryEncoder
+
+
+def _train(data, out, phrasings, observations):
+    from langpref.model.train import train
+
+    cfg = tiny_config(data, out, stage1_epochs=12, stage1_batch_size=128, freeze_language=True)
+    cfg.model.observations = observations
+    return train(cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False)
+
+
+@pytest.fixture(scope="module")
+def squares(tmp_path_factory):
+    return make_image_dataset(tmp_path_factory.mktemp("squares") / "data", n=48)
+
+
+@pytest.fixture(scope="module")
+def image_model(squares, phrasings, tmp_path_factory):
+    return _train(squares, tmp_path_factory.mktemp("image-model") / "m", phrasings, "images")
+
+
+def _one_line(exc: pytest.ExceptionInfo) -> str:
+    text = str(exc.value)
+    assert "\n" not in text
+    return text
+
+
+def test_the_image_encoder_learns_what_only_the_pixels_show(image_model, squares, phrasings, tmp_path):
+    """Where the square is and how red it is are the features; the observations are noise."""
+    history = image_model.history
+    assert history[-1]["loss"] < 0.7 * history[0]["loss"]
+    assert history[0]["val_acc"] < 0.6 and image_model.results["best_val_accuracy"] > 0.65
+    dataset = load_dataset(squares)
+    seen = evaluate_split(image_model.model, dataset, "test", phrasings[0])["accuracy"]
+    state = _train(squares, tmp_path / "state", phrasings, "state")  # the same data without the pixels: chance
+    blind = evaluate_split(state.model, dataset, "test", phrasings[0])["accuracy"]
+    assert state.results["best_val_accuracy"] < 0.6 and blind < 0.6
+    assert seen > 0.75 and seen > blind + 0.2  # measured: 0.86 and 0.40
+
+
+def test_an_image_checkpoint_round_trips(image_model, squares):
+    dataset = load_dataset(squares)
+    loaded = load_model(image_model.out, dataset=dataset)
+    assert loaded.observations == "images" and loaded.sees_images
+    assert torch.equal(loaded.encode_dataset(dataset, "test"), image_model.model.encode_dataset(dataset, "test"))
+    cfg = json.loads((image_model.out / "config.json").read_text())
+    assert cfg["model"]["observations"] == "images" and cfg["model"]["frame_channels"] == [16, 32, 32]
+    assert cfg["data"]["frames"] == {"width": 32, "height": 32, "stride": 2, "source": "render"}
+    assert cfg["data"]["schema_version"] == 3 and len(cfg["normalisation"]["mean"]) == 2  # the actions alone
+    obs, act = dataset.arrays("test")
+    frames = dataset.frames("test")
+    assert torch.equal(loaded.encode_trajectories(obs, act, frames=frames), loaded.encode_dataset(dataset, "test"))
+    with pytest.raises(LangprefError, match="sees camera frames") as info:
+        loaded.encode_trajectories(obs, act)
+    _one_line(info)
+    with pytest.raises(LangprefError, match=r"\(16, 16\) given, the model was trained on 32 x 32") as info:
+        loaded.encode_trajectories(obs, act, frames=frames[:, :, :16, :16])
+    _one_line(info)
+    with pytest.raises(LangprefError, match="K >= 4") as info:
+        loaded.encode_trajectories(obs, act, frames=frames[:, :2])
+    _one_line(info)
+
+
+def test_an_image_model_refuses_a_dataset_without_frames_or_with_other_frames(image_model, squares, tmp_path):
+    bare = tmp_path / "bare"
+    shutil.copytree(squares, bare)
+    meta = json.loads((bare / "meta.json").read_text())
+    del meta["frames"]
+    (bare / "meta.json").write_text(json.dumps({**meta, "schema_version": 2}))
+    with pytest.raises(LangprefError, match="has none") as info:
+        load_model(image_model.out, dataset=load_dataset(bare))
+    _one_line(info)
+    meta["frames"] = {"width": 16, "height": 16, "stride": 2, "source": "render"}
+    (bare / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(LangprefError, match="16x16 frames.*--frame-size 32,32") as info:
+        load_model(image_model.out, dataset=load_dataset(bare))
+    _one_line(info)
+
+
+def test_training_on_images_needs_frames_and_defaults_to_them(tiny_data, squares, phrasings, tmp_path):
+    with pytest.raises(LangprefError, match="needs camera frames") as info:
+        _train(tiny_data, tmp_path / "m", phrasings, "images+state")
+    _one_line(info)
+    assert not (tmp_path / "m").exists()
+    assert resolve_observations(None, True, "d") == "images+state" and resolve_observations(None, False, "d") == "state"
+    with pytest.raises(LangprefError, match="must be one of state, images, images\\+state"):
+        resolve_observations("pixels", True, "d")
+
+
+def test_padding_and_frame_sampling_do_not_change_phi(squares):
+    """A trajectory padded to a longer horizon embeds as its own steps; the training path that passes only the
+    frames of the sampled steps gives what indexing all frames gives."""
+    torch.manual_seed(0)
+    inp = dataset_input(load_dataset(squares), "train", "images+state", True)
+    enc = ImageTrajectoryEncoder(inp.steps.shape[-1], [16], 8, "images+state", (4, 8), 8, observation_deltas=True)
+    steps, frames = torch.from_numpy(inp.steps[:2]), torch.from_numpy(inp.frames[:2])
+    index = torch.from_numpy(inp.frame_index[:2])
+    short = enc(steps[:1, :5], None, frames[:1], index[:1, :5])
+    both = enc(steps, torch.tensor([5, 8]), frames, index)
+    torch.testing.assert_close(both[0], short[0])
+    t = torch.tensor([[0, 3, 6], [1, 2, 7]])
+    rows = torch.arange(2)
+    shown = index[rows.unsqueeze(1), t]
+    sampled = enc(steps[rows.unsqueeze(1), t], None, frames[rows.unsqueeze(1), shown], torch.arange(3).expand(2, 3))
+    torch.testing.assert_close(sampled, enc(steps[rows.unsqueeze(1), t], None, frames, shown))
+
+
+def test_frames_are_read_only_when_asked(squares):
+    dataset = load_dataset(squares)
+    assert dataset.frame_spec is not None and dataset.frame_spec.count(8) == 4
+    assert dataset.frames("val").shape == (len(dataset.split("val")), 4, 32, 32, 3)
+    assert dataset_input(dataset, "val", "state", True).frames is None
+    shown = dataset_input(dataset, "val", "images", True).frame_index[0]
+    np.testing.assert_array_equal(shown, [0, 0, 1, 1, 2, 2, 3, 3])
+
+
+def test_downstream_takes_a_model_of_generated_frames_as_a_state_model(tmp_path, phrasings):
+    """Meta-World with rendered frames: training defaults to images+state, and evaluation, the latent space of
+    reward learning and new rollouts (rendered as generation renders them) all take the image model."""
+    from langpref.dataset.frames import FrameOptions
+    from langpref.dataset.generate import GenerateConfig, generate
+    from langpref.feedback.space import load_space
+    from langpref.model.train import train
+
+    frames = FrameOptions(images=True, frame_size=(32, 32), frame_stride=5)
+    data = tmp_path / "mw"
+    generate(GenerateConfig(env="metaworld", out=data, num_trajectories=20, horizon=10, workers=1, frames=frames))
+    cfg = tiny_config(data, tmp_path / "m", stage1_epochs=2, freeze_language=True)
+    result = train(cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False)
+    model, dataset = result.model, load_dataset(data)
+    assert model.observations == "images+state"
+    assert 0 <= evaluate_split(model, dataset, "test", phrasings[0])["accuracy"] <= 1
+    space = load_space(data, result.out, env="metaworld")
+    np.testing.assert_allclose(space.phi, model.encode_dataset(dataset).double().numpy())
+    rollouts = [dataset.load(i) for i in dataset.split("test")]
+    torch.testing.assert_close(model.encode_rollouts(rollouts), model.encode_dataset(dataset, "test"))

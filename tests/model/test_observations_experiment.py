@@ -1,0 +1,31 @@
+"""`langpref experiment observations` on the toy dataset whose features are only in the pixels: one model per
+observation kind, trained in its own process, evaluated, tabled, and resumed from its cache."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from conftest import make_image_dataset, tiny_config
+from langpref.errors import LangprefError
+from langpref.experiments.observations import ObservationsConfig, run_observations_experiment
+
+
+def test_a_model_per_kind_with_time_and_memory(tmp_path):
+    """One kind only (each trains in a fresh process, which loads torch and the language model again)."""
+    data = make_image_dataset(tmp_path / "squares", n=24)
+    train_cfg = tiny_config(data, tmp_path / "unused", stage1_epochs=2, freeze_language=True)
+    cfg = ObservationsConfig(env="metaworld", data=str(data), out=str(tmp_path / "out"), kinds=("images",))
+    summary = run_observations_experiment(cfg, train_config=train_cfg)
+    run = summary["runs"]["images"]
+    assert 0 <= run["test"]["accuracy"] <= 1 and run["train"]["train_s"] > 0
+    assert run["train"]["peak_rss_mib"] > 100  # torch and the language model are in there
+    assert (tmp_path / "out" / "latent-images.png").is_file() and run["figure"].endswith("latent-images.png")
+    assert json.loads((tmp_path / "out" / "images" / "config.json").read_text())["model"]["observations"] == "images"
+    table = (tmp_path / "out" / "observations.md").read_text()
+    assert table.splitlines()[2].startswith("| images | ") and "--kinds images" in table
+    again = run_observations_experiment(cfg, train_config=train_cfg)  # every kind cached: nothing retrains
+    assert again["runs"] == summary["runs"]
+    with pytest.raises(LangprefError, match="--observations must be one of"):
+        run_observations_experiment(ObservationsConfig(env="metaworld", data=str(data), kinds=("pixels",)))
