@@ -2,8 +2,8 @@
 # `make wheel-check`: build langpref's sdist and wheel, install the wheel with only the core into a fresh venv (as a
 # lab would: torch 2.13.0 first, then the wheel, with the known-good constraints), and smoke-test it there: import,
 # --help, --version, `langpref import` + `langpref train` on a tiny plain recording, and the one-line message of each
-# command that needs an extra which is not installed. Writes build/wheel-check/install.json (time and size of the
-# fresh core install). Takes about 2-3 minutes.
+# command that needs an extra which is not installed (simulators, study, LeRobot, figures, videos). Writes
+# build/wheel-check/install.json (time and size of the fresh core install). Takes about 2-3 minutes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -40,12 +40,12 @@ cd "$OUT/work"  # away from the source tree: everything below uses the installed
 "$V/python" - <<'PY' || fail "the core venv is not what the core should be"
 import importlib, importlib.util
 import langpref
-for m in ("langpref.cli", "langpref.dataset.importer", "langpref.dataset.video", "langpref.model.train",
+for m in ("langpref.cli", "langpref.dataset.importer", "langpref.dataset.frames", "langpref.model.train",
           "langpref.model.evaluate", "langpref.improve", "langpref.reward", "langpref.rewards", "langpref.propose",
           "langpref.feedback", "langpref.tasks", "langpref.tasks.gym", "langpref.extras"):
     importlib.import_module(m)
 assert langpref.__file__.find("site-packages") > 0, langpref.__file__
-extra = [m for m in ("metaworld", "robosuite", "mujoco", "fastapi", "uvicorn", "ray", "pyarrow")
+extra = [m for m in ("metaworld", "robosuite", "mujoco", "fastapi", "uvicorn", "ray", "pyarrow", "matplotlib", "av")
          if importlib.util.find_spec(m)]
 assert not extra, f"extras' packages in a core install: {extra}"
 print(f"wheel-check: import langpref {langpref.__version__} (core only) ok")
@@ -78,4 +78,8 @@ expect_extra metaworld generate --env metaworld --out gen-mw --num-trajectories 
 expect_extra robosuite generate --env robosuite --out gen-rs --num-trajectories 4
 expect_extra study study serve --model model --data data --db study.db
 expect_extra lerobot import "$ROOT/tests/fixtures/lerobot/tiny" --task rec/task.toml --out lerobot-data
+expect_extra plots visualize --model model --data data --out latent.png
+clip=$ROOT/tests/fixtures/lerobot/tiny/videos/observation.images.front/chunk-000/file-000.mp4
+cp -r rec/recording rec-video && for f in rec-video/*.npz; do cp "$clip" "${f%.npz}.mp4"; done  # episodes with videos
+expect_extra video import rec-video --task rec/task.toml --out video-data
 echo "wheel-check: ok"

@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from langpref.dataset.frames import FrameOptions, save_frames
-from langpref.dataset.recording import RecordedEpisode, plain_episode_files, read_plain_episode
+from langpref.dataset.recording import VIDEO_SUFFIXES, RecordedEpisode, plain_episode_files, read_plain_episode
 from langpref.dataset.storage import (
     DatasetMeta,
     Trajectory,
@@ -125,6 +125,10 @@ def _episodes(cfg: ImportConfig) -> tuple[str, list[Any]]:
         eps = read_lerobot(cfg.src, state_key=cfg.state_key, action_key=cfg.action_key, camera=cfg.camera)
         return "lerobot", [lambda ep=ep: (f"{cfg.src} {ep.name}", ep) for ep in eps]
     files = plain_episode_files(cfg.src)
+    if any(f.with_suffix(s).is_file() for f in files for s in VIDEO_SUFFIXES):
+        from langpref.extras import require
+
+        require("video", "importing a recording's camera videos")  # before any work, not after reading every episode
     return "plain", [lambda f=f: (str(f), read_plain_episode(f)) for f in files]
 
 
@@ -198,7 +202,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
                 "episode its video (NAME.mp4 or NAME.webm) or import without --images"
             )
         if all(with_video):
-            from langpref.dataset.video import decode_frames, write_clip
+            from langpref.dataset.video import decode_frames, write_clip  # the video extra: checked by _episodes
 
             for i, clip in enumerate(
                 tqdm(videos, desc="videos", unit="video", disable=not progress, dynamic_ncols=True)

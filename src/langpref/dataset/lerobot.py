@@ -25,8 +25,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from langpref.dataset.recording import RecordedEpisode
-from langpref.dataset.video import VideoClip
+from langpref.dataset.recording import RecordedEpisode, VideoClip
 from langpref.errors import LangprefError
 
 INFO_PATH = Path("meta/info.json")

@@ -8,8 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
-from langpref.dataset.video import VideoClip
 from langpref.errors import LangprefError
+
+
+@dataclass(frozen=True)
+class VideoClip:
+    """A span of a video file: frames with timestamps in [start_s, end_s); None means the file's start or end."""
+
+    path: Path
+    start_s: float | None = None
+    end_s: float | None = None
 
 
 @dataclass

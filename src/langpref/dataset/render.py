@@ -29,7 +29,11 @@ def replay_video(
 def recorded_video(ds: Dataset, index: int, out: Path) -> Path:
     """The recorded video of trajectory `index` at `out`: copied when the format is the same (imported videos are
     browser-playable H.264), else transcoded."""
-    from langpref.dataset.video import VideoClip, write_clip
+    from langpref.dataset.recording import VideoClip
+    from langpref.extras import needs
+
+    with needs("video", "a recorded trajectory's video"):
+        from langpref.dataset.video import write_clip
 
     src = ds.video_path(index)
     if src is None or not src.is_file():

@@ -4,7 +4,8 @@ small camera frames from it for models that see images (`decode_frames`, used by
 A recording's video may hold one episode or several back to back (LeRobotDataset v3 packs episodes into one mp4,
 often AV1, which not every browser plays). The study serves H.264 mp4 or VP8/VP9 webm, so `write_clip` copies a
 file that is already one of those and otherwise decodes the clip's frames and encodes them again. Everything runs
-through PyAV; a file that does not decode is a `LangprefError` naming it.
+through PyAV (the `video` extra: import this module inside `extras.needs("video", ...)`); a file that does not
+decode is a `LangprefError` naming it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
@@ -21,6 +21,7 @@ import av
 import av.error
 import numpy as np
 
+from langpref.dataset.recording import VideoClip
 from langpref.errors import LangprefError
 
 # Codecs each container may hold for the file to play in current browsers as is.
@@ -30,15 +31,6 @@ _ENCODERS = {".mp4": ("libx264", "h264", "libopenh264"), ".webm": ("libvpx-vp9",
 _FORMATS = {".mp4": "mp4", ".webm": "webm"}
 # An mp4's index goes first so a browser can start playing before the whole file has arrived.
 _MUX_OPTIONS: dict[str, dict[str, str]] = {".mp4": {"movflags": "faststart"}, ".webm": {}}
-
-
-@dataclass(frozen=True)
-class VideoClip:
-    """A span of a video file: frames with timestamps in [start_s, end_s); None means the file's start or end."""
-
-    path: Path
-    start_s: float | None = None
-    end_s: float | None = None
 
 
 def _one_line(exc: BaseException) -> str:

@@ -35,6 +35,7 @@ import torch
 
 from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
+from langpref.extras import missing_modules
 from langpref.language.pairs import (
     Pairs,
     Phrasings,
@@ -419,10 +420,9 @@ class Trainer:
 
 def plot_history(history: list[dict[str, Any]], path: Path, title: str = "") -> Path:
     """Training curve: loss and accuracy (train, validation) per epoch, stage 2 after the dashed line."""
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the training curve")
 
     x = np.arange(1, len(history) + 1)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
@@ -452,11 +452,10 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
     model.set_prototypes(trainer.train_phr)
     history = [h for h in trainer.history if lang_finetuned or h["stage"] == 1]
     with tempfile.TemporaryDirectory() as tmp:
-        curve = plot_history(
-            history,
-            Path(tmp) / "training_curve.png",
-            title=f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}",
-        )
+        curve = {}  # without the plots extra the curve is only the history in config.json
+        if not missing_modules("plots"):
+            title = f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}"
+            curve["training_curve.png"] = plot_history(history, Path(tmp) / "training_curve.png", title=title)
         return save_model(
             model,
             out,
@@ -466,7 +465,7 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
             history=history,
             results=results,
             force=force,
-            extra_files={"training_curve.png": curve, **stored_task_files(trainer.dataset.root)},
+            extra_files={**curve, **stored_task_files(trainer.dataset.root)},
         )
 
 

@@ -30,10 +30,9 @@ def pca_2d(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def visualize(model, dataset, out: str | Path, split: str | None = None) -> dict:
     """Draw the picture into `out` (.png, .pdf or .svg); returns a small summary."""
-    import matplotlib
+    from langpref.extras import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("langpref visualize")
 
     out = Path(out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
