@@ -478,6 +478,29 @@ def selection_table(envs: list[str], today: str, answers: int = 40, candidates: 
     return "\n".join(lines)
 
 
+def generation_table(envs: list[str], today: str, steps: int = 10) -> str:
+    """One generation step as Study 1 waits for it (`experiments.generate.step_latency`) on the default dataset and
+    model of each env, at the dataset's horizon."""
+    from langpref.experiments.alignment import default_model
+    from langpref.experiments.generate import step_latency
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    lines = [
+        f"Measured {today} with `python -m langpref.bench` (`generation_table`), {cores} CPU cores, {steps} steps per "
+        "env, each Eq. 4's objective for a test phrasing from a random dataset trajectory, on data/ENV with "
+        "results/alignment/ENV/cofinetuned. Targets: p95 < 5 s on Meta-World, < 30 s on robosuite.\n",
+        "| env | horizon | rollouts per step | p50 (s) | p95 (s) | max (s) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for env_name in envs:
+        r = step_latency(Path("data") / env_name, default_model(env_name), steps=steps)
+        lines.append(
+            f"| {env_name} | {r['horizon']} | {r['rollouts']} | {r['p50_s']:.2f} | {r['p95_s']:.2f} "
+            f"| {r['max_s']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--envs", nargs="+", default=["metaworld", "robosuite"])
@@ -512,6 +535,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--no-selection", dest="selection", action="store_false", help="skip the active query selection latency"
     )
+    p.add_argument(
+        "--no-generation",
+        dest="generation",
+        action="store_false",
+        help="skip the latency of a generation step (needs the default dataset and model)",
+    )
     p.add_argument("--repeats", type=int, default=3, help="interleaved rounds per measurement; the best is kept")
     args = p.parse_args(argv)
     today = dt.date.today().isoformat()
@@ -525,6 +554,8 @@ def main(argv: list[str] | None = None) -> None:
         write_section("feedback-gate", gate_table(args.envs, today))
     if args.selection:
         write_section("selection-latency", selection_table(args.envs, today))
+    if args.generation:
+        write_section("generation-latency", generation_table(args.envs, today))
     training = training_table(today)
     if training:
         write_section("training-time", training)
