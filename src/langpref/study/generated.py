@@ -425,14 +425,7 @@ class Generator:
             self._queue.clear()
             self._cond.notify_all()
             pool = self._pool
-        if pool is not None:
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                try:
-                    proc.kill()
-                except (OSError, AttributeError):
-                    pass
-        if self._thread is not None:
-            self._thread.join(timeout=timeout)
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        from langpref.study.videos import stop_worker
+
+        stop_worker(pool, self._thread, timeout)
+        self._pool = None

@@ -331,15 +331,20 @@ class VideoCache:
             self._queue.clear()
             self._urgent.clear()
             self._cond.notify_all()
-        pool = self._pool
-        if pool is not None:
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                try:
-                    proc.kill()
-                except (OSError, AttributeError):
-                    pass
-        if self._thread is not None:
-            self._thread.join(timeout=timeout)
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        stop_worker(self._pool, self._thread, timeout)
+        self._pool = None
+
+
+def stop_worker(pool: Any, thread: threading.Thread | None, timeout: float) -> None:
+    """Kill `pool`'s worker processes at once (a job in flight is lost: its caller requeues or rewrites it), let the
+    thread feeding it end within `timeout` seconds, and shut the pool down without waiting."""
+    if pool is not None:
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            try:
+                proc.kill()
+            except (OSError, AttributeError):
+                pass
+    if thread is not None:
+        thread.join(timeout=timeout)
+    if pool is not None:
+        pool.shutdown(wait=False, cancel_futures=True)
