@@ -216,15 +216,26 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
 @command(
     "experiment observations",
     "issue 19: state vs camera images vs both as the trajectory encoder's input",
-    [config("langpref.experiments.observations:ObservationsConfig", {"env": {"metavar": "TASK"}}), JSON],
+    [
+        config("langpref.experiments.observations:ObservationsConfig", {"env": {"metavar": "TASK"}}),
+        config(
+            "langpref.model.config:TrainConfig",
+            {"train.stage1_epochs": "--epochs", "train.stage2_epochs": "--finetune-epochs"},
+            prefix="train.",
+            only=("train.stage1_epochs", "train.stage2_epochs"),
+        ),
+        JSON,
+    ],
     "Trains one model per observation kind (state, images, images+state) on a dataset with frames (made with "
     "`generate --images` when missing), each in a fresh process, and writes observations.md/.json with test "
     "(and --heldout) accuracy, per-feature accuracy, training time, peak memory and a latent-space figure per model.",
 )
 def cmd_experiment_observations(args: argparse.Namespace) -> None:
     from langpref.experiments.observations import ObservationsConfig, observations_table, run_observations_experiment
+    from langpref.model.config import TrainConfig
 
     cfg = from_args(ObservationsConfig, args).resolved()
-    summary = run_observations_experiment(cfg)
-    record(args, Path(str(cfg.out)) / "observations.config.json", cfg)
+    train_cfg = from_args(TrainConfig, args, "train.")
+    summary = run_observations_experiment(cfg, train_config=train_cfg)
+    record(args, Path(str(cfg.out)) / "observations.config.json", cfg, train=train_cfg.to_dict())
     emit(summary, args.json, lambda s: observations_table(s) + f"\n(wrote {cfg.out}/observations.md and .json)")
