@@ -149,7 +149,7 @@ def run_observations_experiment(cfg: ObservationsConfig, *, train_config: TrainC
         "env": cfg.env,
         "data": str(data),
         "runs": {kind: cache.runs[kind] for kind in cfg.kinds},
-        "command": command_line(cfg),
+        "command": command_line(cfg, start),
     }
     out.mkdir(parents=True, exist_ok=True)
     (out / "observations.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -157,8 +157,14 @@ def run_observations_experiment(cfg: ObservationsConfig, *, train_config: TrainC
     return summary
 
 
-def command_line(cfg: ObservationsConfig) -> str:
+def command_line(cfg: ObservationsConfig, train: TrainConfig | None = None) -> str:
+    """The `langpref experiment observations` command that reproduces this run."""
     flags = f" --data {cfg.data} --out {cfg.out}"
+    default = TrainConfig()
+    if train is not None and train.stage1_epochs != default.stage1_epochs:
+        flags += f" --epochs {train.stage1_epochs}"
+    if train is not None and train.stage2_epochs != default.stage2_epochs:
+        flags += f" --finetune-epochs {train.stage2_epochs}"
     if tuple(cfg.kinds) != OBSERVATIONS:
         flags += f" --kinds {','.join(cfg.kinds)}"
     if cfg.heldout:
