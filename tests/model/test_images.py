@@ -15,7 +15,7 @@ from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
 from langpref.model.checkpoint import load_model
 from langpref.model.evaluate import evaluate_split
-from langpref.model.inputs import dataset_input, resolve_observations
+from langpref.model.inputs import dataset_input, resolve_observations, trajectories_input
 from langpref.model.vision import ImageTrajectoryEncoder
 
 
@@ -121,6 +121,17 @@ def test_padding_and_frame_sampling_do_not_change_phi(squares):
     shown = index[rows.unsqueeze(1), t]
     sampled = enc(steps[rows.unsqueeze(1), t], None, frames[rows.unsqueeze(1), shown], torch.arange(3).expand(2, 3))
     torch.testing.assert_close(sampled, enc(steps[rows.unsqueeze(1), t], None, frames, shown))
+
+
+def test_frames_of_another_number_of_trajectories_are_refused():
+    """One frame stack per trajectory: more stacks than trajectories, or too few frames, is a one-line error."""
+    obs, act = np.zeros((2, 6, 3)), np.zeros((2, 6, 1))
+    ok = np.zeros((2, 3, 8, 8, 3), dtype=np.uint8)
+    assert trajectories_input(obs, act, "images", False, frames=ok, frame_stride=2).frames.shape == ok.shape
+    for bad in (np.zeros((3, 1, 8, 8, 3), dtype=np.uint8), np.zeros((2, 2, 8, 8, 3), dtype=np.uint8)):
+        with pytest.raises(LangprefError) as exc:
+            trajectories_input(obs, act, "images", False, frames=bad, frame_stride=2)
+        assert "with N = 2 and K >= 3" in _one_line(exc)
 
 
 def test_frames_are_read_only_when_asked(squares):

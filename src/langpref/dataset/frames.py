@@ -141,7 +141,8 @@ def load_frames(root: Path, index: int, spec: FrameSpec, steps: int) -> np.ndarr
 
 
 def stack_frames(per_trajectory: list[np.ndarray]) -> np.ndarray:
-    """(N, K, height, width, 3): trajectories' frames stacked, the shorter ones padded with their last frame."""
+    """(N, K, height, width, 3): trajectories' frames stacked, the shorter ones padded with their last frame. Works on
+    any arrays that differ only in their first axis (`storage.stack_steps` stacks per-step arrays with it)."""
     most = max(len(f) for f in per_trajectory)
     return np.stack(
         [f if len(f) == most else np.concatenate([f, np.repeat(f[-1:], most - len(f), axis=0)]) for f in per_trajectory]

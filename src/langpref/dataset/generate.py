@@ -64,6 +64,7 @@ class GenerateConfig:
 
     @property
     def frame_spec(self) -> FrameSpec | None:
+        """The frames the dataset keeps, rendered from the simulator states; None without --images."""
         return self.frames.spec("render")
 
     def resolved(self) -> GenerateConfig:
@@ -224,6 +225,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
     """Generate and store a dataset; returns a summary. Interrupted runs resume where they stopped."""
     cfg = cfg.resolved()
     task = get_task(cfg.env)
+    spec = cfg.frame_spec
     _prepare_out(cfg)
     n = cfg.num_trajectories
     units = controller_units(cfg.env, n, cfg.seed)
@@ -233,7 +235,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
     for i in range(n):
         done = _finished(cfg, i)
         if done is None:
-            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon, cfg.frame_spec))
+            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon, spec))
         else:
             features[i], success[i] = done
     start = time.time()
@@ -273,7 +275,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
             "backend": cfg.backend,
             "success_rate": float(success.mean()),
         },
-        frames=None if cfg.frame_spec is None else cfg.frame_spec.to_dict(),
+        frames=None if spec is None else spec.to_dict(),
     )
     write_meta(cfg.out, meta, features)
     return {
@@ -286,5 +288,5 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
         "workers": cfg.workers,
         "backend": cfg.backend,
         "steps_per_s": len(jobs) * cfg.horizon / wall if jobs else None,
-        **({} if cfg.frame_spec is None else {"frames": cfg.frame_spec.to_dict()}),
+        **({} if spec is None else {"frames": spec.to_dict()}),
     }

@@ -243,11 +243,9 @@ class Dataset:
 
 
 def stack_steps(arrays: list[np.ndarray]) -> np.ndarray:
-    """(N, T, d) float32 of per-step arrays (T_i, d), the shorter ones padded to the longest with their last step."""
-    horizon = max(len(a) for a in arrays)
-    return np.stack(
-        [a if len(a) == horizon else np.concatenate([a, np.repeat(a[-1:], horizon - len(a), axis=0)]) for a in arrays]
-    ).astype(np.float32)
+    """(N, T, d) float32 of per-step arrays (T_i, d), the shorter ones padded to the longest with their last step
+    (the padding `stack_frames` gives frames)."""
+    return stack_frames(arrays).astype(np.float32)
 
 
 def video_path(root: Path, index: int) -> Path:

@@ -10,8 +10,8 @@ L-BFGS, L2 prior) for all: only what is shown differs.
 Over queries and over the person's time. A query's modelled seconds are its kind's (`langpref.feedback.cost`: the
 paper's measurement, language 11.3% faster than a comparison, unless given), so every run also has a curve over
 modelled seconds (a step function: at time t, the metrics after the last query finished by t). These are compared up
-to the horizon every run reaches (the least total time of any run, Q language queries unless a mixed run is faster),
-by their mean over that time (AUC per second), with the same paired intervals as per query.
+to the horizon every run reaches (the least total time of any run: Q queries of the cheaper kind, which no mixed run
+can undercut), by their mean over that time (AUC per second), with the same paired intervals as per query.
 
 Writes into its output directory (default `results/active/ENV`): `active.json` (curves and summaries per method,
 per-run AUCs per query and per modelled second, paired 95% intervals between strategies, the mixed learner's share of
@@ -61,9 +61,9 @@ GRID_POINTS = 201
 """Points of the modelled-time axis of the curves over seconds (the AUC per second is exact, not read off it)."""
 
 
-def _per_run(runs: dict, method: str, keys: list[str], key: str, upto: int | None = None) -> np.ndarray:
-    """(runs, 1): each run's mean of curve `key` over query counts 0..upto (all when None)."""
-    return np.array([[float(np.mean(runs[f"{method}/{k}"][key][: None if upto is None else upto + 1]))] for k in keys])
+def _per_run(runs: dict, method: str, keys: list[str], key: str) -> np.ndarray:
+    """(runs, 1): each run's mean of curve `key` over query counts 0..Q (its AUC per query)."""
+    return np.array([[float(np.mean(runs[f"{method}/{k}"][key]))] for k in keys])
 
 
 def _interval(a: np.ndarray, b: np.ndarray) -> dict[str, float]:

@@ -25,6 +25,11 @@ from langpref.model.config import OBSERVATIONS, TrainConfig, check_observations
 RESULTS_ROOT = Path("results") / "observations"
 
 
+def default_data(env: str) -> str:
+    """The dataset with frames used when none is given (generated with --images when missing)."""
+    return str(Path("data") / f"{env}-images")
+
+
 @dataclass(frozen=True)
 class ObservationsConfig:
     """`langpref experiment observations`: state vs images vs images+state on one dataset with frames."""
@@ -53,11 +58,7 @@ class ObservationsConfig:
             check_observations(kind)
         if not self.kinds:
             raise LangprefError("--kinds needs at least one of " + ", ".join(OBSERVATIONS))
-        return replace(
-            self,
-            data=self.data or str(Path("data") / f"{self.env}-images"),
-            out=self.out or str(RESULTS_ROOT / self.env),
-        )
+        return replace(self, data=self.data or default_data(self.env), out=self.out or str(RESULTS_ROOT / self.env))
 
 
 def _train_one(train_cfg: dict[str, Any]) -> dict[str, Any]:
@@ -87,7 +88,7 @@ def _ensure_data(cfg: ObservationsConfig) -> Path:
     from langpref.dataset.storage import load_dataset
 
     data = Path(str(cfg.data))
-    if not data.exists() and cfg.data == str(Path("data") / f"{cfg.env}-images"):
+    if not data.exists() and cfg.data == default_data(cfg.env):
         from langpref.dataset.frames import FrameOptions
         from langpref.dataset.generate import GenerateConfig, generate
 

@@ -90,7 +90,7 @@ class Selection:
     follow-up's bit score (`lal-infogain`)."""
     strategy: str
     candidates: int
-    """How many trajectories (language) or pairs (comparisons) were scored."""
+    """How many trajectories (language) or pairs (comparisons) were scored; both together for a mixed learner."""
 
 
 def check_strategy(strategy: str, kind: str) -> None:

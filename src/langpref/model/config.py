@@ -16,6 +16,7 @@ OBSERVATIONS = ("state", "images", "images+state")
 
 
 def check_observations(observations: str) -> str:
+    """`observations` itself when it is one of `OBSERVATIONS`; else one line naming them."""
     if observations not in OBSERVATIONS:
         raise LangprefError(f"--observations must be one of {', '.join(OBSERVATIONS)}, got {observations!r}")
     return observations

@@ -22,7 +22,7 @@ import numpy as np
 from langpref.dataset.frames import frame_index, stack_frames
 from langpref.errors import LangprefError
 from langpref.model.config import check_observations
-from langpref.model.encoders import step_inputs
+from langpref.model.encoders import step_input_dim, step_inputs
 
 
 def sees_images(observations: str) -> bool:
@@ -51,7 +51,7 @@ def numeric_dim(observations: str, obs_dim: int, action_dim: int, observation_de
     """Width of the numeric per-step input: see `numeric_inputs`."""
     if not sees_state(observations):
         return action_dim
-    return obs_dim * (2 if observation_deltas else 1) + action_dim
+    return step_input_dim(obs_dim, action_dim, observation_deltas)
 
 
 def numeric_inputs(obs: np.ndarray, actions: np.ndarray, observations: str, observation_deltas: bool) -> np.ndarray:
@@ -109,7 +109,8 @@ def trajectories_input(
     n, horizon = steps.shape[:2]
     lens = np.full(n, horizon) if lengths is None else np.asarray(lengths)
     needed = -(-int(lens.max(initial=1)) // frame_stride)
-    if stacked.dtype != np.uint8 or stacked.ndim != 5 or stacked.shape[-1] != 3 or stacked.shape[:2] < (n, needed):
+    wrong_shape = stacked.ndim != 5 or stacked.shape[-1] != 3 or stacked.shape[0] != n or stacked.shape[1] < needed
+    if stacked.dtype != np.uint8 or wrong_shape:
         raise LangprefError(
             f"frames must be uint8 (N, K, height, width, 3) with N = {n} and K >= {needed} (one every "
             f"{frame_stride} steps), got {stacked.dtype} {stacked.shape}"

@@ -101,9 +101,8 @@ class LatentModel(nn.Module):
             raise LangprefError(
                 f"{where} has features {list(meta.feature_names)}, the model was trained on {self.info.feature_names}"
             )
-        if [dict(x) for x in meta.obs_layout] != [
-            dict(x) for x in self.info.obs_layout
-        ] or meta.action_dim != self.info.action_dim:
+        same_layout = [dict(x) for x in meta.obs_layout] == [dict(x) for x in self.info.obs_layout]
+        if not same_layout or meta.action_dim != self.info.action_dim:
             raise LangprefError(
                 f"{where} has a different observation layout or action size (obs {meta.obs_dim}, "
                 f"action {meta.action_dim}) than the model was trained on (obs {self.info.obs_dim}, "

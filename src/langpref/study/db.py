@@ -310,7 +310,8 @@ def _backfill_queries(conn: sqlite3.Connection) -> None:
         (*METHODS, *(f"pref_{m}" for m in METHODS)),
     ).fetchall():
         p = json.loads(r["payload"])
-        shown, b = p["shown"], (p["shown"][1:] or [None])[0]
+        shown = p["shown"]
+        b = shown[1] if len(shown) > 1 else None
         conn.execute(
             "INSERT OR IGNORE INTO queries (participant_id, seq, method, number, a, b, strategy, score, candidates, "
             "created_at) VALUES (?, ?, ?, ?, ?, ?, 'random', NULL, NULL, ?)",

@@ -360,8 +360,8 @@ class Generator:
         psi = self.engine.psi(job.text)
         with self._cond:
             mine = [(m.round, i) for i, m in self._made.items() if m.participant_id == job.participant_id]
-            earlier = [self._made[i] for r, i in sorted(mine) if r < job.round]
             earlier_ids = [i for r, i in sorted(mine) if r < job.round]
+            earlier = [self._made[i] for i in earlier_ids]
         study = [int(i) for i in self.engine.study]
         pool = study + earlier_ids
         pool_phi = np.concatenate(

@@ -30,7 +30,7 @@ import numpy as np
 from langpref.feedback.kind import get_kind
 from langpref.feedback.language import LanguageAnswer
 from langpref.feedback.posterior import laplace_posterior
-from langpref.feedback.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain
+from langpref.feedback.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain, candidate_rows
 from langpref.feedback.space import LatentSpace
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.study.config import METHODS, StudyConfig
@@ -61,7 +61,6 @@ class QueryChooser:
         self.space = space
         self.study = np.asarray(study, dtype=np.int64)
         self.cfg = cfg
-        self.reward = reward
         self.strategies = cfg.selections()
         # the stateless scorers, built once (the language one embeds the bank's feature axes); lal-infogain keeps a
         # record of the answers, so it is made per query
@@ -82,7 +81,7 @@ class QueryChooser:
             past = history()
             seen = {int(a.query.shown) for a in past}
             fresh = self.study[~np.isin(self.study, list(seen))]
-            rows = self._subset(fresh if len(fresh) else self.study, gen)
+            rows = candidate_rows(fresh if len(fresh) else self.study, self.cfg.query_candidates, gen)
             if strategy == "lal-infogain":
                 scores = self._lal_scores(past, rows, gen)
             else:
@@ -90,7 +89,7 @@ class QueryChooser:
                 scores = self._info.scores(xi, rows)
             best = int(np.argmax(scores))
             return Chosen((int(rows[best]),), strategy, float(scores[best]), len(rows))
-        rows = self._subset(self.study, gen)
+        rows = candidate_rows(self.study, self.cfg.query_candidates, gen)
         xi = laplace_posterior(learner()).sample(DEFAULT_SAMPLES, gen)
         i, j, scores = self._pairs.scores(xi, rows)
         best = int(np.argmax(scores))
@@ -106,12 +105,6 @@ class QueryChooser:
             return Chosen((int(rng(1, cycle).permutation(study)[pos]),), "random", None, len(study))
         shown = tuple(int(i) for i in rng(2, number).choice(study, size=shows, replace=False))
         return Chosen(shown, "random", None, len(study))
-
-    def _subset(self, pool: np.ndarray, gen: np.random.Generator) -> np.ndarray:
-        """`pool`, or a sorted random subset of `query_candidates` of it."""
-        if len(pool) <= self.cfg.query_candidates:
-            return pool
-        return np.sort(gen.choice(pool, size=self.cfg.query_candidates, replace=False))
 
     def _lal_scores(self, past: list, rows: np.ndarray, gen: np.random.Generator) -> np.ndarray:
         """The follow-up's scores of `rows` after the answers `past` (text read with its whitespace collapsed, as
