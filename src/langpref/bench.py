@@ -431,6 +431,9 @@ def selection_timings(
     from langpref.feedback.humans import HumanConfig
     from langpref.feedback.selection import make_selector
     from langpref.reward import RewardConfig, RewardLearner
+    from langpref.study.serve import limit_blas_threads
+
+    limit_blas_threads(1)  # as `langpref study serve` runs it (one BLAS thread per request)
 
     space = toy_latent_space(env_name, n=int(candidates / 0.6) + 2, dim=dim, seed=0)
     pool = space.split("train")[:candidates]
@@ -467,8 +470,8 @@ def selection_table(envs: list[str], today: str, answers: int = 40, candidates: 
         f"Measured {today} with `python -m langpref.bench` (`selection_timings`), {cores} CPU cores, 30 trials: "
         f"choosing the next query with {answers} answers so far and {candidates} candidate trajectories "
         f"(comparisons: all {candidates * (candidates - 1) // 2} pairs), D = 128, 64 posterior draws "
-        "(lal-infogain: its own 10 x 100). Includes the Laplace posterior at the fit; not the refit itself (see "
-        "the reward update above). Target: p95 < 100 ms.\n",
+        "(lal-infogain: its own 10 x 100), one BLAS thread as the study server runs it. Includes the Laplace "
+        "posterior at the fit; not the refit itself (see the reward update above). Target: p95 < 100 ms.\n",
         "| env | strategy | median (ms) | p95 (ms) |",
         "|---|---|---|---|",
     ]
