@@ -310,12 +310,11 @@ def write_section(name: str, body: str) -> None:
     RESULTS.write_text(text)
 
 
-def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> None:
-    """The generator-throughput and ray-overhead tables (see the module docstring)."""
+def generator_sections(envs: list[str], repeats: int, today: str) -> None:
+    """The generator-throughput table (see the module docstring)."""
     from langpref.dataset.generate import make_worker_env
 
-    rows, ray_rows = [], []
-    ray_init = ray_init_seconds(2) if ray else None
+    rows = []
     load_before = os.getloadavg()[0]
     for env_name in envs:
         horizon = 500
@@ -326,14 +325,12 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
         for _ in range(repeats):
             one, replayed = generator_steps_per_s(env_name, n, horizon, 1, replay=True)
             two, _ = generator_steps_per_s(env_name, n, horizon, 2)
-            ray_two = generator_steps_per_s(env_name, n, horizon, 2, backend="ray")[0] if ray else None
             rounds.append(
                 {
                     "raw": raw_steps_per_s(env_name, 8 if env_name == "metaworld" else 2, horizon),
                     "one": one,
                     "replay": replayed,
                     "two": two,
-                    "ray_two": ray_two,
                     "startup": worker_startup_seconds(make_worker_env, (env_name, horizon), 2),
                 }
             )
@@ -342,9 +339,6 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
         raw, one, replayed, two = best["raw"], best["one"], best["replay"], best["two"]
         steady = n * horizon / (n * horizon / two - startup)
         rows.append((env_name, raw, one, one / raw, replayed, one / replayed, two, two / one, startup, steady / one))
-        if ray:
-            ray_two = max(r["ray_two"] for r in rounds)
-            ray_rows.append((env_name, two, ray_two, 1 - ray_two / two))
         print(json.dumps({"env": env_name, "rounds": rounds}), flush=True)
     table = [
         f"Measured {today} on this machine ({os.cpu_count()} cores, no GPU) with `make bench` "
@@ -368,16 +362,44 @@ def generator_sections(envs: list[str], repeats: int, ray: bool, today: str) -> 
             f"| {two:.0f} | {speedup:.2f}x | {startup:.1f} | {steady:.2f}x |"
         )
     write_section("generator-throughput", "\n".join(table))
-    if ray:
-        lines = [
-            f"Measured {today} with `make bench` (`python -m langpref.bench`), 2 workers, horizon 500. Ray was "
-            f"started once before timing (a local instance took {ray_init:.1f} s to start; that one-off cost "
-            "is not in the rates).\n",
-            "| env | local processes (steps/s) | Ray tasks (steps/s) | Ray overhead (target < 15%) |",
-            "|---|---|---|---|",
-        ]
-        lines += [f"| {e} | {loc:.0f} | {r:.0f} | {ovh:.1%} |" for e, loc, r, ovh in ray_rows]
-        write_section("ray-overhead", "\n".join(lines))
+
+
+def ray_overhead_table(envs: list[str], rounds: int, today: str) -> str:
+    """Ray's overhead against local processes (target < 15%), 2 workers: per round the same trajectories generated
+    both ways back to back (the order alternating, so the machine's drift falls on both), the overhead 1 - ray/local
+    per round, and its mean with a 95% t-interval over rounds. One best-of figure sat within its own noise (a
+    negative overhead on robosuite), which is why the interval is reported."""
+    from langpref.experiments.reward import paired_difference
+
+    ray_init = ray_init_seconds(2)
+    lines = [
+        f"Measured {today} with `python -m langpref.bench --ray-rounds {rounds}` ({rounds} rounds per env), 2 "
+        "workers, horizon 500; per round the same trajectories generated with local processes and with Ray tasks "
+        "back to back, the order alternating between rounds. Overhead per round: 1 - Ray rate / local rate; mean "
+        "over rounds with its 95% t-interval. Ray was started once before timing (a local instance took "
+        f"{ray_init:.1f} s to start; that one-off cost is not in the rates). Load average "
+        f"{os.getloadavg()[0]:.2f} before the run.\n",
+        "| env | rounds | local processes, mean (steps/s) | Ray tasks, mean (steps/s) "
+        "| Ray overhead, mean [95% interval] (target < 15%) |",
+        "|---|---|---|---|---|",
+    ]
+    for env_name in envs:
+        n = 120 if env_name == "metaworld" else 16
+        generator_steps_per_s(env_name, 3, 500, 2, backend="ray")  # warm-up: Ray's workers build their simulators
+        local, ray = [], []
+        for r in range(rounds):
+            order = ("local", "ray") if r % 2 == 0 else ("ray", "local")
+            rate = {b: generator_steps_per_s(env_name, n, 500, 2, backend=b)[0] for b in order}
+            local.append(rate["local"])
+            ray.append(rate["ray"])
+            print(json.dumps({"env": env_name, "round": r, **rate}), flush=True)
+        overhead = 1 - np.array(ray)[:, None] / np.array(local)[:, None]
+        d = paired_difference(overhead, np.zeros_like(overhead))
+        lines.append(
+            f"| {env_name} | {rounds} | {np.mean(local):.0f} | {np.mean(ray):.0f} "
+            f"| {d['mean'][0]:.1%} [{d['low'][0]:.1%}, {d['high'][0]:.1%}] |"
+        )
+    return "\n".join(lines)
 
 
 def import_table(today: str, repeats: int) -> str:
@@ -515,7 +537,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--no-generator", dest="generator", action="store_false", help="skip the generator and Ray throughput tables"
     )
-    p.add_argument("--no-ray", dest="ray", action="store_false", help="skip the Ray backend comparison")
+    p.add_argument(
+        "--ray-rounds",
+        type=int,
+        default=6,
+        help="paired rounds of local processes vs Ray tasks per env (the overhead's interval); 0 skips it",
+    )
     p.add_argument(
         "--no-uses",
         dest="uses",
@@ -548,7 +575,9 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     today = dt.date.today().isoformat()
     if args.generator:
-        generator_sections(args.envs, args.repeats, args.ray, today)
+        generator_sections(args.envs, args.repeats, today)
+    if args.ray_rounds:
+        write_section("ray-overhead", ray_overhead_table(args.envs, args.ray_rounds, today))
     if args.import_:
         write_section("import-throughput", import_table(today, args.repeats))
     if args.uses:
