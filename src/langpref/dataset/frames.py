@@ -9,9 +9,9 @@ images and a dataset's frames are read only when a model that sees images asks f
     frames/000123.npz      frames (K, height, width, 3) uint8, K = ceil(T / stride)
 
 `meta.json` records the frames' size, stride and source (`render`: replayed in the simulator; `video`: decoded from
-the recorded camera video) under "frames". Simulated frames are rendered as `langpref render` renders its videos
-(MuJoCo's renderer without shadows or reflections), at twice the size and box-averaged down, which keeps thin
-parts such as the gripper visible at 64x64.
+the recorded camera video; `image`: decoded from a LeRobotDataset's per-step images) under "frames". Simulated
+frames are rendered as `langpref render` renders its videos (MuJoCo's renderer without shadows or reflections), at
+twice the size and box-averaged down, which keeps thin parts such as the gripper visible at 64x64.
 """
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ class FrameOptions:
 
     images: bool = False
     """Store per-step camera frames (downscaled, every FRAME_STRIDE-th step) for models that see images (`langpref
-    train --observations images|images+state`); simulated tasks render them, a recording decodes its videos."""
+    train --observations images|images+state`); simulated tasks render them, a recording decodes its videos (or a
+    LeRobotDataset's image column)."""
     frame_size: tuple[int, int] = (64, 64)
     """WIDTH,HEIGHT of the stored frames in pixels (each 16 to 512)."""
     frame_stride: int = 5
@@ -71,7 +72,8 @@ class FrameSpec:
     height: int
     stride: int
     source: str
-    """`render` (replayed in the simulator) or `video` (decoded from the recorded camera video)."""
+    """`render` (replayed in the simulator), `video` (decoded from the recorded camera video) or `image` (decoded
+    from a LeRobotDataset's per-step images)."""
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -4,7 +4,8 @@ The recording brings observations, actions, and optionally features, success and
 task file (`langpref.tasks.taskfile`) brings the task's name, features, text and bank. Features come from the task
 file's `features_from` function when it names one, else from the episodes' own `features`. Episodes may differ in
 length. Videos are copied when a browser plays them as they are, else cut and transcoded once, here. With
-`--images`, small camera frames are decoded from every episode's video too (`langpref.dataset.frames`).
+`--images`, small camera frames are decoded from every episode's video too (`langpref.dataset.frames`), or, for a
+LeRobotDataset whose camera is an image column, from its per-step images (`langpref.dataset.images`).
 
 Everything is written into a temporary folder beside `out` and renamed into place at the end, so a bad episode
 (one line naming its file and key) never leaves half a dataset.
@@ -15,15 +16,21 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
-from langpref.dataset.frames import FrameOptions, save_frames
-from langpref.dataset.recording import VIDEO_SUFFIXES, RecordedEpisode, plain_episode_files, read_plain_episode
+from langpref.dataset.frames import FrameOptions, FrameSpec, save_frames
+from langpref.dataset.recording import (
+    VIDEO_SUFFIXES,
+    ImageCells,
+    RecordedEpisode,
+    plain_episode_files,
+    read_plain_episode,
+)
 from langpref.dataset.storage import (
     DatasetMeta,
     Trajectory,
@@ -33,6 +40,7 @@ from langpref.dataset.storage import (
     write_meta,
 )
 from langpref.errors import LangprefError
+from langpref.extras import needs, require
 from langpref.tasks.taskfile import TaskFile, save_task
 
 DEFAULT_SPLITS = (0.8, 0.1, 0.1)  # the paper's simulated datasets: 260/32/32
@@ -55,11 +63,12 @@ class ImportConfig:
     action_key: str = "action"
     """LeRobotDataset: the feature read as actions."""
     camera: str | None = None
-    """LeRobotDataset: the video feature kept as each episode's video (default the first; '' for none)."""
+    """LeRobotDataset: the camera feature, a video (kept as each episode's video) or an image column (frames for
+    --images only); default the first video feature, else the first image feature; '' for none."""
     force: bool = False
     """Overwrite an existing dataset in `out`."""
     frames: FrameOptions = field(default_factory=FrameOptions)
-    """Camera frames (--images, --frame-size, --frame-stride), decoded from every episode's video."""
+    """Camera frames (--images, --frame-size, --frame-stride), decoded from every episode's video or images."""
 
 
 def is_lerobot(src: Path) -> bool:
@@ -114,20 +123,26 @@ def _step_features(ep: RecordedEpisode, task: TaskFile, fn: Any, where: str) -> 
     return out.astype(np.float32)
 
 
+def _still_frames(images: ImageCells, steps: int, spec: FrameSpec) -> np.ndarray:
+    """The frames of an episode recorded as one still image per step (PyAV decodes them: the video extra, as for
+    frames from videos)."""
+    with needs("video", "--images from a LeRobotDataset's image column"):
+        from langpref.dataset.images import image_frames
+    return image_frames(images, steps, spec)
+
+
 def _episodes(cfg: ImportConfig) -> tuple[str, list[Any]]:
     """(layout name, a list of zero-argument loaders, one per episode, each returning (where, RecordedEpisode))."""
     if is_lerobot(cfg.src):
-        from langpref.extras import needs
-
         with needs("lerobot", "importing a LeRobotDataset"):
             from langpref.dataset.lerobot import read_lerobot
 
-        eps = read_lerobot(cfg.src, state_key=cfg.state_key, action_key=cfg.action_key, camera=cfg.camera)
+        eps = read_lerobot(
+            cfg.src, state_key=cfg.state_key, action_key=cfg.action_key, camera=cfg.camera, images=cfg.frames.images
+        )
         return "lerobot", [lambda ep=ep: (f"{cfg.src} {ep.name}", ep) for ep in eps]
     files = plain_episode_files(cfg.src)
     if any(f.with_suffix(s).is_file() for f in files for s in VIDEO_SUFFIXES):
-        from langpref.extras import require
-
         require("video", "importing a recording's camera videos")  # before any work, not after reading every episode
     return "plain", [lambda f=f: (str(f), read_plain_episode(f)) for f in files]
 
@@ -159,6 +174,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         fn = task.step_features()
         obs_dim = action_dim = None
         lengths, features, success, videos, wheres = [], np.zeros((n, len(task.features))), [], [], []
+        imaged: list[bool] = []  # whose frames came from its still images (a LeRobotDataset's image column)
         for i, load in enumerate(
             tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress, dynamic_ncols=True)
         ):
@@ -184,6 +200,9 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
                 source=ep.name,
             )
             save_trajectory(tmp, traj)
+            imaged.append(spec is not None and ep.images is not None)
+            if spec is not None and ep.images is not None:
+                save_frames(tmp, i, _still_frames(ep.images, traj.horizon, spec))
             lengths.append(traj.horizon)
             features[i] = traj.features
             success.append(ep.success)
@@ -196,11 +215,15 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
                 f"episode {wheres[missing]} has no video while others have one; give every "
                 "episode its video (NAME.mp4 or NAME.webm) or none"
             )
-        if spec is not None and not all(with_video):
+        bare = [w for w, v, m in zip(wheres, with_video, imaged) if not (v or m)]
+        if spec is not None and bare:
             raise LangprefError(
-                f"--images takes each episode's camera frames from its video, and {wheres[0]} has none; give every "
-                "episode its video (NAME.mp4 or NAME.webm) or import without --images"
+                f"--images takes each episode's camera frames from its video (or a LeRobotDataset's image column), "
+                f"and {bare[0]} has none; give every episode its video (NAME.mp4 or NAME.webm) or import without "
+                "--images"
             )
+        if spec is not None and any(imaged):
+            spec = replace(spec, source="image")
         if all(with_video):
             from langpref.dataset.video import decode_frames, write_clip  # the video extra: checked by _episodes
 
@@ -208,7 +231,7 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
                 tqdm(videos, desc="videos", unit="video", disable=not progress, dynamic_ncols=True)
             ):
                 write_clip(clip, video_path(tmp, i))
-                if spec is not None:
+                if spec is not None and not imaged[i]:
                     frames = decode_frames(clip, lengths[i], spec.stride, spec.width, spec.height)
                     save_frames(tmp, i, frames)
         splits = shuffle_into_splits(n, counts, cfg.seed)

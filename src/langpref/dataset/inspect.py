@@ -41,7 +41,9 @@ def describe(root: str | Path) -> dict[str, Any]:
 def _frames_line(frames: dict[str, Any] | None) -> str:
     if not frames:
         return "none"
-    where = "rendered in the simulator" if frames["source"] == "render" else "decoded from the recorded videos"
+    where = {"render": "rendered in the simulator", "image": "decoded from the recorded images"}.get(
+        frames["source"], "decoded from the recorded videos"
+    )
     return f"{frames['width']}x{frames['height']}, every {frames['stride']} steps, {where}"
 
 

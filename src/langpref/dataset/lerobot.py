@@ -8,7 +8,9 @@ The v3 layout, as lerobot 0.4 writes it:
                                                 data/file_index, videos/<key>/{chunk_index, file_index,
                                                 from_timestamp, to_timestamp}
     data/chunk-000/file-000.parquet             one row per frame of many episodes: episode_index, frame_index,
-                                                and one column per non-video feature (vectors as list columns)
+                                                and one column per non-video feature (vectors as list columns;
+                                                an image feature as a struct of the encoded image's `bytes`
+                                                (PNG, JPEG, ...) and its original `path`)
     videos/<key>/chunk-000/file-000.mp4         many episodes back to back; an episode is [from, to) in seconds
 
 Every problem is a `LangprefError` with one line naming the file and the key, since these files come from
@@ -25,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from langpref.dataset.recording import RecordedEpisode, VideoClip
+from langpref.dataset.recording import ImageCells, RecordedEpisode, VideoClip
 from langpref.errors import LangprefError
 
 INFO_PATH = Path("meta/info.json")
@@ -36,14 +38,22 @@ _BOOKKEEPING = {"timestamp", "frame_index", "episode_index", "index", "task_inde
 
 
 def read_lerobot(
-    src: Path, *, state_key: str = "observation.state", action_key: str = "action", camera: str | None = None
+    src: Path,
+    *,
+    state_key: str = "observation.state",
+    action_key: str = "action",
+    camera: str | None = None,
+    images: bool = False,
 ) -> list[RecordedEpisode]:
     """Every episode of the LeRobotDataset v3 at `src`, in episode order.
 
-    `state_key` and `action_key` name the features read as observations and actions. `camera` names the video
-    feature to attach as each episode's clip: None takes the first video feature in meta/info.json (no clip if
-    there is none), "" attaches no video. An episode's `success` is whether `next.success` was ever true, when the
-    dataset records it; `features` is None (LeRobot has no task features; the task file computes them).
+    `state_key` and `action_key` name the features read as observations and actions. `camera` names the camera
+    feature: a video feature is attached as each episode's clip; an image feature (one encoded image per frame in the
+    data files) as each episode's `images`, and only when `images` is true, since those cells are the bulk of the
+    data files and only `import --images` decodes them. None takes the first video feature in meta/info.json, else
+    the first image feature (no camera if there is neither); "" takes none. An episode's `success` is whether
+    `next.success` was ever true, when the dataset records it; `features` is None (LeRobot has no task features; the
+    task file computes them).
     """
     src = Path(src)
     info_path = src / INFO_PATH
@@ -51,10 +61,14 @@ def read_lerobot(
     features: dict[str, Any] = info["features"]
     for key in (state_key, action_key):
         _check_vector_feature(features, key, info_path)
-    video_key = _pick_camera(features, camera, info_path)
+    camera_key = _pick_camera(features, camera, info_path)
+    is_image = bool(camera_key) and features[camera_key].get("dtype") == "image"
+    video_key = "" if is_image else camera_key
+    image_key = camera_key if is_image and images else ""
     episodes = _read_episodes_meta(src, video_key)
     columns = [state_key, action_key] + ([SUCCESS_KEY] if SUCCESS_KEY in features else [])
-    frames = _read_frames(src, _template(info, "data_path", info_path), episodes, columns, features)
+    data_template = _template(info, "data_path", info_path)
+    frames, cells = _read_frames(src, data_template, episodes, columns, features, image_key)
     video_template = _template(info, "video_path", info_path) if video_key else ""
     result = []
     for episode in episodes:
@@ -70,6 +84,7 @@ def read_lerobot(
                 features=None,
                 success=success,
                 video=clip,
+                images=cells.get(index),
             )
         )
     return result
@@ -136,14 +151,20 @@ def _check_vector_feature(features: dict[str, Any], key: str, path: Path) -> Non
     raise LangprefError(f"{path}: no feature '{key}'; available: {available}")
 
 
+def _features_of(features: dict[str, Any], dtype: str) -> list[str]:
+    return [key for key, ft in features.items() if isinstance(ft, dict) and ft.get("dtype") == dtype]
+
+
 def _pick_camera(features: dict[str, Any], camera: str | None, path: Path) -> str:
-    """The video feature to attach ("" for none)."""
-    videos = [key for key, ft in features.items() if isinstance(ft, dict) and ft.get("dtype") == "video"]
+    """The camera feature to take ("" for none): `camera` when it names a video or image feature, by default the
+    first video feature (a clip the study can play), else the first image feature."""
+    videos, images = _features_of(features, "video"), _features_of(features, "image")
     if camera is None:
-        return videos[0] if videos else ""
-    if camera == "" or camera in videos:
+        return (videos + images)[0] if videos or images else ""
+    if camera == "" or camera in videos or camera in images:
         return camera
-    raise LangprefError(f"{path}: no video feature '{camera}'; video features: {', '.join(videos) or 'none'}")
+    cameras = [f"{key} (video)" for key in videos] + [f"{key} (image)" for key in images]
+    raise LangprefError(f"{path}: no camera feature '{camera}'; camera features: {', '.join(cameras) or 'none'}")
 
 
 # ---- meta/episodes -----------------------------------------------------------------------------------------------
@@ -164,11 +185,7 @@ def _read_episodes_meta(src: Path, video_key: str) -> list[dict[str, Any]]:
     wanted = _episode_columns(video_key)
     rows: list[dict[str, Any]] = []
     for path in files:
-        table = _read_parquet(path)
-        missing = [c for c in wanted if c not in table.column_names]
-        if missing:
-            raise LangprefError(f"{path}: column '{missing[0]}' missing from the episodes metadata")
-        rows.extend(table.select(wanted).to_pylist())
+        rows.extend(_read_parquet(path, wanted, "episodes metadata").to_pylist())
     for row in rows:
         if any(row[c] is None for c in wanted):
             column = next(c for c in wanted if row[c] is None)
@@ -180,10 +197,17 @@ def _read_episodes_meta(src: Path, video_key: str) -> list[dict[str, Any]]:
     return rows
 
 
-def _read_parquet(path: Path, columns: list[str] | None = None) -> pa.Table:
+def _read_parquet(path: Path, columns: list[str] | None = None, what: str = "file") -> pa.Table:
+    """The table at `path`, or only `columns` of it (each checked to exist first; `what` names the file in that
+    error), so a data file's image cells are not read unless they are wanted."""
     if not path.is_file():
         raise LangprefError(f"{path}: parquet file not found")
     try:
+        if columns is not None:
+            names = pq.read_schema(path).names
+            missing = [c for c in columns if c not in names]
+            if missing:
+                raise LangprefError(f"{path}: column '{missing[0]}' missing from the {what}")
         return pq.read_table(path, columns=columns)
     except (pa.ArrowException, OSError) as exc:
         raise LangprefError(f"{path}: not a readable parquet file ({' '.join(str(exc).split())})") from exc
@@ -193,20 +217,26 @@ def _read_parquet(path: Path, columns: list[str] | None = None) -> pa.Table:
 
 
 def _read_frames(
-    src: Path, data_template: str, episodes: list[dict[str, Any]], columns: list[str], features: dict[str, Any]
-) -> dict[int, dict[str, np.ndarray]]:
-    """{episode_index: {column: (T, D) array}} for the listed episodes, rows in frame_index order."""
+    src: Path,
+    data_template: str,
+    episodes: list[dict[str, Any]],
+    columns: list[str],
+    features: dict[str, Any],
+    image_key: str = "",
+) -> tuple[dict[int, dict[str, np.ndarray]], dict[int, ImageCells]]:
+    """({episode_index: {column: (T, D) array}}, {episode_index: its cells of the image column `image_key`}) for the
+    listed episodes, rows in frame_index order; the second is empty without an `image_key`."""
     by_file: dict[tuple[int, int], list[dict[str, Any]]] = {}
     for ep in episodes:
         by_file.setdefault((ep["data/chunk_index"], ep["data/file_index"]), []).append(ep)
     out: dict[int, dict[str, np.ndarray]] = {}
+    cells: dict[int, ImageCells] = {}
     for (chunk, file), eps in sorted(by_file.items()):
         path = src / data_template.format(chunk_index=chunk, file_index=file)
-        table = _read_parquet(path)
-        for col in ["episode_index", "frame_index", *columns]:
-            if col not in table.column_names:
-                raise LangprefError(f"{path}: column '{col}' missing from the data file")
+        wanted = ["episode_index", "frame_index", *columns] + ([image_key] if image_key else [])
+        table = _read_parquet(path, wanted, "data file")
         arrays = {col: _to_matrix(table.column(col), path, col, features.get(col)) for col in columns}
+        images = _image_cells(table.column(image_key), path, image_key) if image_key else []
         episode = table.column("episode_index").to_numpy()
         frame = table.column("frame_index").to_numpy()
         for ep in eps:
@@ -218,7 +248,23 @@ def _read_frames(
                 )
             rows = rows[np.argsort(frame[rows], kind="stable")]
             out[index] = {col: arr[rows] for col, arr in arrays.items()}
-    return out
+            if image_key:
+                where = f"{path}: column '{image_key}', episode {index}"
+                cells[index] = ImageCells(cells=[images[r] for r in rows], where=where)
+    return out, cells
+
+
+def _image_cells(column: pa.ChunkedArray, path: Path, key: str) -> list[bytes | None]:
+    """Every row's encoded image in an image column: the `bytes` of lerobot's (Hugging Face datasets') struct
+    {bytes, path}, or a plain binary column; None where a row has no bytes (decoding it is the error)."""
+    arr = column.combine_chunks() if column.num_chunks != 1 else column.chunk(0)
+    if pa.types.is_struct(arr.type):
+        if arr.type.get_field_index("bytes") < 0:
+            raise LangprefError(f"{path}: column '{key}' is {arr.type}, not images (a struct with 'bytes')")
+        arr = arr.flatten()[arr.type.get_field_index("bytes")]  # flatten() keeps the rows that are null as a whole
+    if not (pa.types.is_binary(arr.type) or pa.types.is_large_binary(arr.type)):
+        raise LangprefError(f"{path}: column '{key}' is {arr.type}, not encoded images")
+    return arr.to_pylist()
 
 
 def _to_matrix(column: pa.ChunkedArray, path: Path, key: str, feature: dict[str, Any] | None) -> np.ndarray:

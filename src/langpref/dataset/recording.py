@@ -20,13 +20,24 @@ class VideoClip:
     end_s: float | None = None
 
 
+@dataclass(frozen=True)
+class ImageCells:
+    """An episode's camera frames stored as still images, one encoded image (PNG, JPEG, ...) per step in step order,
+    as a LeRobotDataset's image column holds them. A cell is None where the file has no image bytes. `where` names
+    the file, column and episode, for a one-line error on a cell that does not decode."""
+
+    cells: list[bytes | None]
+    where: str
+
+
 @dataclass
 class RecordedEpisode:
     """One recorded episode, as every source reader returns it before `langpref import` stores it.
 
     `observations` and `actions` are float32 with one row per recorded step. `features` is either per step (T, F)
     or per episode (F,), or None when the source has none (the task file's `features_from` then computes them).
-    `video` is the episode's camera footage, possibly a time span inside a longer file.
+    `video` is the episode's camera footage, possibly a time span inside a longer file; `images` is its camera as
+    one still image per step instead (a LeRobotDataset's image column), read only when frames are imported.
     """
 
     name: str
@@ -35,6 +46,7 @@ class RecordedEpisode:
     features: np.ndarray | None
     success: bool | None
     video: VideoClip | None
+    images: ImageCells | None = None
 
 
 VIDEO_SUFFIXES = (".mp4", ".webm")

@@ -228,7 +228,7 @@ class Dataset:
         if spec is None:
             raise LangprefError(
                 f"dataset {self.root} has no camera frames; make one with `langpref generate --images` or "
-                "`langpref import --images` (a recording with videos)"
+                "`langpref import --images` (a recording with videos or camera images)"
             )
         indices = range(len(self)) if split is None else self.split(split)
         return stack_frames([load_frames(self.root, i, spec, self.meta.length(i)) for i in indices])

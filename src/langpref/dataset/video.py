@@ -21,6 +21,7 @@ import av
 import av.error
 import numpy as np
 
+from langpref.dataset.frames import frame_steps
 from langpref.dataset.recording import VideoClip
 from langpref.errors import LangprefError
 
@@ -33,7 +34,7 @@ _FORMATS = {".mp4": "mp4", ".webm": "webm"}
 _MUX_OPTIONS: dict[str, dict[str, str]] = {".mp4": {"movflags": "faststart"}, ".webm": {}}
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
     """An exception's message on one line, for a `LangprefError` (FFmpeg's own words, without its errno)."""
     text = getattr(exc, "strerror", None) if isinstance(exc, av.error.FFmpegError) else None
     return " ".join(str(text or exc).split()) or type(exc).__name__
@@ -71,7 +72,7 @@ def check_video(path: Path) -> tuple[int, float]:
     except LangprefError:
         raise
     except (av.error.FFmpegError, OSError, ValueError) as exc:
-        raise LangprefError(f"{path}: video does not decode ({_one_line(exc)})") from exc
+        raise LangprefError(f"{path}: video does not decode ({one_line(exc)})") from exc
     if frames == 0:
         raise LangprefError(f"{path}: video has no frames that decode")
     if declared and frames < declared:
@@ -101,7 +102,7 @@ def _probe(path: Path) -> tuple[str, Fraction, float | None]:
     except LangprefError:
         raise
     except (av.error.FFmpegError, OSError, ValueError) as exc:
-        raise LangprefError(f"{path}: video does not open ({_one_line(exc)})") from exc
+        raise LangprefError(f"{path}: video does not open ({one_line(exc)})") from exc
 
 
 def _clip_frames(container: av.container.InputContainer, clip: VideoClip, frame_s: float) -> Iterator[av.VideoFrame]:
@@ -190,7 +191,7 @@ def write_clip(clip: VideoClip, dest: Path) -> Path:
             try:
                 count = _encode(clip, tmp, suffix, fps, frame_s)
             except (av.error.FFmpegError, OSError, ValueError) as exc:
-                raise LangprefError(f"{clip.path}: video does not decode or encode ({_one_line(exc)})") from exc
+                raise LangprefError(f"{clip.path}: video does not decode or encode ({one_line(exc)})") from exc
             if count == 0:
                 raise LangprefError(
                     f"{clip.path}: no video frames between {clip.start_s or 0.0:g}s and "
@@ -201,6 +202,12 @@ def write_clip(clip: VideoClip, dest: Path) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return dest
+
+
+def small_rgb(frame: av.VideoFrame, width: int, height: int) -> np.ndarray:
+    """(height, width, 3) uint8 RGB of a decoded picture, resized by area averaging (the aspect ratio is not kept):
+    the one resize of every recorded camera frame `import --images` stores, from a video or from still images."""
+    return frame.reformat(width=width, height=height, format="rgb24", interpolation="AREA").to_ndarray()
 
 
 def decode_frames(clip: VideoClip, steps: int, stride: int, width: int, height: int) -> np.ndarray:
@@ -219,11 +226,10 @@ def decode_frames(clip: VideoClip, steps: int, stride: int, width: int, height: 
     try:
         with av.open(str(path)) as container:
             for frame in _clip_frames(container, clip, frame_s):
-                image = frame.reformat(width=width, height=height, format="rgb24", interpolation="AREA")
-                small.append(image.to_ndarray())
+                small.append(small_rgb(frame, width, height))
     except (av.error.FFmpegError, OSError, ValueError) as exc:
-        raise LangprefError(f"{path}: video does not decode ({_one_line(exc)})") from exc
+        raise LangprefError(f"{path}: video does not decode ({one_line(exc)})") from exc
     if not small:
         raise LangprefError(f"{path}: no video frames to take the episode's camera frames from ({codec})")
-    kept = np.arange(0, steps, stride)
+    kept = frame_steps(steps, stride)
     return np.stack([small[i] for i in (kept * len(small)) // steps]).astype(np.uint8)

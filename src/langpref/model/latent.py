@@ -201,7 +201,7 @@ class LatentModel(nn.Module):
         spec = FrameSpec.from_dict(self.info.frames or {}, "the model's config.json")
         if spec.source != "render":
             raise LangprefError(
-                f"the model saw frames decoded from recorded videos ({self.info.env}); new trajectories need their "
+                f"the model saw frames decoded from a recording ({self.info.env}); new trajectories need their "
                 "own frames: pass them to encode_trajectories(..., frames=...)"
             )
         own = env is None
