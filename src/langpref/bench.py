@@ -377,7 +377,10 @@ def ray_overhead_table(envs: list[str], rounds: int, today: str) -> str:
         "workers, horizon 500; per round the same trajectories generated with local processes and with Ray tasks "
         "back to back, the order alternating between rounds. Overhead per round: 1 - Ray rate / local rate; mean "
         "over rounds with its 95% t-interval. Ray was started once before timing (a local instance took "
-        f"{ray_init:.1f} s to start; that one-off cost is not in the rates). Load average "
+        f"{ray_init:.1f} s to start; that one-off cost is not in the rates). Local processes are spawned by each "
+        "run, so their rate includes their start-up (the throughput table's \"2-worker start-up\"); Ray's workers "
+        "stay up between runs (a warm-up run built their simulators), which is why Ray can come out faster where a "
+        "run is short against that start-up. Load average "
         f"{os.getloadavg()[0]:.2f} before the run.\n",
         "| env | rounds | local processes, mean (steps/s) | Ray tasks, mean (steps/s) "
         "| Ray overhead, mean [95% interval] (target < 15%) |",
