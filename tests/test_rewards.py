@@ -109,6 +109,19 @@ def test_a_reward_of_another_task_is_refused(checkpoint, tmp_path):
         save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=None)
 
 
+def test_learn_reward_refuses_an_unsaveable_reward_before_any_run(tmp_path):
+    """--save-reward with the oracle space (no encoder) fails at once, not after the first run."""
+    from langpref.errors import LangprefError
+    from langpref.reward import LearnRewardConfig, learn_reward
+
+    class NoSpace:  # any use of the space would fail differently: the check must come first
+        def __getattr__(self, name):
+            raise AssertionError(f"the space was used ({name}) before the check")
+
+    with pytest.raises(LangprefError, match="needs --model"):
+        learn_reward(NoSpace(), LearnRewardConfig(), progress=False, save_reward=str(tmp_path), model=None)
+
+
 def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp_path):
     sb3 = pytest.importorskip(
         "stable_baselines3", reason="stable-baselines3 is not installed (pip install 'langpref[test]')"

@@ -507,6 +507,10 @@ def learn_reward(
     from tqdm import tqdm
 
     cfg.validate()
+    if save_reward:
+        from langpref.rewards import check_saveable
+
+        check_saveable(model)
     runs, saved = [], []
     with tqdm(
         total=cfg.humans * cfg.seeds,

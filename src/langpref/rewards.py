@@ -35,25 +35,34 @@ FORMAT_VERSION = 1
 DEFAULT_NAME = "reward.json"
 
 
-def save_learned_reward(
-    learner, out: str | Path, *, env: str, model: str | Path | None, name: str = "reward", default: bool = False
-) -> Path:
-    """Write a `RewardLearner`'s r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`)."""
-    from langpref.model.checkpoint import WEIGHTS, read_config
+def check_saveable(model: str | Path | None) -> dict:
+    """The checkpoint config of `model` if its r_xi can be saved (checked before any run, not after the first);
+    a `LangprefError` if there is no trajectory encoder (the oracle space) or it sees camera frames."""
+    from langpref.model.checkpoint import read_config
 
     if model is None:
         raise LangprefError(
             "--save-reward needs --model: a saved reward reads phi from a trained trajectory encoder "
             "(the oracle --perfect-latent space has none)"
         )
-    model = Path(model).resolve()
-    cfg = read_config(model)
+    cfg = read_config(Path(model).resolve())
     seen = cfg["model"].get("observations") or "state"  # None or absent: a state model
     if seen != "state":
         raise LangprefError(
-            f"--save-reward: the model in {model} sees camera frames ({seen}); the Gymnasium "
+            f"--save-reward: the model in {Path(model).resolve()} sees camera frames ({seen}); the Gymnasium "
             "wrapper rebuilds phi from the state alone, so only a state model's reward can be saved"
         )
+    return cfg
+
+
+def save_learned_reward(
+    learner, out: str | Path, *, env: str, model: str | Path | None, name: str = "reward", default: bool = False
+) -> Path:
+    """Write a `RewardLearner`'s r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`)."""
+    from langpref.model.checkpoint import WEIGHTS
+
+    cfg = check_saveable(model)
+    model = Path(model).resolve()
     params = [p.detach().cpu().numpy().astype(np.float64).tolist() for p in learner.params]
     doc = {
         "format": FORMAT,

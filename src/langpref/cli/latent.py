@@ -8,6 +8,7 @@ from pathlib import Path
 
 from langpref.cli.common import DATA, JSON, MODEL, SPLITS, TASK, load
 from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+from langpref.extras import require
 
 
 @command(
@@ -234,6 +235,7 @@ def cmd_experiment_observations(args: argparse.Namespace) -> None:
     from langpref.experiments.observations import ObservationsConfig, observations_table, run_observations_experiment
     from langpref.model.config import TrainConfig
 
+    require("plots", "langpref experiment observations")  # each model's latent-space figure
     cfg = from_args(ObservationsConfig, args).resolved()
     train_cfg = from_args(TrainConfig, args, "train.")
     summary = run_observations_experiment(cfg, train_config=train_cfg)

@@ -11,6 +11,7 @@ from typing import Any
 from langpref import cli_config as cc
 from langpref.cli.common import BACKENDS, JSON, SPLITS, TASK
 from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+from langpref.extras import require
 
 
 def _use_opts(experiment: bool = False) -> dict[str, Any]:
@@ -165,6 +166,8 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
     cfg = from_args(LearnRewardConfig, args)
     cfg.validate()
+    if args.figure:
+        require("plots", "learn-reward --figure")  # before the runs, not after them
     space = _space(args)
     result = learn_reward(
         space,
@@ -204,6 +207,7 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
     from langpref.experiments.common import SweepConfig
 
+    require("plots", f"langpref experiment {args.experiment}")  # every experiment ends with its figure
     kw = {
         "env": args.env,
         "data": args.data,

@@ -30,6 +30,7 @@ import numpy as np
 
 from langpref.experiments.common import SweepConfig, figure_link
 from langpref.experiments.reward import _run_methods, _save, _table, paired_difference
+from langpref.extras import pyplot
 from langpref.feedback.cost import elapsed, on_time_grid, time_average
 
 METHODS = {
@@ -190,10 +191,7 @@ def run_active_experiment(
 def plot_active(results: dict[str, dict], timed: dict[str, Any], out: str | Path, title: str = "") -> Path:
     """Four panels: cross-entropy and true reward of the best test trajectory per query (as Fig. 5), and the same
     over modelled seconds of the person's time, up to the horizon every run reaches; mean with a +-std band."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the active-queries figure")
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
