@@ -433,7 +433,7 @@ class GeneratedStore:
 
     def add(self, traj, **extra: Any) -> int:
         """Store a rollout (its parameters gain `extra`, e.g. the run and iteration); returns its index."""
-        from langpref.dataset.storage import DatasetMeta, save_trajectory, write_meta
+        from langpref.dataset.storage import DatasetMeta, save_trajectory, write_meta, write_text_atomic
         from langpref.tasks import get_task
 
         task = get_task(self.env)
@@ -453,5 +453,5 @@ class GeneratedStore:
             config={"generator": "langpref.propose (CMA-ES on a surrogate, decided by real rollouts)", **self.info},
         )
         write_meta(self.root, meta, np.array(self.features))
-        (self.root / "generated.json").write_text(json.dumps(self.info, indent=2, default=str) + "\n")
+        write_text_atomic(self.root / "generated.json", json.dumps(self.info, indent=2, default=str) + "\n")
         return traj.index

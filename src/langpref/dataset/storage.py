@@ -128,17 +128,28 @@ def save_trajectory(root: Path, traj: Trajectory) -> Path:
     return path
 
 
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write `path` through a temporary file renamed over it: a crash leaves the old file or the new, never half."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
 def write_meta(root: Path, meta: DatasetMeta, features: np.ndarray) -> None:
-    """Write meta.json and features.npy; a dataset with frames as schema 3, one without exactly as before."""
+    """Write features.npy, then meta.json (each atomically, so a dataset rewritten after every trajectory, as a
+    store of generated ones is, survives a crash mid-write); a dataset with frames as schema 3, one without exactly
+    as before."""
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
-    np.save(root / "features.npy", features.astype(np.float64))
+    tmp = root / "features.tmp.npy"
+    np.save(tmp, features.astype(np.float64))
+    tmp.replace(root / "features.npy")
     raw = asdict(meta)
     if meta.frames is None:
         del raw["frames"]
     else:
         raw["schema_version"] = max(meta.schema_version, FRAMES_SCHEMA_VERSION)
-    (root / "meta.json").write_text(json.dumps(raw, indent=2) + "\n")
+    write_text_atomic(root / "meta.json", json.dumps(raw, indent=2) + "\n")
 
 
 def _read_meta(root: Path) -> DatasetMeta:
