@@ -217,9 +217,11 @@ class Proposal:
     surrogate_scores: np.ndarray
     wall_s: float
 
-    @property
-    def best(self) -> int:
-        return int(np.argmax(self.scores))
+    @classmethod
+    def ranked(cls, trajectories: list, units, phi, scores, predicted, wall_s: float) -> Proposal:
+        """The rollouts sorted best first by `scores` (ties keep their order)."""
+        order = np.argsort(-np.asarray(scores), kind="stable")
+        return cls([trajectories[i] for i in order], units[order], phi[order], scores[order], predicted[order], wall_s)
 
 
 class Proposer:
@@ -300,15 +302,7 @@ class Proposer:
         phi = np.stack([self.embed(t) for t in trajs])
         self.surrogate.add(units, phi)
         scores = np.asarray(objective(phi), dtype=np.float64)
-        order = np.argsort(-scores, kind="stable")
-        return Proposal(
-            [trajs[i] for i in order],
-            units[order],
-            phi[order],
-            scores[order],
-            predicted[order],
-            time.perf_counter() - t0,
-        )
+        return Proposal.ranked(trajs, units, phi, scores, predicted, time.perf_counter() - t0)
 
     def optimise(self, objective: Objective, start: np.ndarray, step: tuple[int, ...] = ()) -> Proposal:
         """`optimize_rounds` generation steps, each starting from the best real rollout so far; all their rollouts,
@@ -321,15 +315,7 @@ class Proposer:
         units, phi = np.concatenate([p.units for p in parts]), np.concatenate([p.phi for p in parts])
         scores = np.concatenate([p.scores for p in parts])
         predicted = np.concatenate([p.surrogate_scores for p in parts])
-        order = np.argsort(-scores, kind="stable")
-        return Proposal(
-            [trajs[i] for i in order],
-            units[order],
-            phi[order],
-            scores[order],
-            predicted[order],
-            sum(p.wall_s for p in parts),
-        )
+        return Proposal.ranked(trajs, units, phi, scores, predicted, sum(p.wall_s for p in parts))
 
 
 # ---- what a command needs: the dataset's parameters and embeddings, the encoder -----------------------------------

@@ -47,7 +47,8 @@ def test_the_image_encoder_learns_what_only_the_pixels_show(image_model, squares
     """Where the square is and how red it is are the features; the observations are noise."""
     history = image_model.history
     assert history[-1]["loss"] < 0.7 * history[0]["loss"]
-    assert history[0]["val_acc"] < 0.6 and image_model.results["best_val_accuracy"] > 0.65
+    first, best = history[0]["val_acc"], image_model.results["best_val_accuracy"]
+    assert best > 0.65 and best > first + 0.05, [round(h["val_acc"], 3) for h in history]
     dataset = load_dataset(squares)
     seen = evaluate_split(image_model.model, dataset, "test", phrasings[0])["accuracy"]
     state = _train(squares, tmp_path / "state", phrasings, "state")  # the same data without the pixels: chance

@@ -108,3 +108,49 @@ def test_improve_candidates_are_checked_in_one_line():
     with pytest.raises(LangprefError, match="--improve-candidates must be split or generated") as err:
         StudyConfig(improve_candidates="test").validate()
     assert "\n" not in str(err.value)
+
+
+def test_simulated_participants_answer_generated_trajectories_by_their_features(engine, h, tmp_path, capsys):
+    """`langpref study simulate --db DB` beside a server with generated candidates: a synthetic human never satisfied
+    (all rounds) and near-greedy in Eq. 10 names, about each generated trajectory, the feature and direction Eq. 10
+    picks from that trajectory's own features (the generated dataset's, train-split scaled), and finishes."""
+    import json
+
+    import numpy as np
+
+    from langpref.cli import main
+    from langpref.dataset.storage import load_dataset
+    from langpref.feedback.humans import sample_weights
+    from langpref.feedback.space import FeatureScale, phrase_table
+    from langpref.language.bank import load_bank
+    from langpref.study.serve import BackgroundServer
+
+    db = tmp_path / "sim.sqlite"
+    state = build_state(h.serve_config(db, **GENERATED), engine=engine, progress=False)
+    args = ["--participants", "1", "--seed", "5", "--temperature", "1e-6", "--satisfied-at", "inf", "--json"]
+    try:
+        with BackgroundServer(state) as url:
+            assert main(["study", "simulate", "--url", url, "--db", str(db), "--deadline-s", "300", *args]) == 0
+    finally:
+        _close(state)
+    out = json.loads(capsys.readouterr().out)
+    assert out["errors"] == [] and out["completed"] == 1 and out["retries"] > 0  # waited for the simulator
+
+    ds = load_dataset(h.data)  # data and split ("all") came from the database
+    conn = sdb.connect(db)
+    store_index = {r["id"]: r["store_index"] for r in sdb.rows(conn, "SELECT id, store_index FROM generated")}
+    said = sdb.rows(conn, "SELECT shown, text FROM feedback WHERE phase='improve' AND shown >= ?", (len(ds),))
+    conn.close()
+    rounds = state.cfg.improve_max_iterations
+    assert len(store_index) == rounds and len(said) == rounds - 1  # one per round; the last is not spoken of
+    feats = np.asarray(ds.features)
+    scale = FeatureScale.fit(feats[ds.split("train")])
+    w = sample_weights(feats.shape[1], np.random.default_rng([5, 0]))  # participant 0 of seed 5
+    best = scale(feats)[np.argmax(scale(feats) @ w)]
+    store = load_dataset(f"{db}.generated")
+    phrases = phrase_table(load_bank(ds.env), "test", ds.feature_names, lambda t: np.zeros((len(t), 1)))
+    for row in said:
+        theta = scale(store.features[store_index[row["shown"]]])
+        feature = int(np.argmax(w * (best - theta)))  # Eq. 10 at temperature -> 0
+        direction = 0 if w[feature] >= 0 else 1
+        assert row["text"] in {phrases.texts[i] for i in phrases.rows(feature, direction)}, (row, feature)

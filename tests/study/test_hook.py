@@ -154,3 +154,57 @@ def test_a_hook_that_cannot_run_is_refused_at_start(h, tmp_path):
             cfg.validate()
     with pytest.raises(LangprefError, match="on-show-timeout"):
         replace(h.serve_config(tmp_path / "x.sqlite"), on_show="true", on_show_timeout=0).validate()
+
+
+RECORD_MADE = """import json, os, sys
+made = os.path.join(os.environ["LANGPREF_DATA"], "trajectories", "%06d.npz" % int(os.environ["LANGPREF_TRAJECTORY"]))
+with open(sys.argv[1], "a") as f:
+    env = {k: v for k, v in os.environ.items() if k.startswith("LANGPREF_")}
+    f.write(json.dumps({**env, "made": os.path.exists(made)}) + "\\n")
+"""
+
+
+def test_hook_runs_for_a_generated_trajectory_once_it_is_made(engine, h, tmp_path, study_data):
+    """Study 1 with generated candidates: the satisfaction step about a trajectory still being made is handed out at
+    once; its run waits aside and comes when the simulator has made it, with the generated dataset and the
+    trajectory's index in it; the next step showing it runs at once; a reload runs nothing."""
+    from fastapi.testclient import TestClient
+
+    from langpref.study.app import create_app
+    from langpref.study.serve import build_state
+
+    out = tmp_path / "runs.jsonl"
+    (tmp_path / "record.py").write_text(RECORD_MADE)
+    db = tmp_path / "gen.sqlite"
+    study = {"improve_candidates": "generated", "improve_rollouts": 2, "improve_search_generations": 3}
+    cfg = replace(h.serve_config(db, **study), on_show=python_command(tmp_path / "record.py", out))
+    state = build_state(cfg, engine=engine, progress=False)
+    try:
+        with TestClient(create_app(state)) as client:
+            pid, headers, steps = walk(client, h, until_kind="language")
+            t0 = time.perf_counter()
+            r = client.post(f"/api/participants/{pid}/answer", json=h.answer_for(steps[-1][0]), headers=headers)
+            assert r.status_code == 200 and time.perf_counter() - t0 < PROMPT_S  # the hook never holds it up
+            satisfaction = r.json()
+            assert satisfaction["kind"] == "satisfaction" and "/gen" in satisfaction["videos"][0]
+            assert state.hook.status()["waiting_for_generation"] == 1  # the worker is still starting
+            assert state.hook.wait(timeout=120)  # made, and its run done
+            assert client.get(f"/api/participants/{pid}/step", headers=headers).status_code == 200  # a reload
+            r = client.post(f"/api/participants/{pid}/answer", json=h.answer_for(satisfaction), headers=headers)
+            assert r.status_code == 200 and r.json()["videos"] == satisfaction["videos"]  # not satisfied: again
+            assert state.hook.wait(timeout=60)
+    finally:
+        state.hook.close()
+        state.generated.close()
+        state.videos.close()
+    runs = [json.loads(line) for line in out.read_text().splitlines()]
+    store = str((tmp_path / "gen.sqlite.generated").resolve())
+    seen = [(r["LANGPREF_KIND"], r["LANGPREF_DATA"], r["LANGPREF_TRAJECTORY"], r["LANGPREF_EPISODE"]) for r in runs]
+    first = state.videos.index_of(steps[-1][0]["videos"][0].rsplit("/", 1)[1])
+    assert seen == [
+        ("language", str(study_data.resolve()), str(first), ""),
+        ("satisfaction", store, "0", ""),
+        ("language", store, "0", ""),
+    ]
+    assert all(r["made"] for r in runs) and {r["LANGPREF_PARTICIPANT"] for r in runs} == {pid}
+    assert state.hook.status()["counts"]["ok"] == 3

@@ -54,6 +54,44 @@ def cmd_study_serve(args: argparse.Namespace) -> None:
 
 
 @command(
+    "study simulate",
+    "simulated participants (synthetic humans) run whole sessions against a study server",
+    [
+        config(
+            "langpref.study.config:SimulateConfig",
+            {"split": {"choices": (*SPLITS, "all")}, "data": {"metavar": "DIR"}, "generated": {"metavar": "DIR"}},
+        ),
+        config("langpref.study.simulate:SimConfig", {"think_ms": {"metavar": "LO,HI"}}),
+        JSON,
+    ],
+    "Load tests, demo data, a dry run of a protocol. They answer like the library's synthetic humans over the study's "
+    "dataset (--data, or the one --db was created with), at random without one. Run it on the server's machine: "
+    "with --improve-candidates generated it reads the trajectories the server makes from --db and its generated "
+    "dataset. Prints finished sessions, answers and latency per answer kind.",
+)
+def cmd_study_simulate(args: argparse.Namespace) -> None:
+    from langpref.extras import needs
+    from langpref.study.config import SimulateConfig
+
+    with needs("study", "langpref study simulate"):
+        import httpx  # noqa: F401 (the participants' HTTP client)
+
+        from langpref.study.simulate import SimConfig, simulate, study_of
+    cfg = from_args(SimulateConfig, args)
+    stored = study_of(cfg.db) if cfg.db else {}
+    split = cfg.split or stored.get("split") or "test"
+    out = simulate(cfg.url, from_args(SimConfig, args), cfg.data or stored.get("data"), split, cfg.db, cfg.generated)
+    emit(
+        out,
+        args.json,
+        lambda o: (
+            f"{o['completed']} of {o['participants']} participants finished without errors, {o['answers']} answers "
+            f"in {o['wall_s']:.0f} s" + (f"; first error: {o['errors'][0]}" if o["errors"] else "")
+        ),
+    )
+
+
+@command(
     "study export",
     "CSV tables, analyses and figures of a study (HTML report + JSON)",
     [config("langpref.study.config:ExportConfig"), JSON],

@@ -36,7 +36,7 @@ class FrameOptions:
     """Whether and how a new dataset stores camera frames (`langpref generate`, `langpref import`)."""
 
     images: bool = False
-    """Store per-step camera frames (downscaled, every FRAME_STRIDE-th step) for models that see images (`langpref
+    """Store per-step camera frames (downscaled, every `--frame-stride`-th step) for models that see images (`langpref
     train --observations images|images+state`); simulated tasks render them, a recording decodes its videos (or a
     LeRobotDataset's image column)."""
     frame_size: tuple[int, int] = (64, 64)

@@ -52,10 +52,6 @@ class TrajectoryEncoder(nn.Module):
         self.register_buffer("mean", torch.zeros(in_dim) if mean is None else torch.as_tensor(mean).float())
         self.register_buffer("std", torch.ones(in_dim) if std is None else torch.as_tensor(std).float())
 
-    @property
-    def in_dim(self) -> int:
-        return int(self.mean.numel())
-
     def forward(self, steps: torch.Tensor, lengths: torch.Tensor | None = None) -> torch.Tensor:
         """steps (N, T, in_dim) from `step_inputs`, raw -> phi (N, D). With `lengths` (N,), trajectory i has only
         its first lengths[i] steps (the rest is padding) and phi is the mean over those: episodes of different

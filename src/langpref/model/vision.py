@@ -37,8 +37,8 @@ class SpatialSoftArgmax(nn.Module):
 
 
 class FrameEncoder(nn.Module):
-    """uint8 frames (M, H, W, 3) -> features (M, out_dim): 3x3 convolutions of stride 2 (64x64 -> 8x8), then each
-    channel's soft-argmax position and mean activation, a linear layer and a ReLU."""
+    """uint8 frames (M, H, W, 3) -> features (M, out_dim): 3x3 convolutions of stride 2 (each halves height and
+    width), then each channel's soft-argmax position and mean activation, a linear layer and a ReLU."""
 
     def __init__(self, channels: Sequence[int], out_dim: int):
         super().__init__()
@@ -86,10 +86,6 @@ class ImageTrajectoryEncoder(nn.Module):
         self.out = nn.Linear(width, latent_dim)
         self.register_buffer("mean", torch.zeros(numeric_dim) if mean is None else torch.as_tensor(mean).float())
         self.register_buffer("std", torch.ones(numeric_dim) if std is None else torch.as_tensor(std).float())
-
-    @property
-    def in_dim(self) -> int:
-        return int(self.mean.numel())
 
     def frame_features(self, frames: torch.Tensor) -> torch.Tensor:
         """CNN features (..., F) of uint8 frames (..., H, W, 3), in chunks when no gradient is kept."""

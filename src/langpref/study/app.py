@@ -316,10 +316,9 @@ class StudyApp:
             return self.step_json(tr.next, prow["resume_code"], p)
 
     def _show(self, pid: str, step: Step) -> None:
-        """Tell the `--on-show` hook of a step handed out (a generated trajectory is not in the dataset it knows)."""
+        """Tell the `--on-show` hook of a step handed out (it runs for a generated trajectory once it is made)."""
         if self.hook is not None:
-            shown = [i for i in step.shown if self.generated is None or not self.generated.owns(i)]
-            self.hook.show(pid, step.seq, step.kind, shown)
+            self.hook.show(pid, step.seq, step.kind, step.shown)
 
     def _store(self, conn, p: Participant, step: Step, row: dict, ans, data: dict, tr, received: float) -> None:
         shown_at = row["first_shown_at"] or row["created_at"]

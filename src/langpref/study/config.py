@@ -230,3 +230,23 @@ class ExportConfig:
     exclude: tuple[str, ...] = ()
     """Participants to leave out of the analyses (`--exclude 3,7`: arrival numbers, or ids as the dashboard shows them),
     besides those marked excluded on the dashboard; the tables keep every row."""
+
+
+@dataclass
+class SimulateConfig:
+    """`langpref study simulate`: simulated participants (synthetic humans) against a running study server."""
+
+    url: str = ""
+    """The server's address as `study serve` prints it, e.g. http://127.0.0.1:8000."""
+    db: str | None = None
+    """The server's SQLite database on this machine (only read): the dataset and split default to the study's, and
+    with `--improve-candidates generated` the participants learn from it what the server generated. Without --db and
+    --data they answer at random."""
+    data: str | None = None
+    """The study's dataset directory (default: the one --db was created with): the participants answer as synthetic
+    humans over its features."""
+    split: str | None = None
+    """The study split (default: the --db study's, else test)."""
+    generated: str | None = None
+    """The server's dataset of generated trajectories (`study serve --generated`); default `DB.generated/` beside
+    --db, as the server's."""

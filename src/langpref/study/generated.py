@@ -24,12 +24,14 @@ Where things live and how a restart continues:
   says what it is. Its video is then rendered like any other (`langpref.study.videos`).
 - Until then its video is answered 503 with Retry-After (`langpref.study.app`), and the page says the robot is making
   a new trajectory; an answer about a trajectory that is not made yet is answered 503 the same way (`NotReady`).
-- The `--on-show` hook is not run for generated trajectories (it is given dataset indices).
+- The `--on-show` hook (`langpref.study.hook`) runs for a generated trajectory once it is made, given its index in
+  the generated dataset; simulated participants (`langpref.study.simulate`) read its features from there.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import multiprocessing
 import os
 import threading
@@ -51,6 +53,8 @@ from langpref.study.config import StudyConfig
 if TYPE_CHECKING:
     from langpref.study.engine import StudyEngine
     from langpref.study.flow import Participant
+
+log = logging.getLogger("langpref.study")
 
 
 class NotReady(LangprefError):
@@ -155,7 +159,8 @@ class Made:
 
 class Generator:
     """The generated candidates of one study: ids, the job queue and its worker, the store and the `generated` rows.
-    `on_made(id)` is called (from the generator's thread) when a trajectory is stored: the video cache renders it."""
+    Each of `on_made` is called with the id (from the generator's thread) when a trajectory is stored: the video
+    cache renders it, the `--on-show` hook runs for it."""
 
     def __init__(
         self,
@@ -179,7 +184,7 @@ class Generator:
             engine.dataset.meta.horizon,
             {"source": self.data_dir, "command": "study serve", "db": str(Path(db_path).resolve())},
         )
-        self.on_made: Callable[[int], None] | None = None
+        self.on_made: list[Callable[[int], None]] = []
         self._made: dict[int, Made] = {}
         self._queue: deque[Job] = deque()
         self._running: Job | None = None
@@ -278,6 +283,12 @@ class Generator:
             return "failed", failed
         return "unknown", None
 
+    def store_index(self, index: int) -> int | None:
+        """The index in the store of generated trajectory `index` once it is made; None until then."""
+        with self._cond:
+            made = self._made.get(int(index))
+        return None if made is None else made.store_index
+
     def phi(self, index: int) -> np.ndarray:
         """phi of a dataset row or of a generated trajectory made; NotReady while it is being made."""
         index = int(index)
@@ -350,8 +361,12 @@ class Generator:
                 with self._cond:
                     self._running = None
                     self._cond.notify_all()
-            if job.id in self._made and self.on_made is not None:
-                self.on_made(job.id)
+            if job.id in self._made:
+                for listener in self.on_made:
+                    try:
+                        listener(job.id)
+                    except Exception:  # noqa: BLE001 (a listener's failure must not stop the generator)
+                        log.exception("after generated trajectory %d was made", job.id)
 
     def _job_input(self, job: Job) -> dict[str, Any]:
         """What the worker needs: the objective (phi^t, psi_l), where the search starts (the participant's best

@@ -10,12 +10,17 @@ and run WITHOUT a shell; nothing a participant sends ever becomes command text. 
 explicit shell: `--on-show "sh -c 'replay.sh && beep'"`. What to show comes in the environment (the server's own,
 plus):
 
-    LANGPREF_TRAJECTORY   the trajectory's index in the dataset
-    LANGPREF_EPISODE      its recording's episode name (`Trajectory.source`); empty for a simulated dataset
+    LANGPREF_TRAJECTORY   the trajectory's index in the dataset LANGPREF_DATA
+    LANGPREF_EPISODE      its recording's episode name (`Trajectory.source`); empty for a simulated dataset and
+                          for a generated trajectory
     LANGPREF_PARTICIPANT  the participant's id (made by the server)
-    LANGPREF_DATA         the dataset directory (absolute)
+    LANGPREF_DATA         the dataset directory (absolute): the study's, or for a trajectory Study 1 made in the
+                          simulator (`--improve-candidates generated`) the generated dataset (default DB.generated/)
     LANGPREF_KIND         the step's kind: language, comparison, satisfaction or rating
     LANGPREF_POSITION     the trajectory's place among the step's videos (0; 0 or 1 in a comparison)
+
+A generated trajectory cannot be shown before the simulator has made it: its run waits aside (counted in the queue's
+bound, holding no thread) and joins the queue when it is made, so it may run after runs of steps handed out later.
 
 Hooks run one at a time, in the order steps were handed out (one robot replays one trajectory at a time), in one
 background thread; a request only appends to a bounded queue, so a slow or failing hook never delays a step, an
@@ -36,11 +41,13 @@ import threading
 import time
 from collections import Counter, deque
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from langpref.dataset.storage import Dataset
+    from langpref.study.generated import Generator
 
 log = logging.getLogger("langpref.study")
 STATUSES = ("ok", "failed", "timeout", "error", "skipped")
@@ -65,6 +72,9 @@ class ShowEvent:
     kind: str
     position: int
     trajectory: int
+    """Its index in the study's dataset, or for a generated trajectory in the generated dataset `data`."""
+    data: str | None = None
+    """The generated dataset (absolute) of a generated trajectory; None: the study's dataset."""
 
 
 @dataclass(frozen=True)
@@ -97,6 +107,9 @@ class ShowHook:
         self._counts: Counter[str] = Counter()
         self._handed_out: set[tuple[str, int]] = set()
         self._episodes: dict[int, str | None] = {}
+        self.generated: Generator | None = None
+        self._waiting: dict[int, list[ShowEvent]] = {}
+        """Generated trajectory id -> the runs waiting for the simulator to make it."""
         self._running: ShowEvent | None = None
         self._proc: subprocess.Popen[bytes] | None = None
         self._stopped = False
@@ -104,17 +117,24 @@ class ShowHook:
         self._thread = threading.Thread(target=self._run, name="on-show-hook", daemon=True)
         self._thread.start()
 
+    def attach(self, generated: Generator) -> None:
+        """Run for Study 1's generated trajectories too, each once the simulator has made it."""
+        self.generated = generated
+        generated.on_made.append(self._made)
+
     # ---- request side (never blocks, never raises for a hook's sake) ----
 
     def show(self, participant: str, seq: int, kind: str, trajectories: Sequence[int]) -> None:
-        """Queue the hook for each trajectory of a step handed out to a participant (once per step)."""
+        """Queue the hook for each trajectory of a step handed out to a participant (once per step); a generated
+        trajectory not made yet waits aside until it is."""
         with self._cond:
             if not trajectories or (participant, seq) in self._handed_out or self._stopped:
                 return
             self._handed_out.add((participant, seq))
             for position, index in enumerate(trajectories):
                 event = ShowEvent(participant, seq, kind, position, int(index))
-                if len(self._queue) >= self.queue_size:
+                waiting = sum(map(len, self._waiting.values()))
+                if len(self._queue) + waiting >= self.queue_size:
                     self._record(
                         HookRun(
                             event,
@@ -126,8 +146,29 @@ class ShowHook:
                             f"{self.queue_size} runs were already waiting",
                         )
                     )
+                elif self.generated is not None and self.generated.owns(index):
+                    # checked under our lock: `_made` takes it too, so no run is left waiting for a made trajectory
+                    row = self.generated.store_index(index)
+                    if row is None:
+                        self._waiting.setdefault(int(index), []).append(event)
+                    else:
+                        self._queue.append(self._in_store(event, row))
                 else:
                     self._queue.append(event)
+            self._cond.notify_all()
+
+    def _in_store(self, event: ShowEvent, row: int) -> ShowEvent:
+        """The run of a generated trajectory, made: its index in the generated dataset, and that dataset."""
+        return replace(event, trajectory=row, data=str(Path(self.generated.store.root).resolve()))
+
+    def _made(self, index: int) -> None:
+        """The simulator has made generated trajectory `index`: queue the runs waiting for it (generator thread)."""
+        row = self.generated.store_index(index)
+        with self._cond:
+            events = self._waiting.pop(int(index), [])
+            if row is None or self._stopped:
+                return
+            self._queue.extend(self._in_store(e, row) for e in events)
             self._cond.notify_all()
 
     def status(self) -> dict[str, Any]:
@@ -138,21 +179,23 @@ class ShowHook:
                 "command": self.command,
                 "timeout_s": self.timeout_s,
                 "queued": len(self._queue),
+                "waiting_for_generation": sum(map(len, self._waiting.values())),
                 "running": asdict(self._running) if self._running else None,
                 "counts": {s: self._counts[s] for s in STATUSES},
                 "recent": [r.to_json() for r in reversed(self._recent)],
             }
 
     def wait(self, timeout: float = 60.0) -> bool:
-        """Wait until nothing waits or runs (tests, shutdown)."""
+        """Wait until nothing waits (for its turn or for a generated trajectory) or runs (tests, shutdown)."""
         with self._cond:
-            return self._cond.wait_for(lambda: not self._queue and self._running is None, timeout)
+            return self._cond.wait_for(lambda: not self._queue and not self._waiting and self._running is None, timeout)
 
     def close(self) -> None:
         """Stop: drop what waits, kill a running hook's process group, end the thread."""
         with self._cond:
             self._stopped = True
             self._queue.clear()
+            self._waiting.clear()
             if self._proc is not None:
                 _kill_group(self._proc)
             self._cond.notify_all()
@@ -200,13 +243,13 @@ class ShowHook:
 
     def _execute(self, event: ShowEvent) -> HookRun:
         """Run the command for one event, its output into a temporary file (a pipe could block on a grandchild)."""
-        episode = self._episode(event.trajectory)
+        episode = None if event.data else self._episode(event.trajectory)  # a generated one has no recording
         env = {
             **os.environ,
             "LANGPREF_TRAJECTORY": str(event.trajectory),
             "LANGPREF_EPISODE": episode or "",
             "LANGPREF_PARTICIPANT": event.participant,
-            "LANGPREF_DATA": str(self.dataset.root.resolve()),
+            "LANGPREF_DATA": event.data or str(self.dataset.root.resolve()),
             "LANGPREF_KIND": event.kind,
             "LANGPREF_POSITION": str(event.position),
         }

@@ -105,6 +105,8 @@ def build_state(
         generated = Generator(engine, cfg.study, cfg.db, store, cfg.model, cfg.data)
         videos.attach(generated)
     hook = ShowHook(cfg.on_show, engine.dataset, cfg.on_show_timeout) if cfg.on_show else None
+    if hook is not None and generated is not None:
+        hook.attach(generated)
     token = admin_token or cfg.resolve_admin_token() or secrets.token_urlsafe(24)
     return StudyApp(
         cfg.db, engine, videos, token, cfg.study, hook=hook, allowed_origins=cfg.allowed_origins, generated=generated

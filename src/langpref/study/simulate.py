@@ -3,11 +3,21 @@
 Each simulated participant is a thread with its own HTTP connection. It answers surveys with random valid answers
 and, when it is given the dataset, answers the robot like the library's synthetic humans (`langpref.feedback.language`
 and `.comparison`): a random reward w over the normalised features, language feedback by Eq. 10 with the bank's test
-phrasings, comparisons by Eq. 11, "satisfied" once the shown trajectory is within 10% of the best of the study set,
-and ratings 1 + 4 x the normalised reward. It reads which trajectory a video shows from the video's name
-(`trajNNNNNN-...`), a shortcut only a simulation takes. Without the dataset it answers at random. The time per query
-it reports is the time it really took from receiving the step to sending the answer (its optional think time
-included).
+phrasings, comparisons by Eq. 11, "satisfied" once the shown trajectory is within 10% of the best of the study set
+(`satisfied_at`), and ratings 1 + 4 x the normalised reward. It reads which trajectory a video shows from the
+video's name (`trajNNNNNN-...`, `genNNNNNN-...`), a shortcut only a simulation takes. Without the dataset it answers
+at random. The time per query it reports is the time it really took from receiving the step to sending the answer
+(its optional think time included). A participant's reward is fixed by the seed and its number: w =
+`sample_weights(D, np.random.default_rng([seed, number]))`.
+
+Study 1 with generated candidates (`study serve --improve-candidates generated`): the trajectories the server makes in
+the simulator are numbered from len(dataset) on (videos `genNNNNNN-...`). Given the server's database (`db`; the
+simulation runs on the server's machine), a simulated participant looks each one up in its table `generated` (id ->
+index in the generated dataset, default `DB.generated/`) and reads its features there, scaled with the study set's
+train-split `FeatureScale`, so it answers about it by Eq. 10, satisfaction and rating like about any other. One the
+server has not made yet is waited for as the page waits for it: its video is asked for again after each 503's
+Retry-After until it plays. Any answer the server refuses with 503 and Retry-After is sent again after that many
+seconds (never longer, never past the deadline).
 """
 
 from __future__ import annotations
@@ -15,13 +25,16 @@ from __future__ import annotations
 import re
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-_INDEX = re.compile(r"/videos/traj(\d{6})-")
+from langpref.errors import LangprefError
+
+_INDEX = re.compile(r"/videos/(?:traj|gen)(\d{6})-")
 
 
 @dataclass
@@ -29,30 +42,90 @@ class SimConfig:
     participants: int = 20
     """Simulated participants, all started at once."""
     seed: int = 0
+    """Seed of the synthetic humans (participant k's reward and answers come from the seed and k)."""
     think_ms: tuple[float, float] = (0.0, 0.0)
-    """Uniform range of the pause before each answer (0, 0: answer at once, the heaviest load)."""
+    """Uniform range of the pause before each answer in ms, LO,HI (0,0: answer at once, the heaviest load)."""
     timeout_s: float = 60.0
-    """Per request."""
+    """Seconds a request may take."""
     deadline_s: float = 600.0
-    """The whole run stops by itself after this long."""
+    """Seconds after which the whole run stops by itself."""
+    temperature: float = 1.0
+    """Temperature of the synthetic humans' Eq. 10 (1: the paper's); near 0 they name the feature whose change
+    raises their reward most."""
+    satisfied_at: float = 0.9
+    """Study 1: a synthetic human is satisfied with a trajectory whose normalised reward is at least this (0: the
+    worst, 1: the best of the study set; a generated trajectory can exceed 1)."""
 
 
 class _World:
-    """What a simulated participant knows: normalised features of the study set and the bank's test phrasings."""
+    """What a simulated participant knows: normalised features of the study set (rows of `theta` in dataset order)
+    and the bank's test phrasings; given the server's database, also those of the trajectories the server generates
+    (`row` appends them as they are made)."""
 
-    def __init__(self, data_dir: str | Path, split: str):
+    def __init__(
+        self, data_dir: str | Path, split: str, db: str | Path | None = None, generated_dir: str | Path | None = None
+    ):
         from langpref.dataset.storage import load_dataset
         from langpref.feedback.space import FeatureScale, phrase_table
         from langpref.language.bank import load_bank
 
         ds = load_dataset(data_dir)
         feats = np.asarray(ds.features, dtype=np.float64)
-        self.theta = FeatureScale.fit(feats[ds.split("train")])(feats)
+        self.dataset = ds
+        self.scale = FeatureScale.fit(feats[ds.split("train")])
+        self.theta = self.scale(feats)
         self.study = np.arange(len(ds)) if split == "all" else np.asarray(ds.split(split))
         self.feature_names = ds.feature_names
         self.phrases = phrase_table(
             load_bank(ds.env), "test", ds.feature_names, lambda texts: np.zeros((len(texts), 1))
         )
+        self.db = None if db is None else Path(db)
+        self.generated_dir = Path(generated_dir) if generated_dir else Path(f"{db}.generated") if db else None
+        self._rows: dict[int, int] = {}
+        self._lock = threading.Lock()
+
+    def row(self, index: int) -> int | None:
+        """The row of `theta` of trajectory `index` as the server numbers it: a dataset index is its own row; a
+        generated one (index >= len(dataset)) gets a row once the server has made it, None until then."""
+        index = int(index)
+        if index < len(self.dataset):
+            return index
+        with self._lock:
+            if index not in self._rows:
+                self._read_generated(index)
+            return self._rows.get(index)
+
+    def _read_generated(self, index: int) -> None:
+        """Append the rows of the generated trajectories made since the last look (call with `_lock` held): the
+        database's table `generated` says where each is in the generated dataset, whose trajectories have the study
+        set's task and horizon (`GeneratedStore` refuses others), so the study set's metadata reads them (its own
+        meta.json is rewritten as it grows, a trajectory file never is)."""
+        from langpref.dataset.storage import load_trajectory
+        from langpref.study import db as sdb
+
+        if self.db is None or self.generated_dir is None:
+            raise LangprefError(
+                f"the server shows trajectory {index}, one it generated (--improve-candidates generated): give the "
+                "simulation the server's --db (and --generated DIR if the server was given one)"
+            )
+        conn = sdb.open_existing(self.db)
+        try:
+            made = conn.execute("SELECT id, store_index FROM generated ORDER BY id").fetchall()
+        finally:
+            conn.close()
+        new = [(int(r["id"]), int(r["store_index"])) for r in made if int(r["id"]) not in self._rows]
+        if not new:
+            return
+        try:
+            feats = [load_trajectory(self.generated_dir, k, self.dataset.meta).features for _, k in new]
+        except LangprefError as exc:
+            raise LangprefError(
+                f"{self.db} lists generated trajectories that {self.generated_dir} cannot give ({exc}); pass the "
+                "--generated DIR the server stores them in"
+            ) from None
+        first = len(self.theta)
+        self.theta = np.concatenate([self.theta, self.scale(np.asarray(feats))])  # a new array: readers keep theirs
+        self._rows.update({i: first + n for n, (i, _) in enumerate(new)})
 
 
 def _answer_survey(step: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
@@ -86,29 +159,76 @@ class SimParticipant:
         self.world = world
         self.latency: dict[str, list[float]] = {}
         self.answers = 0
+        self.retries = 0
         self.errors: list[str] = []
         self.participant_id = ""
+        self.pause: Callable[[float], None] = time.sleep
+        """How the participant waits for a Retry-After (a test records the pauses instead)."""
         if world is not None:
-            from langpref.feedback.comparison import ComparisonHuman
             from langpref.feedback.humans import sample_weights
-            from langpref.feedback.language import LanguageHuman
 
-            w = sample_weights(world.theta.shape[1], self.rng)
-            self.reward = world.theta @ w
-            ref = self.reward[world.study]
-            self.norm = (self.reward - ref.min()) / max(float(ref.max() - ref.min()), 1e-12)
-            self.lang = LanguageHuman(w, world.theta, world.phrases, world.study, world.feature_names, 1.0, self.rng)
-            self.comp = ComparisonHuman(w, world.theta, 1.0, self.rng)
+            self.w = sample_weights(world.theta.shape[1], self.rng)
+            self._meet(world.theta)
 
-    @staticmethod
-    def _shown(step: dict[str, Any]) -> list[int]:
-        return [int(m.group(1)) for m in map(_INDEX.search, step["videos"]) if m]
+    def _meet(self, theta: np.ndarray) -> None:
+        """The synthetic human over `theta` (the world's rows so far): its reward, the reward normalised over the
+        study set (0 worst, 1 best), its Eq. 10 and Eq. 11 answerers; made again when the world gains rows."""
+        from langpref.feedback.comparison import ComparisonHuman
+        from langpref.feedback.language import LanguageHuman
 
-    def _body(self, step: dict[str, Any], received: float) -> dict[str, Any]:
+        world, cfg = self.world, self.cfg
+        self.theta = theta
+        self.reward = theta @ self.w
+        ref = self.reward[world.study]
+        self.norm = (self.reward - ref.min()) / max(float(ref.max() - ref.min()), 1e-12)
+        self.lang = LanguageHuman(
+            self.w, theta, world.phrases, world.study, world.feature_names, cfg.temperature, self.rng
+        )
+        self.comp = ComparisonHuman(self.w, theta, 1.0, self.rng)
+
+    def _rows(self, step: dict[str, Any], stop_at: float) -> list[int] | None:
+        """The world's rows of the trajectories a step shows. A generated one the server has not made yet is waited
+        for as the page waits for it (its video, asked for again after each 503's Retry-After); None when the
+        deadline came first."""
+        urls = [u for u in step["videos"] if _INDEX.search(u)]
+        while True:
+            rows = [self.world.row(int(_INDEX.search(u).group(1))) for u in urls]
+            if None not in rows:
+                if len(self.world.theta) > len(self.theta):
+                    self._meet(self.world.theta)
+                return rows
+            url = urls[rows.index(None)]
+            r = self.client.get(url)
+            if r.status_code == 200:
+                if self.world.row(int(_INDEX.search(url).group(1))) is None:
+                    raise LangprefError(
+                        f"{url} plays, but the server's database {self.world.db} has no row for it in "
+                        f"{self.world.generated_dir}: pass the --db and --generated the server runs with"
+                    )
+            elif r.status_code != 503 or not self._wait(r, stop_at):
+                self.errors.append(f"waiting for {url}: {r.status_code} {r.text[:200]}")
+                return None
+
+    def _wait(self, response: Any, stop_at: float) -> bool:
+        """Wait as a 503's Retry-After (seconds) asks, never longer nor past the deadline; False when it names no
+        wait or the deadline has come."""
+        try:
+            seconds = max(0.0, float(response.headers["Retry-After"]))
+        except (KeyError, ValueError):
+            return False
+        left = stop_at - time.time()
+        if left <= 0:
+            return False
+        self.retries += 1
+        self.pause(min(seconds, left))
+        return True
+
+    def _body(self, step: dict[str, Any], received: float, shown: list[int]) -> dict[str, Any]:
+        """The answer to a step; `shown` are the world's rows of its trajectories (empty without a world)."""
         from langpref.feedback.comparison import ComparisonQuery
         from langpref.feedback.language import LanguageQuery
 
-        kind, shown, rng, world = step["kind"], self._shown(step), self.rng, self.world
+        kind, rng, world = step["kind"], self.rng, self.world
         if kind == "survey":
             return _answer_survey(step, rng)
         lo, hi = self.cfg.think_ms
@@ -126,8 +246,10 @@ class SimParticipant:
             choice = self.comp.answer(ComparisonQuery(*shown)).choice if world else int(rng.integers(2))
             return {"choice": int(choice), "client_ms": round(client_ms, 1), "seq": step["seq"]}
         if kind == "satisfaction":
-            return {"satisfied": bool(self.norm[shown[0]] >= 0.9) if world else bool(rng.random() < 0.3)}
-        return {"rating": int(1 + round(4 * self.norm[shown[0]])) if world else int(rng.integers(1, 6))}
+            satisfied = self.norm[shown[0]] >= self.cfg.satisfied_at if world else rng.random() < 0.3
+            return {"satisfied": bool(satisfied)}
+        rating = np.clip(1 + round(4 * self.norm[shown[0]]), 1, 5) if world else rng.integers(1, 6)
+        return {"rating": int(rating)}
 
     def run(self, stop_at: float) -> None:
         try:
@@ -143,9 +265,15 @@ class SimParticipant:
                     self.errors.append("deadline reached")
                     return
                 received = time.perf_counter()
-                body = {**self._body(step, received), "seq": step["seq"]}  # every answer names its step
-                t0 = time.perf_counter()
-                r = self.client.post(f"{path}/answer", json=body, headers=headers)
+                shown = self._rows(step, stop_at) if self.world is not None else []
+                if shown is None:
+                    return
+                body = {**self._body(step, received, shown), "seq": step["seq"]}  # every answer names its step
+                while True:  # an answer the server cannot take yet (503, Retry-After) is sent again
+                    t0 = time.perf_counter()
+                    r = self.client.post(f"{path}/answer", json=body, headers=headers)
+                    if r.status_code != 503 or not self._wait(r, stop_at):
+                        break
                 self.latency.setdefault(step["kind"], []).append((time.perf_counter() - t0) * 1000.0)
                 if r.status_code != 200:
                     self.errors.append(f"{r.status_code} {r.text[:200]}")
@@ -158,16 +286,37 @@ class SimParticipant:
             self.client.close()
 
 
+def study_of(db: str | Path) -> dict[str, Any]:
+    """The dataset directory (`data`) and study split (`split`) the study in `db` was created with."""
+    from langpref.study import db as sdb
+
+    conn = sdb.open_existing(db)
+    try:
+        meta = sdb.read_meta(conn)
+    finally:
+        conn.close()
+    return {"data": meta.get("data"), "split": (meta.get("study") or {}).get("split")}
+
+
 def percentile(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
 def simulate(
-    base_url: str, cfg: SimConfig | None = None, data_dir: str | Path | None = None, split: str = "test"
+    base_url: str,
+    cfg: SimConfig | None = None,
+    data_dir: str | Path | None = None,
+    split: str = "test",
+    db: str | Path | None = None,
+    generated_dir: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Run `cfg.participants` simulated participants at once against a study server; latency per answer kind."""
+    """Run `cfg.participants` simulated participants at once against a study server; latency per answer kind.
+
+    With `data_dir` (the server's dataset) and `split` (its study split) they answer as synthetic humans, else at
+    random. `db` is the server's database, read (never written) for the trajectories it generates with
+    `--improve-candidates generated`, whose dataset is `generated_dir` (default `DB.generated/`, as the server's)."""
     cfg = cfg or SimConfig()
-    world = _World(data_dir, split) if data_dir is not None else None
+    world = _World(data_dir, split, db, generated_dir) if data_dir is not None else None
     sims = [SimParticipant(base_url, cfg, i, world) for i in range(cfg.participants)]
     stop_at = time.time() + cfg.deadline_s
     threads = [threading.Thread(target=s.run, args=(stop_at,), daemon=True) for s in sims]
@@ -191,6 +340,7 @@ def simulate(
         "participants": cfg.participants,
         "completed": sum(1 for s in sims if not s.errors),
         "answers": sum(s.answers for s in sims),
+        "retries": sum(s.retries for s in sims),
         "wall_s": wall,
         "latency": latency,
         "errors": [e for s in sims for e in s.errors][:20],

@@ -138,7 +138,7 @@ class VideoCache:
         self.generated = generated
         ident = {"tag": self.tag, "store": str(Path(generated.store.root).resolve())}
         self.gen_tag = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:10]
-        generated.on_made = self.request
+        generated.on_made.append(self.request)
 
     def _is_generated(self, index: int) -> bool:
         return self.generated is not None and self.generated.owns(index)

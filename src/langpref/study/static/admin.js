@@ -119,7 +119,8 @@ function showHooks(h) {
     `${h.command} (timeout ${h.timeout_s} s): ${c.ok} ok, ${failures} not ok` +
     (failures ? ` (${c.failed} exit non-zero, ${c.timeout} timed out, ${c.error} could not start, ` +
                 `${c.skipped} skipped: queue full)` : "") +
-    `; ${h.queued} waiting` + (h.running ? `, running for trajectory ${h.running.trajectory}` : "") + ".";
+    `; ${h.queued} waiting` + (h.waiting_for_generation ? `, ${h.waiting_for_generation} for the simulator` : "") +
+    (h.running ? `, running for trajectory ${h.running.trajectory}` : "") + ".";
   const body = document.querySelector("#hook-runs tbody");
   body.replaceChildren();
   for (const r of h.recent) {
@@ -129,7 +130,8 @@ function showHooks(h) {
     const output = cell(r.output);
     output.className = "hook-output";
     tr.append(cell(when(r.started_at)), cell(r.participant.slice(0, 8) + "\u2026"), cell(`${r.kind} (#${r.seq})`),
-              cell(r.kind === "comparison" ? `${r.trajectory} (${"AB"[r.position]})` : r.trajectory), cell(r.episode), status,
+              cell(r.kind === "comparison" ? `${r.trajectory} (${"AB"[r.position]})`
+                   : r.data ? `generated ${r.trajectory}` : r.trajectory), cell(r.episode), status,
               cell(r.returncode), cell(r.seconds.toFixed(1)), output);
     body.append(tr);
   }
