@@ -318,6 +318,7 @@ class LearnRewardConfig:
         return query_costs(self.language_seconds, self.comparison_seconds)
 
     def validate(self) -> None:
+        from langpref.feedback.posterior import require_linear
         from langpref.feedback.selection import check_strategy
 
         if self.feedback not in feedback_choices():
@@ -326,11 +327,7 @@ class LearnRewardConfig:
         if self.query_batch is not None and self.query_batch < 1:
             raise LangprefError(f"query_batch must be >= 1, got {self.query_batch}")
         query_costs(self.language_seconds, self.comparison_seconds)
-        if self.selection != "random" and self.reward.model != "linear":
-            raise LangprefError(
-                f"query selection {self.selection!r} needs the linear reward model; the "
-                f"{self.reward.model} reward only works with random queries"
-            )
+        require_linear(self.reward.model, self.selection)
         if self.candidates is not None and self.candidates < 2:
             raise LangprefError(f"candidates must be >= 2, got {self.candidates}")
         if self.posterior_samples is not None and self.posterior_samples < 2:

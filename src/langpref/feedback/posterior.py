@@ -75,13 +75,18 @@ def loss_hessian(xi: np.ndarray, d: np.ndarray, weights: np.ndarray, weight_deca
     return h
 
 
+def require_linear(model: str, strategy: str = "active") -> None:
+    """Active query selection samples the Laplace posterior of the linear r_xi; any other reward model is refused."""
+    if strategy != "random" and model != "linear":
+        raise LangprefError(
+            f"query selection {strategy!r} needs the linear reward model (a Laplace posterior); the {model} "
+            "reward only works with --query-selection random"
+        )
+
+
 def laplace_posterior(learner: RewardLearner) -> LaplacePosterior:
     """The Laplace approximation of the linear learner's posterior at its current fit (call `fit` first)."""
-    if learner.cfg.model != "linear":
-        raise LangprefError(
-            f"active query selection needs the linear reward model (a Laplace posterior); the "
-            f"{learner.cfg.model} reward only works with --query-selection random"
-        )
+    require_linear(learner.cfg.model)
     xi = learner.params[0].detach().numpy().astype(np.float64, copy=True)
     d, weights = pair_arrays(learner)
     total = float(weights.sum()) if len(weights) else 0.0

@@ -56,7 +56,7 @@ import numpy as np
 
 from langpref.errors import LangprefError
 from langpref.feedback.batch import Scored, comparison_candidates, language_candidates, pick
-from langpref.feedback.posterior import laplace_posterior
+from langpref.feedback.posterior import laplace_posterior, require_linear
 
 if TYPE_CHECKING:
     from langpref.feedback.kind import FeedbackKind
@@ -345,11 +345,7 @@ def make_selector(
 ) -> Selector | None:
     """The selector of `strategy` for feedback `kind`; None for `random` (the caller draws uniformly)."""
     check_strategy(strategy, kind.name)
-    if strategy != "random" and reward.model != "linear":
-        raise LangprefError(
-            f"query selection {strategy!r} needs the linear reward model (a Laplace posterior); "
-            f"the {reward.model} reward only works with random queries"
-        )
+    require_linear(reward.model, strategy)
     samples = DEFAULT_SAMPLES if samples is None else int(samples)
     if strategy == "random":
         return None
