@@ -412,12 +412,12 @@ def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
     """The active strategy of `cfg` (None for random: the loop draws uniformly)."""
     from langpref.feedback.selection import make_selector
 
-    if cfg.feedback == MIXED:
-        from langpref.feedback.mixed import make_mixed_selector
+    if cfg.feedback == MIXED:  # validate() has checked the strategy (infogain) and the linear reward
+        from langpref.feedback.mixed import MixedInfoGain
+        from langpref.feedback.selection import DEFAULT_SAMPLES
 
-        return make_mixed_selector(
-            cfg.selection, space, pool, cfg.reward, cfg.costs, cfg.candidates, cfg.posterior_samples
-        )
+        samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
+        return MixedInfoGain(space, pool, cfg.reward, cfg.costs, cfg.candidates, samples)
     kind = get_kind(cfg.feedback)
     return make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
 

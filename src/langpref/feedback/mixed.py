@@ -28,20 +28,13 @@ import numpy as np
 from langpref.feedback.batch import Scored, join
 from langpref.feedback.kind import MIXED, MIXED_KINDS
 from langpref.feedback.posterior import laplace_posterior
-from langpref.feedback.selection import (
-    DEFAULT_SAMPLES,
-    ComparisonActive,
-    LanguageInfoGain,
-    Selector,
-    candidate_rows,
-    check_strategy,
-)
+from langpref.feedback.selection import DEFAULT_SAMPLES, ComparisonActive, LanguageInfoGain, Selector, candidate_rows
 
 if TYPE_CHECKING:
     from langpref.feedback.space import LatentSpace
     from langpref.reward import RewardConfig, RewardLearner
 
-__all__ = ["MIXED", "MIXED_KINDS", "MixedInfoGain", "make_mixed_selector"]
+__all__ = ["MIXED", "MIXED_KINDS", "MixedInfoGain"]
 
 
 class MixedInfoGain(Selector):
@@ -62,24 +55,11 @@ class MixedInfoGain(Selector):
         self.candidates = candidates
         self.samples = int(samples)
         self.costs = dict(costs)
-        self.language = LanguageInfoGain(space, pool, reward, candidates, samples)
-        self.comparison = ComparisonActive(space, pool, "infogain", candidates, samples)
+        # only their `scored` is used, on this selector's candidates and draws
+        self.language = LanguageInfoGain(space, pool, reward)
+        self.comparison = ComparisonActive(space, pool, "infogain")
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         rows = candidate_rows(self.pool, self.candidates, rng)
         xi = laplace_posterior(learner).sample(self.samples, rng)
         return join([self.language.scored(xi, rows), self.comparison.scored(xi, rows)], self.costs)
-
-
-def make_mixed_selector(
-    strategy: str,
-    space: LatentSpace,
-    pool: Sequence[int],
-    reward: RewardConfig,
-    costs: Mapping[str, float],
-    candidates: int | None = None,
-    samples: int | None = None,
-) -> MixedInfoGain:
-    """The mixed learner's selector (`strategy` must be `infogain`; the linear reward, for its Laplace posterior)."""
-    check_strategy(strategy, MIXED)
-    return MixedInfoGain(space, pool, reward, costs, candidates, DEFAULT_SAMPLES if samples is None else samples)
