@@ -82,12 +82,21 @@ def worker_space(
 
 
 def run_sweep(
-    job_fn, todo: list, space, space_args: tuple, cache: RunCache, sweep: SweepConfig, desc: str, progress: bool
+    job_fn,
+    todo: list,
+    space,
+    space_args: tuple,
+    cache: RunCache,
+    sweep: SweepConfig,
+    desc: str,
+    progress: bool,
+    setup=worker_space,
 ) -> None:
     """Run every job of `todo` and store each result in `cache` as it finishes (a rerun skips what is there).
 
-    In-process runs use `space` as it is; worker processes and Ray tasks rebuild it from `space_args` (data, model,
-    env, perfect), so on a cluster every node needs the dataset and the model at the same paths.
+    In-process runs use `space` as it is; worker processes and Ray tasks rebuild it with `setup(*space_args)` (by
+    default `worker_space`: data, model, env, perfect), so on a cluster every node needs the dataset and the model at
+    the same paths.
     """
     from tqdm import tqdm
 
@@ -99,7 +108,7 @@ def run_sweep(
         results = run_jobs(
             job_fn,
             todo,
-            setup=worker_space,
+            setup=setup,
             setup_args=space_args,
             backend=sweep.backend,
             workers=sweep.workers,

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.common import RunCache, SweepConfig, command_line, default_paths, figure_link
+from langpref.experiments.common import RunCache, SweepConfig, command_line, default_paths, figure_link, run_sweep
 
 CURVES = {
     "paper": ("paper", "test"),
@@ -91,11 +91,7 @@ def run_generate_experiment(
     sweep: SweepConfig | None = None,
 ) -> dict[str, Any]:
     """Both comparisons (module docstring) with `config` (an `ImproveConfig`: seeds, iterations, the human)."""
-    import sys
 
-    from tqdm import tqdm
-
-    from langpref.backends import run_jobs
     from langpref.improve import ImproveConfig, ImprovementRun, generation_stats, plot_improvement
     from langpref.improve import summarise as summarise_runs
     from langpref.reward import Curves, LearnRewardConfig
@@ -120,20 +116,7 @@ def run_generate_experiment(
     todo = [(f"{n}/{s}", c, (c.seed, s)) for n, c in cfgs.items() for s in range(c.seeds)]
     todo += [(f"reward/{h}/{s}", rcfg, (rcfg.seed, h, s)) for h in range(rcfg.humans) for s in range(rcfg.seeds)]
     todo = [j for j in todo if j[0] not in cache]
-    if sweep.backend == "local" and sweep.workers <= 1:
-        results = (_job((space, generation), j) for j in todo)
-    else:
-        results = run_jobs(
-            _job,
-            todo,
-            setup=_worker,
-            setup_args=args,
-            backend=sweep.backend,
-            workers=sweep.workers,
-            ray_address=sweep.ray_address,
-        )
-    for key, value in tqdm(results, total=len(todo), desc=f"generate {env}", disable=not progress, file=sys.stderr):
-        cache.put(key, value)
+    run_sweep(_job, todo, (space, generation), args, cache, sweep, f"generate {env}", progress, setup=_worker)
     improve = {}
     for name, cfg in cfgs.items():
         runs = [ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]
