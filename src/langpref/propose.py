@@ -112,10 +112,12 @@ class Surrogate:
 
 def model_embedder(model) -> Embedder:
     """phi of a rollout from a trained `LatentModel`'s trajectory encoder (as `encode_dataset` embeds the dataset; a
-    model that sees images renders the rollout's frames from its simulator states)."""
+    model that sees images renders the rollout's frames from its simulator states, in the process's live env of the
+    task (`_env`), not a new one per rollout)."""
 
     def embed(traj) -> np.ndarray:
-        phi = model.encode_rollouts([traj])
+        env = _env(model.info.env, traj.horizon) if model.sees_images else None
+        phi = model.encode_rollouts([traj], env=env)
         return phi.detach().cpu().numpy().astype(np.float64)[0]
 
     return embed

@@ -164,3 +164,9 @@ def test_downstream_takes_a_model_of_generated_frames_as_a_state_model(tmp_path,
     np.testing.assert_allclose(space.phi, model.encode_dataset(dataset).double().numpy())
     rollouts = [dataset.load(i) for i in dataset.split("test")]
     torch.testing.assert_close(model.encode_rollouts(rollouts), model.encode_dataset(dataset, "test"))
+    from langpref.propose import model_embedder
+
+    embed = model_embedder(model)  # generation's embedder renders in one live env, reused between rollouts
+    phi = np.stack([embed(t) for t in rollouts + rollouts[:1]])
+    np.testing.assert_allclose(phi[:-1], model.encode_dataset(dataset, "test").double().numpy(), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(phi[-1], phi[0], rtol=1e-6, atol=1e-6)
