@@ -133,8 +133,7 @@ class ShowHook:
             self._handed_out.add((participant, seq))
             for position, index in enumerate(trajectories):
                 event = ShowEvent(participant, seq, kind, position, int(index))
-                waiting = sum(map(len, self._waiting.values()))
-                if len(self._queue) + waiting >= self.queue_size:
+                if len(self._queue) + self._waiting_runs() >= self.queue_size:
                     self._record(
                         HookRun(
                             event,
@@ -156,6 +155,10 @@ class ShowHook:
                 else:
                     self._queue.append(event)
             self._cond.notify_all()
+
+    def _waiting_runs(self) -> int:
+        """Runs waiting for a generated trajectory to be made (call with `_cond` held); they count in the bound."""
+        return sum(map(len, self._waiting.values()))
 
     def _in_store(self, event: ShowEvent, row: int) -> ShowEvent:
         """The run of a generated trajectory, made: its index in the generated dataset, and that dataset."""
@@ -179,7 +182,7 @@ class ShowHook:
                 "command": self.command,
                 "timeout_s": self.timeout_s,
                 "queued": len(self._queue),
-                "waiting_for_generation": sum(map(len, self._waiting.values())),
+                "waiting_for_generation": self._waiting_runs(),
                 "running": asdict(self._running) if self._running else None,
                 "counts": {s: self._counts[s] for s in STATUSES},
                 "recent": [r.to_json() for r in reversed(self._recent)],
