@@ -13,6 +13,13 @@ length is drawn too, so some episodes stop before the drawer is fully open.
 
 The environment is built straight from Meta-World's class (not `gym.make`) so that the drawer position comes from our
 seed alone and an episode is the same whichever worker records it.
+
+`--hide-handle` records the robot as a lab without object tracking would: the observations keep only the arm's
+proprioception (hand position and gripper opening, now and one step before; 8 numbers), the drawer's handle and the
+goal are left out, and the three features are computed here from the full simulator state and written per step into
+each episode (`features`). Where the hand holds the handle (`hand_sideways`) is then in the camera only; the hand also
+backs straight off at the end instead of drifting to the side it held, which would tell the proprioception. Its task
+file is `task_hidden.toml`; issue 19's observations experiment compares state and image models on it.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from features import step_features  # beside this script (the folder of the script run is on sys.path)
 
 # Headless rendering. mujoco and metaworld are imported only inside `Recorder`, after these are set (also in the
 # spawned workers, which import this module afresh).
@@ -40,6 +48,8 @@ WIDTH, HEIGHT = 160, 120  # even, and multiples of 8 so that ffmpeg does not res
 SIM_HZ = 80  # Meta-World steps per second (dt = 5 MuJoCo substeps of 2.5 ms)
 FRAME_STRIDE = 2  # render every 2nd step: a 40 fps video
 HAND_LOW, HAND_HIGH = np.array([-0.45, 0.42, 0.06]), np.array([0.45, 0.95, 0.40])
+# --hide-handle keeps these columns of Meta-World's observation: hand position and gripper opening, now and before.
+PROPRIOCEPTION = np.r_[0:4, 18:22]
 
 
 @dataclass(frozen=True)
@@ -93,9 +103,10 @@ class DrawerScript:
     HOOK_DZ = -0.02  # drop the hand this far below the handle's centre to hook it (as Meta-World's expert does)
     CLOSED_HANDLE_Y = 0.73  # handle y with the drawer shut (the drawer case is always at y = 0.9)
 
-    def __init__(self, plan: Plan, rng: np.random.Generator):
+    def __init__(self, plan: Plan, rng: np.random.Generator, drift: bool = True):
         self.plan = plan
         self._rng = rng
+        self.drift = drift  # back off towards the side the handle was held on (else straight back)
         self.phase = "wait"
         self._phase_t = 0  # step at which the current phase began
         self._anchor = np.zeros(3)  # a fixed world point the current phase steers to, set on entering it
@@ -136,7 +147,8 @@ class DrawerScript:
             if abs(self._anchor[2] - hand[2]) > 0.015 and t - self._phase_t < 40:
                 return self._anchor
             # Back off towards the robot, drifting further to the side the hand held the handle on.
-            self._enter("away", t, anchor=hand + np.array([2.0 * p.offset, -0.1, 0.0]))
+            side = 2.0 * p.offset if self.drift else 0.0
+            self._enter("away", t, anchor=hand + np.array([side, -0.1, 0.0]))
         return self._anchor
 
     def act(self, obs: np.ndarray, t: int) -> np.ndarray:
@@ -160,7 +172,7 @@ class DrawerScript:
 class Recorder:
     """One Meta-World drawer-open env plus an offscreen renderer; records whole episodes from their index."""
 
-    def __init__(self, video: bool):
+    def __init__(self, video: bool, hide_handle: bool = False):
         import metaworld  # noqa: F401  (registers Meta-World's envs)
         from metaworld.envs.sawyer_drawer_open_v3 import SawyerDrawerOpenEnvV3
 
@@ -170,6 +182,7 @@ class Recorder:
         env._partially_observable = False  # observe the goal too...
         env.__dict__.pop("sawyer_observation_space", None)  # ...and drop the cached bounds that clip it to zeros
         self.env = env
+        self.hide_handle = hide_handle
         self.renderer: Any = None
         self.camera: Any = None
         self.scene_option: Any = None
@@ -205,7 +218,7 @@ class Recorder:
         env._freeze_rand_vec = True
         env.seed(int(rng.integers(2**31)))
         obs, _ = env.reset()
-        script = DrawerScript(plan, rng)
+        script = DrawerScript(plan, rng, drift=not self.hide_handle)
         observations, actions, frames = [], [], []
         success = False
         for t in range(plan.length):
@@ -216,12 +229,12 @@ class Recorder:
             actions.append(action)
             obs, _, _, _, info = env.step(action)
             success = success or bool(info["success"])
-        return {
-            "observations": np.stack(observations),
-            "actions": np.stack(actions),
-            "success": np.bool_(success),
-            "frames": frames,
-        }
+        obs_all, act = np.stack(observations), np.stack(actions)
+        episode = {"observations": obs_all, "actions": act, "success": np.bool_(success), "frames": frames}
+        if self.hide_handle:
+            episode["features"] = step_features(obs_all, act)  # from the full state, before the handle is dropped
+            episode["observations"] = obs_all[:, PROPRIOCEPTION]
+        return episode
 
     def close(self) -> None:
         if self.renderer is not None:
@@ -251,9 +264,9 @@ def write_video(frames: list[np.ndarray], path: Path) -> None:
 _RECORDER: Recorder | None = None
 
 
-def _init_worker(video: bool) -> None:
+def _init_worker(video: bool, hide_handle: bool) -> None:
     global _RECORDER
-    _RECORDER = Recorder(video)
+    _RECORDER = Recorder(video, hide_handle)
 
 
 def _record_one(job: tuple[int, int, str]) -> tuple[int, int, bool]:
@@ -264,7 +277,7 @@ def _record_one(job: tuple[int, int, str]) -> tuple[int, int, bool]:
     stem = Path(out) / f"episode_{index:04d}"
     tmp = stem.with_name(f".{stem.name}.tmp.npz")
     with open(tmp, "wb") as f:
-        np.savez_compressed(f, observations=ep["observations"], actions=ep["actions"], success=ep["success"])
+        np.savez_compressed(f, **{k: v for k, v in ep.items() if k != "frames"})
     tmp.replace(stem.with_suffix(".npz"))
     if ep["frames"]:
         write_video(ep["frames"], stem.with_suffix(".mp4"))
@@ -278,19 +291,24 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-video", action="store_true", help="write only the .npz files")
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    parser.add_argument(
+        "--hide-handle",
+        action="store_true",
+        help="observations without the handle and goal (the arm's proprioception only), features written per episode",
+    )
     args = parser.parse_args(argv)
 
     args.out.mkdir(parents=True, exist_ok=True)
     jobs = [(args.seed, i, str(args.out)) for i in range(args.episodes)]
     start = time.time()
     if args.workers <= 1:
-        _init_worker(not args.no_video)
+        _init_worker(not args.no_video, args.hide_handle)
         results = [_record_one(job) for job in jobs]
         assert _RECORDER is not None
         _RECORDER.close()
     else:
         # spawn: each worker makes its own EGL context; nothing GL-related is inherited from this process
-        with mp.get_context("spawn").Pool(args.workers, _init_worker, (not args.no_video,)) as pool:
+        with mp.get_context("spawn").Pool(args.workers, _init_worker, (not args.no_video, args.hide_handle)) as pool:
             results = list(pool.imap_unordered(_record_one, jobs, chunksize=4))
         # (leaving the block terminates the workers, renderers and all; nothing is left to flush)
     lengths = np.array([n for _, n, _ in results])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -170,3 +171,22 @@ def test_downstream_takes_a_model_of_generated_frames_as_a_state_model(tmp_path,
     phi = np.stack([embed(t) for t in rollouts + rollouts[:1]])
     np.testing.assert_allclose(phi[:-1], model.encode_dataset(dataset, "test").double().numpy(), rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(phi[-1], phi[0], rtol=1e-6, atol=1e-6)
+
+
+def test_an_image_step_draws_its_pairs_among_a_few_trajectories(squares, phrasings, tmp_path):
+    """The CNN's cost grows with a step's distinct trajectories: an image model's step takes its pairs among a random
+    subset just large enough for its batch, a different one each step, and a state model's from all of them."""
+    from langpref.model.train import Trainer
+
+    cfg = tiny_config(squares, tmp_path / "m", stage1_batch_size=64, freeze_language=True)
+    cfg.model.observations = "images"
+    trainer = Trainer(cfg, phrasings[0], phrasings[1], progress=False)
+    n, pairs = len(trainer.train.features), trainer.train.pairs
+    m = trainer.step_trajectories(64)
+    assert 2 <= m < n
+    seen = [np.unique(np.concatenate([pairs.a[rows], pairs.b[rows]])) for rows in trainer._epoch_batches(64, 20)]
+    assert len(seen) == 20 and all(len(s) <= m for s in seen)
+    assert np.mean([len(rows) for rows in trainer._epoch_batches(64, 20)]) > 0.9 * 64  # batches stay full
+    assert len({tuple(s) for s in seen}) > 15  # a fresh subset each step
+    state = replace(cfg, model=replace(cfg.model, observations="state"))
+    assert Trainer(state, phrasings[0], phrasings[1], progress=False).step_trajectories(64) == n

@@ -92,6 +92,10 @@ class TrainConfig:
     image_time_samples: int = 16
     """`time_samples` of a model that sees images: each sampled step's frame goes through the CNN, which costs
     most of a training step (0 = all)."""
+    image_step_trajectories: int | None = None
+    """Distinct trajectories whose pairs make one training step of a model that sees images (the CNN's cost grows
+    with them; a state model's step takes pairs from all): default just enough to hold twice the batch on average,
+    0 = all."""
     tie_fraction: float = 0.05
     """A feature differs between two trajectories when |delta| > tie_fraction * its std on the train split."""
     norm_a: float = 1e-2
@@ -142,6 +146,8 @@ class TrainConfig:
             raise LangprefError("no output given: pass --out MODEL_DIR")
         if self.device not in ("auto", "cpu", "cuda"):
             raise LangprefError(f"--device must be auto, cpu or cuda, got {self.device!r}")
+        if self.image_step_trajectories is not None and self.image_step_trajectories < 0:
+            raise LangprefError(f"image_step_trajectories must be >= 0, got {self.image_step_trajectories}")
         for name in ("stage1_epochs", "stage2_epochs", "patience", "time_samples", "image_time_samples"):
             if getattr(self, name) < 0:
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")

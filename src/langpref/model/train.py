@@ -17,6 +17,9 @@ almost nothing, which is why stage 2 takes large batches of them.
 A model that sees camera frames (`ModelConfig.observations`, default images+state when the dataset has frames)
 trains the same way; its frame CNN runs on the frames of the sampled steps only (`image_time_samples` of them per
 trajectory, as its cost dominates), and the frames of the train and val splits are held on the device as uint8.
+As the CNN's cost grows with the distinct trajectories of a step, each step takes its pairs from a random subset of
+the train trajectories, just large enough to hold twice the batch on average (`image_step_trajectories`): every pair
+is still equally likely in every step, and a step costs a fraction of one over all trajectories.
 """
 
 from __future__ import annotations
@@ -248,6 +251,33 @@ class Trainer:
         )
         return float(correct.sum() / max(total.sum(), 1))
 
+    def step_trajectories(self, batch_size: int) -> int:
+        """Distinct train trajectories a step draws its pairs among (`image_step_trajectories`): all for a state
+        model; for an image model, by default the fewest that hold twice the batch's pairs on average."""
+        n, chosen = len(self.train.features), self.cfg.image_step_trajectories
+        if not sees_images(self.cfg.model.observations or "state") or chosen == 0:
+            return n
+        if chosen is None:  # a random m of n trajectories hold about (m / n)^2 of the pairs
+            chosen = math.ceil(n * math.sqrt(2 * batch_size / max(len(self.train.pairs), 1)))
+        return min(n, max(chosen, 2))
+
+    def _epoch_batches(self, batch_size: int, steps: int):
+        """The pair rows of each step of an epoch: a permutation of all pairs cut into batches or, when a step
+        draws among fewer trajectories than there are, up to `batch_size` pairs among a fresh random subset."""
+        pairs, n = self.train.pairs, len(self.train.features)
+        m = self.step_trajectories(batch_size)
+        if m >= n:
+            order = self.rng.permutation(len(pairs))
+            yield from (order[i : i + batch_size] for i in range(0, len(order), batch_size))
+            return
+        chosen = np.zeros(n, dtype=bool)
+        for _ in range(steps):
+            chosen[:] = False
+            chosen[self.rng.choice(n, m, replace=False)] = True
+            candidates = np.flatnonzero(chosen[pairs.a] & chosen[pairs.b])
+            if len(candidates):
+                yield self.rng.choice(candidates, min(batch_size, len(candidates)), replace=False)
+
     def _bar(self, stage: int, total: int):
         from tqdm import tqdm
 
@@ -273,18 +303,17 @@ class Trainer:
         with_transformer: bool,
     ) -> tuple[float, dict]:
         """Epoch loop with validation, best-state tracking and early stopping; returns (best val acc, best state)."""
-        pairs = self.train.pairs
-        steps_per_epoch = math.ceil(len(pairs) / batch_size)
+        steps_per_epoch = math.ceil(len(self.train.pairs) / batch_size)
         best_acc, best_state = init_best if init_best else (-1.0, _snapshot(self.model, with_transformer))
         stale = 0
         bar = self._bar(stage, epochs * steps_per_epoch)
         try:
             for epoch in range(1, epochs + 1):
                 t0 = time.perf_counter()
-                order = self.rng.permutation(len(pairs))
                 sums = np.zeros(4)  # loss, align, norm, correct
-                for start in range(0, len(order), batch_size):
-                    rows = order[start : start + batch_size]
+                n = 0
+                for rows in self._epoch_batches(batch_size, steps_per_epoch):
+                    n += len(rows)
                     with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.mixed_precision):
                         loss, la, ln, correct = step_fn(rows, epoch)
                     optimizer.zero_grad(set_to_none=True)
@@ -302,7 +331,6 @@ class Trainer:
                 val_acc = val_fn()
                 secs = time.perf_counter() - t0
                 self.seconds[stage] += secs
-                n = len(order)
                 self.history.append(
                     {
                         "stage": stage,
