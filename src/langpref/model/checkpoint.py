@@ -71,6 +71,7 @@ def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: 
             mean,
             std,
             observation_deltas=deltas,
+            frame_shift=model_cfg.frame_shift,
         )
     lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
     return LatentModel(traj, lang, info, model_cfg.lang_model)

@@ -46,6 +46,10 @@ class ModelConfig:
     that see images only."""
     frame_features: int = 64
     """Size of each frame's CNN feature vector, joined to the step's numeric inputs; models that see images only."""
+    frame_shift: int = 0
+    """Random shift of each training frame by up to this many pixels (padded at the border; DrQ's augmentation
+    against a small dataset's overfitting); 0 = none. Helps where what is said depends on where things are relative to
+    each other in the frame, hurts where it depends on their absolute image position."""
 
     def validate(self) -> None:
         if self.observations is not None:
@@ -55,6 +59,8 @@ class ModelConfig:
                 f"frame_channels and frame_features must be positive, got {list(self.frame_channels)} and "
                 f"{self.frame_features}"
             )
+        if self.frame_shift < 0:
+            raise LangprefError(f"frame_shift must be >= 0 pixels, got {self.frame_shift}")
         if self.latent_dim < 1:
             raise LangprefError(f"latent_dim must be >= 1, got {self.latent_dim}")
         if not self.traj_hidden or any(h < 1 for h in self.traj_hidden):

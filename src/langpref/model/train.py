@@ -244,7 +244,9 @@ class Trainer:
     @torch.no_grad()
     def _val_accuracy(self, pooled_val: torch.Tensor) -> float:
         lens = None if self.val.lengths is None else torch.as_tensor(self.val.lengths, device=self.device)
+        self.model.traj.eval()  # no training-time augmentation of frames
         phi = self.model.traj(self.val.steps, lens, **self.val.frame_args()).double().cpu()
+        self.model.traj.train()
         psi = self.model.lang.head(pooled_val).double().cpu()
         correct, total = alignment_counts(
             phi, psi, self.val.pairs, self.val_phr.group_ids, len(self.val_phr.feature_names)

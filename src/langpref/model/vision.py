@@ -36,12 +36,31 @@ class SpatialSoftArgmax(nn.Module):
         return torch.cat([x, y], dim=1)
 
 
+def random_shift(x: torch.Tensor, pad: int) -> torch.Tensor:
+    """Each image of (M, C, H, W) moved by its own random whole-pixel offset in [-pad, pad] along each axis, the
+    border repeated into the gap (DrQ, Kostrikov et al. 2021)."""
+    m, c, h, w = x.shape
+    padded = torch.nn.functional.pad(x, (pad, pad, pad, pad), mode="replicate")
+    oy = torch.randint(0, 2 * pad + 1, (m, 1), device=x.device)
+    ox = torch.randint(0, 2 * pad + 1, (m, 1), device=x.device)
+    rows = (torch.arange(h, device=x.device) + oy)[:, None, :, None]
+    cols = (torch.arange(w, device=x.device) + ox)[:, None, None, :]
+    return padded[
+        torch.arange(m, device=x.device)[:, None, None, None],
+        torch.arange(c, device=x.device)[None, :, None, None],
+        rows,
+        cols,
+    ]
+
+
 class FrameEncoder(nn.Module):
     """uint8 frames (M, H, W, 3) -> features (M, out_dim): 3x3 convolutions of stride 2 (each halves height and
-    width), then each channel's soft-argmax position and mean activation, a linear layer and a ReLU."""
+    width), then each channel's soft-argmax position and mean activation, a linear layer and a ReLU. In training,
+    each frame is first shifted at random by up to `shift` pixels (0 = never)."""
 
-    def __init__(self, channels: Sequence[int], out_dim: int):
+    def __init__(self, channels: Sequence[int], out_dim: int, shift: int = 0):
         super().__init__()
+        self.shift = shift
         layers: list[nn.Module] = []
         width = 3
         for c in channels:
@@ -53,6 +72,8 @@ class FrameEncoder(nn.Module):
 
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         x = frames.permute(0, 3, 1, 2).float() / 127.5 - 1.0
+        if self.training and self.shift:
+            x = random_shift(x, self.shift)
         maps = self.convs(x)
         pooled = torch.cat([self.keypoints(maps), maps.mean(dim=(2, 3))], dim=1)
         return torch.relu(self.head(pooled))
@@ -72,11 +93,12 @@ class ImageTrajectoryEncoder(nn.Module):
         mean: np.ndarray | None = None,
         std: np.ndarray | None = None,
         observation_deltas: bool = False,
+        frame_shift: int = 0,
     ):
         super().__init__()
         self.observations = observations
         self.observation_deltas = observation_deltas
-        self.frames = FrameEncoder(frame_channels, frame_features)
+        self.frames = FrameEncoder(frame_channels, frame_features, frame_shift)
         layers: list[nn.Module] = []
         width = numeric_dim + frame_features
         for h in hidden:
