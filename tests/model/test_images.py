@@ -190,3 +190,23 @@ def test_an_image_step_draws_its_pairs_among_a_few_trajectories(squares, phrasin
     assert len({tuple(s) for s in seen}) > 15  # a fresh subset each step
     state = replace(cfg, model=replace(cfg.model, observations="state"))
     assert Trainer(state, phrasings[0], phrasings[1], progress=False).step_trajectories(64) == n
+
+
+def test_frame_shift_moves_training_frames_only():
+    """--frame-shift moves each training frame by its own whole-pixel offset within the bound, the picture otherwise
+    intact; in evaluation (validation and every use of a trained model) frames are not moved."""
+    from langpref.model.vision import FrameEncoder, random_shift
+
+    torch.manual_seed(0)
+    x = torch.zeros(64, 1, 16, 16)
+    x[:, :, 8, 8] = 1.0  # one bright pixel in the middle
+    moved = random_shift(x, 3)
+    where = torch.stack([torch.nonzero(m[0])[0] for m in moved]) - 8
+    assert where.abs().max() <= 3 and len({tuple(w.tolist()) for w in where}) > 10
+    assert torch.all(moved.sum(dim=(1, 2, 3)) == 1.0)
+    enc = FrameEncoder((4, 8), 8, shift=3)
+    frames = torch.randint(0, 255, (5, 16, 16, 3), dtype=torch.uint8)
+    enc.eval()
+    torch.testing.assert_close(enc(frames), enc(frames))
+    enc.train()
+    assert not torch.allclose(enc(frames), enc(frames))
