@@ -152,10 +152,15 @@ class TrainConfig:
             raise LangprefError("no output given: pass --out MODEL_DIR")
         if self.device not in ("auto", "cpu", "cuda"):
             raise LangprefError(f"--device must be auto, cpu or cuda, got {self.device!r}")
-        if self.image_step_trajectories is not None and self.image_step_trajectories < 0:
-            raise LangprefError(f"image_step_trajectories must be >= 0, got {self.image_step_trajectories}")
-        for name in ("stage1_epochs", "stage2_epochs", "patience", "time_samples", "image_time_samples"):
-            if getattr(self, name) < 0:
+        for name in (
+            "stage1_epochs",
+            "stage2_epochs",
+            "patience",
+            "time_samples",
+            "image_time_samples",
+            "image_step_trajectories",
+        ):
+            if (getattr(self, name) or 0) < 0:  # image_step_trajectories may be None (automatic)
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("stage1_batch_size", "stage2_batch_size", "stage2_phrasings_per_step"):
             if getattr(self, name) < 1:
