@@ -165,6 +165,7 @@ def tiny_config(data: Path, out: Path, **overrides):
         stage2_batch_size=128,
         stage2_phrasings_per_step=6,
         patience=0,
+        frame_pretrain_steps=40,  # the default 1500 would dominate a tiny image model's training
         device="cpu",
         seed=0,
     )

@@ -27,3 +27,13 @@ def latent_loss(
     la = align_loss(phi_a, phi_b, psi).mean()
     ln = norm_loss(phi_a, phi_b, psi, a, b).mean()
     return la + ln, la, ln
+
+
+def episode_contrastive_loss(z_first: torch.Tensor, z_second: torch.Tensor, temperature: float = 0.1) -> torch.Tensor:
+    """InfoNCE over 2n frame embeddings (n, d) x 2: frame i of `z_first` and frame i of `z_second` come from the
+    same trajectory and must pick each other out among all 2n - 1 others (SimCLR's NT-Xent, cosine similarity)."""
+    n = len(z_first)
+    z = F.normalize(torch.cat([z_first, z_second]), dim=-1)
+    sim = (z @ z.T / temperature).masked_fill(torch.eye(2 * n, dtype=torch.bool, device=z.device), float("-inf"))
+    partner = torch.cat([torch.arange(n, 2 * n), torch.arange(n)]).to(z.device)
+    return F.cross_entropy(sim, partner)

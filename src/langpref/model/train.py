@@ -19,7 +19,10 @@ trains the same way; its frame CNN runs on the frames of the sampled steps only 
 trajectory, as its cost dominates), and the frames of the train and val splits are held on the device as uint8.
 As the CNN's cost grows with the distinct trajectories of a step, each step takes its pairs from a random subset of
 the train trajectories, just large enough to hold twice the batch on average (`image_step_trajectories`): every pair
-is still equally likely in every step, and a step costs a fraction of one over all trajectories.
+is still equally likely in every step, and a step costs a fraction of one over all trajectories. Before stage 1,
+and beside the language loss in both stages, the CNN also learns to tell episodes apart from their frames
+(`frame_contrastive`, `frame_pretrain_steps`): a few hundred episodes' comparisons alone do not teach it where an
+object stands.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ from langpref.model.encoders import freeze, normalisation_stats
 from langpref.model.evaluate import alignment_counts
 from langpref.model.inputs import dataset_input, resolve_observations, sees_images
 from langpref.model.latent import DataInfo, LatentModel
-from langpref.model.loss import latent_loss
+from langpref.model.loss import episode_contrastive_loss, latent_loss
 from langpref.tasks.taskfile import stored_task_files
 
 
@@ -196,10 +199,17 @@ class Trainer:
         for m in [*self.model.traj.modules(), self.model.lang.head]:
             if isinstance(m, (torch.nn.Linear, torch.nn.Conv2d)):
                 m.reset_parameters()
+        # `frame_contrastive`'s projection of the CNN features; a training aid, not part of the saved model
+        self.frame_head: torch.nn.Module | None = None
+        if (cfg.frame_contrastive > 0 or cfg.frame_pretrain_steps > 0) and sees_images(observations):
+            width = cfg.model.frame_features
+            self.frame_head = torch.nn.Sequential(
+                torch.nn.Linear(width, width), torch.nn.ReLU(), torch.nn.Linear(width, 32)
+            ).to(self.device)
         self.model.to(self.device)
         self.history: list[dict[str, Any]] = []
         self.samples_seen = {1: 0, 2: 0}
-        self.seconds = {1: 0.0, 2: 0.0}
+        self.seconds = {0: 0.0, 1: 0.0, 2: 0.0}
 
     # ---- pieces shared by both stages ------------------------------------------------------------------------------
 
@@ -285,7 +295,7 @@ class Trainer:
 
         return tqdm(
             total=total,
-            desc=f"stage {stage} ({'frozen LM' if stage == 1 else 'co-finetune'})",
+            desc=f"stage {stage} ({['frames alone', 'frozen LM', 'co-finetune'][stage]})",
             unit="step",
             file=sys.stderr,
             disable=not self.progress,
@@ -357,12 +367,50 @@ class Trainer:
         self.model.load_state_dict(best_state, strict=False)
         return best_acc, best_state
 
+    def _head_params(self) -> list[torch.nn.Parameter]:
+        """The trajectory side's parameters that the language loss does not reach: `frame_head`'s."""
+        return [] if self.frame_head is None else list(self.frame_head.parameters())
+
+    def _episode_contrastive(self, rows: np.ndarray) -> torch.Tensor:
+        """`frame_contrastive`'s loss on trajectories `rows`: one random frame from each half of each."""
+        split, encoder = self.train, self.model.traj
+        lengths = np.full(len(rows), split.steps.shape[1]) if split.lengths is None else split.lengths[rows]
+        t = np.floor((np.arange(2) + self.rng.random((len(rows), 2))) / 2 * lengths[:, None]).astype(np.int64)
+        r = torch.as_tensor(rows, device=self.device)[:, None]
+        shown = split.frame_index[r, torch.as_tensor(t, device=self.device)]
+        z = self.frame_head(encoder.frames(split.frames[r, shown].flatten(0, 1))).reshape(len(rows), 2, -1)
+        return episode_contrastive_loss(z[:, 0], z[:, 1])
+
     def _loss(self, batch: Pairs, psi: torch.Tensor):
         phi_a, phi_b = self._phi(self.train, batch.a, batch.b)
         loss, la, ln = latent_loss(phi_a, phi_b, psi, self.cfg.norm_a, self.cfg.norm_b)
+        if self.frame_head is not None and self.cfg.frame_contrastive > 0:
+            rows = np.unique(np.concatenate([batch.a, batch.b]))
+            loss = loss + self.cfg.frame_contrastive * self._episode_contrastive(rows)
         with torch.no_grad():
             correct = int(((psi * (phi_b - phi_a)).sum(-1) > 0).sum())
         return loss, la, ln, correct
+
+    # ---- before stage 1: the frame CNN alone ----
+
+    def pretrain_frames(self) -> None:
+        """`frame_pretrain_steps` steps of the episode-contrastive loss alone (no language), 64 trajectories each."""
+        steps = self.cfg.frame_pretrain_steps if self.frame_head is not None else 0
+        if not steps:
+            return
+        params = list(self.model.traj.frames.parameters()) + self._head_params()
+        optimizer = torch.optim.Adam(params, lr=self.cfg.stage1_lr)
+        n = len(self.train.features)
+        t0 = time.perf_counter()
+        with self._bar(0, steps) as bar:
+            for _ in range(steps):
+                loss = self._episode_contrastive(self.rng.choice(n, min(n, 64), replace=False))
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+                bar.update(1)
+                bar.set_postfix(loss=f"{loss.item():.3f}", refresh=False)
+        self.seconds[0] = time.perf_counter() - t0
 
     # ---- stage 1: language model frozen ----------------------------------------------------------------------------
 
@@ -375,7 +423,7 @@ class Trainer:
             pooled_val = lang.pooled_texts(self.val_phr.texts)
         optimizer = torch.optim.Adam(
             [
-                {"params": list(self.model.traj.parameters()), "lr": cfg.stage1_lr},
+                {"params": list(self.model.traj.parameters()) + self._head_params(), "lr": cfg.stage1_lr},
                 {"params": list(lang.head.parameters()), "lr": cfg.stage1_head_lr},
             ],
             weight_decay=cfg.weight_decay,
@@ -412,7 +460,10 @@ class Trainer:
                 freeze(emb)
         lm_params = [p for p in lang.transformer.parameters() if p.requires_grad]
         optimizer = torch.optim.Adam(
-            [{"params": _own_params(self.model), "lr": cfg.stage2_lr}, {"params": lm_params, "lr": cfg.stage2_lm_lr}],
+            [
+                {"params": _own_params(self.model) + self._head_params(), "lr": cfg.stage2_lr},
+                {"params": lm_params, "lr": cfg.stage2_lm_lr},
+            ],
             weight_decay=cfg.weight_decay,
         )
         tokens = lang.tokenize(self.train_phr.texts)
@@ -543,6 +594,7 @@ def _train(
     t_start = time.perf_counter()
     trainer = Trainer(cfg, train_phrasings, val_phrasings, progress=progress)
     setup_s = time.perf_counter() - t_start
+    trainer.pretrain_frames()
     acc1 = trainer.stage1()
 
     def results(stage: int, best: float) -> dict[str, Any]:
@@ -555,12 +607,12 @@ def _train(
             "train_phrasings": len(trainer.train_phr.texts),
             "val_phrasings": len(trainer.val_phr.texts),
             "setup_s": setup_s,
-            "train_s": s,
+            "train_s": s + trainer.seconds[0],  # with the frames-alone pretraining, if any
             "samples": n,
             "samples_per_s": n / s if s else 0.0,
             "device": str(trainer.device),
             "torch_threads": torch.get_num_threads(),
-            "stage_seconds": {str(k): v for k, v in trainer.seconds.items() if k <= stage},
+            "stage_seconds": {str(k): v for k, v in trainer.seconds.items() if k <= stage and (k or v)},
             "stage_samples_per_s": {
                 str(k): trainer.samples_seen[k] / trainer.seconds[k] for k in range(1, stage + 1) if trainer.seconds[k]
             },
