@@ -228,7 +228,7 @@ def test_frame_pretraining_teaches_the_cnn_to_tell_the_episodes_apart(squares, p
     saved model holds no trace of the auxiliary head, and a state model ignores the option."""
     from langpref.model.train import Trainer, train
 
-    def make(observations: str, steps: int, out: str = "m") -> Trainer:
+    def make(observations: str, steps: int | None, out: str = "m") -> Trainer:
         cfg = tiny_config(squares, tmp_path / out, stage1_epochs=1, freeze_language=True, frame_pretrain_steps=steps)
         cfg.model.observations = observations
         return Trainer(cfg, phrasings[0], phrasings[1], progress=False)
@@ -253,3 +253,6 @@ def test_frame_pretraining_teaches_the_cnn_to_tell_the_episodes_apart(squares, p
     saved = train(cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False)
     assert set(load_model(saved.out).state_dict()) == set(make("images", 0, "plain").model.state_dict())
     assert make("state", 80, "s").frame_head is None
+    # by default on for images+state (the proprioception brings what changes within an episode), off for images alone
+    both, alone = make("images+state", None, "b").cfg, make("images", None, "a").cfg
+    assert (both.frame_contrastive, alone.frame_contrastive, alone.frame_pretrain_steps) == (1.0, 0.0, 0)

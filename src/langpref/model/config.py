@@ -102,16 +102,18 @@ class TrainConfig:
     """Distinct trajectories whose pairs make one training step of a model that sees images (the CNN's cost grows
     with them; a state model's step takes pairs from all): default just enough to hold twice the batch on average,
     0 = all."""
-    frame_contrastive: float = 1.0
+    frame_contrastive: float | None = None
     """Weight of an auxiliary loss for a model that sees images: two frames of one trajectory, from its first and
     second half, must pick each other out among the frames of the step's other trajectories (InfoNCE on a small
     projection of the CNN's features). It teaches the CNN what stays put within an episode and differs between
     episodes, such as where an object stands, which the language loss alone does not find in a few hundred
-    episodes (chosen on the val split of the drawer recording with the handle hidden; docs/results.md). 0 = off;
-    no effect on a state model."""
-    frame_pretrain_steps: int = 1500
+    episodes. Default: 1 for images+state, 0 (off) for images alone, whose CNN must also keep what changes within an
+    episode (where the arm is), which this loss discards; both chosen on val splits (docs/results.md). No effect on
+    a state model."""
+    frame_pretrain_steps: int | None = None
     """Steps of that auxiliary loss alone, on 64 trajectories each, before stage 1 of a model that sees images (the
-    CNN then starts the language loss telling the scenes apart; about a minute on one CPU core); 0 = none."""
+    CNN then starts the language loss telling the scenes apart; about a minute on one CPU core). Default: 1500 for
+    images+state, 0 for images alone."""
     tie_fraction: float = 0.05
     """A feature differs between two trajectories when |delta| > tie_fraction * its std on the train split."""
     norm_a: float = 1e-2
@@ -171,7 +173,7 @@ class TrainConfig:
             "image_step_trajectories",
             "frame_pretrain_steps",
         ):
-            if (getattr(self, name) or 0) < 0:  # image_step_trajectories may be None (automatic)
+            if (getattr(self, name) or 0) < 0:  # None: automatic
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("stage1_batch_size", "stage2_batch_size", "stage2_phrasings_per_step"):
             if getattr(self, name) < 1:
@@ -179,7 +181,7 @@ class TrainConfig:
         for name in ("stage1_lr", "stage1_head_lr", "stage2_lr", "stage2_lm_lr"):
             if not getattr(self, name) > 0:
                 raise LangprefError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.norm_a < 0 or self.norm_b < 0 or self.tie_fraction < 0 or self.frame_contrastive < 0:
+        if self.norm_a < 0 or self.norm_b < 0 or self.tie_fraction < 0 or (self.frame_contrastive or 0) < 0:
             raise LangprefError("norm_a, norm_b, tie_fraction and frame_contrastive must be >= 0")
         if self.extend_bank and not self.utterances:
             raise LangprefError("--extend-bank needs --utterances FILE")

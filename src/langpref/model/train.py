@@ -140,6 +140,18 @@ def _own_params(model: LatentModel) -> list[torch.nn.Parameter]:
     return list(model.traj.parameters()) + list(model.lang.head.parameters())
 
 
+def _frame_defaults(cfg: TrainConfig, observations: str) -> dict[str, Any]:
+    """`frame_contrastive` and `frame_pretrain_steps` as given, else on for images+state (see their docs) and off
+    for images alone; always off for a state model, which has no CNN."""
+    if not sees_images(observations):
+        return {"frame_contrastive": 0.0, "frame_pretrain_steps": 0}
+    on = observations == "images+state"
+    return {
+        "frame_contrastive": (1.0 if on else 0.0) if cfg.frame_contrastive is None else cfg.frame_contrastive,
+        "frame_pretrain_steps": (1500 if on else 0) if cfg.frame_pretrain_steps is None else cfg.frame_pretrain_steps,
+    }
+
+
 def _snapshot(model: LatentModel, with_transformer: bool) -> dict[str, torch.Tensor]:
     return {
         k: v.detach().clone()
@@ -175,7 +187,9 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         # what the encoder sees, resolved against the dataset; the checkpoint records it
         observations = resolve_observations(cfg.model.observations, meta.frames is not None, str(self.dataset.root))
-        self.cfg = cfg = replace(cfg, model=replace(cfg.model, observations=observations))
+        self.cfg = cfg = replace(
+            cfg, model=replace(cfg.model, observations=observations), **_frame_defaults(cfg, observations)
+        )
 
         train_idx = self.dataset.split("train")
         thresholds = tie_thresholds(self.dataset.features[train_idx], cfg.tie_fraction)
@@ -201,7 +215,7 @@ class Trainer:
                 m.reset_parameters()
         # `frame_contrastive`'s projection of the CNN features; a training aid, not part of the saved model
         self.frame_head: torch.nn.Module | None = None
-        if (cfg.frame_contrastive > 0 or cfg.frame_pretrain_steps > 0) and sees_images(observations):
+        if cfg.frame_contrastive or cfg.frame_pretrain_steps:
             width = cfg.model.frame_features
             self.frame_head = torch.nn.Sequential(
                 torch.nn.Linear(width, width), torch.nn.ReLU(), torch.nn.Linear(width, 32)
@@ -384,7 +398,7 @@ class Trainer:
     def _loss(self, batch: Pairs, psi: torch.Tensor):
         phi_a, phi_b = self._phi(self.train, batch.a, batch.b)
         loss, la, ln = latent_loss(phi_a, phi_b, psi, self.cfg.norm_a, self.cfg.norm_b)
-        if self.frame_head is not None and self.cfg.frame_contrastive > 0:
+        if self.frame_head is not None and self.cfg.frame_contrastive:
             rows = np.unique(np.concatenate([batch.a, batch.b]))
             loss = loss + self.cfg.frame_contrastive * self._episode_contrastive(rows)
         with torch.no_grad():
@@ -395,7 +409,7 @@ class Trainer:
 
     def pretrain_frames(self) -> None:
         """`frame_pretrain_steps` steps of the episode-contrastive loss alone (no language), 64 trajectories each."""
-        steps = self.cfg.frame_pretrain_steps if self.frame_head is not None else 0
+        steps = self.cfg.frame_pretrain_steps
         if not steps:
             return
         params = list(self.model.traj.frames.parameters()) + self._head_params()
