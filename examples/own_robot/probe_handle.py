@@ -42,13 +42,11 @@ def probe_r2(trainer, target: np.ndarray) -> float:
     import torch
 
     def episode_features(split) -> np.ndarray:
-        encoder = trainer.model.traj.frames
+        encoder, stride = trainer.model.traj.frames, trainer.model.info.frames["stride"]
+        lengths = np.full(len(split.frames), split.steps.shape[1]) if split.lengths is None else split.lengths
         encoder.eval()
         with torch.no_grad():
-            out = [
-                encoder(split.frames[i, : -(-int(n) // trainer.model.info.frames["stride"])]).mean(dim=0).numpy()
-                for i, n in enumerate(split.lengths)
-            ]
+            out = [encoder(split.frames[i, : -(-int(n) // stride)]).mean(dim=0).numpy() for i, n in enumerate(lengths)]
         encoder.train()
         return np.array(out)
 
