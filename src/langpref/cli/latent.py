@@ -223,7 +223,12 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
             "langpref.model.config:TrainConfig",
             {"train.stage1_epochs": "--epochs", "train.stage2_epochs": "--finetune-epochs"},
             prefix="train.",
-            only=("train.stage1_epochs", "train.stage2_epochs"),
+            only=(
+                "train.stage1_epochs",
+                "train.stage2_epochs",
+                "train.frame_contrastive",
+                "train.frame_pretrain_steps",
+            ),
         ),
         JSON,
     ],

@@ -166,6 +166,10 @@ def command_line(cfg: ObservationsConfig, train: TrainConfig | None = None) -> s
         flags += f" --epochs {train.stage1_epochs}"
     if train is not None and train.stage2_epochs != default.stage2_epochs:
         flags += f" --finetune-epochs {train.stage2_epochs}"
+    if train is not None and train.frame_contrastive is not None:
+        flags += f" --frame-contrastive {train.frame_contrastive:g}"
+    if train is not None and train.frame_pretrain_steps is not None:
+        flags += f" --frame-pretrain-steps {train.frame_pretrain_steps}"
     if tuple(cfg.kinds) != OBSERVATIONS:
         flags += f" --kinds {','.join(cfg.kinds)}"
     if cfg.heldout:
