@@ -4,7 +4,7 @@ config.json.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -188,6 +188,18 @@ class TrainConfig:
         out = Path(self.out)
         if out.exists() and not self.force:
             raise LangprefError(f"{out} already exists; pass --force to overwrite it or choose another --out")
+
+    def frames_resolved(self) -> TrainConfig:
+        """This config with `frame_contrastive` and `frame_pretrain_steps` as given, else on for images+state and
+        off for images alone (see their docs); always off for a state model, which has no CNN. `model.observations`
+        must be resolved already."""
+        kind = self.model.observations
+        if kind == "state":
+            return replace(self, frame_contrastive=0.0, frame_pretrain_steps=0)
+        on = kind == "images+state"
+        weight = (1.0 if on else 0.0) if self.frame_contrastive is None else self.frame_contrastive
+        steps = (1500 if on else 0) if self.frame_pretrain_steps is None else self.frame_pretrain_steps
+        return replace(self, frame_contrastive=weight, frame_pretrain_steps=steps)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON types only (paths as strings), for config.json."""

@@ -140,18 +140,6 @@ def _own_params(model: LatentModel) -> list[torch.nn.Parameter]:
     return list(model.traj.parameters()) + list(model.lang.head.parameters())
 
 
-def _frame_defaults(cfg: TrainConfig, observations: str) -> dict[str, Any]:
-    """`frame_contrastive` and `frame_pretrain_steps` as given, else on for images+state (see their docs) and off
-    for images alone; always off for a state model, which has no CNN."""
-    if not sees_images(observations):
-        return {"frame_contrastive": 0.0, "frame_pretrain_steps": 0}
-    on = observations == "images+state"
-    return {
-        "frame_contrastive": (1.0 if on else 0.0) if cfg.frame_contrastive is None else cfg.frame_contrastive,
-        "frame_pretrain_steps": (1500 if on else 0) if cfg.frame_pretrain_steps is None else cfg.frame_pretrain_steps,
-    }
-
-
 def _snapshot(model: LatentModel, with_transformer: bool) -> dict[str, torch.Tensor]:
     return {
         k: v.detach().clone()
@@ -187,9 +175,7 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         # what the encoder sees, resolved against the dataset; the checkpoint records it
         observations = resolve_observations(cfg.model.observations, meta.frames is not None, str(self.dataset.root))
-        self.cfg = cfg = replace(
-            cfg, model=replace(cfg.model, observations=observations), **_frame_defaults(cfg, observations)
-        )
+        self.cfg = cfg = replace(cfg, model=replace(cfg.model, observations=observations)).frames_resolved()
 
         train_idx = self.dataset.split("train")
         thresholds = tie_thresholds(self.dataset.features[train_idx], cfg.tie_fraction)
