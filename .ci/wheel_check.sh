@@ -41,7 +41,7 @@ cd "$OUT/work"  # away from the source tree: everything below uses the installed
 import importlib, importlib.util
 import langpref
 for m in ("langpref.cli", "langpref.dataset.importer", "langpref.dataset.frames", "langpref.model.train",
-          "langpref.model.evaluate", "langpref.improve", "langpref.reward", "langpref.rewards", "langpref.propose",
+          "langpref.model.evaluate", "langpref.improve", "langpref.reward", "langpref.reward.saved", "langpref.propose",
           "langpref.feedback", "langpref.tasks", "langpref.tasks.gym", "langpref.extras"):
     importlib.import_module(m)
 assert langpref.__file__.find("site-packages") > 0, langpref.__file__

@@ -156,7 +156,7 @@ def test_core_modules_import_without_any_extra(tmp_path):
     hidden = ("metaworld", "robosuite", "mujoco", "fastapi", "starlette", "uvicorn", "ray", "pyarrow")
     code = HIDE.format(mods=hidden) + (
         "import langpref.cli, langpref.dataset.importer, langpref.dataset.storage, langpref.model.train, "
-        "langpref.model.evaluate, langpref.improve, langpref.reward, langpref.rewards, langpref.propose, "
+        "langpref.model.evaluate, langpref.improve, langpref.reward, langpref.reward.saved, langpref.propose, "
         "langpref.feedback, langpref.tasks, langpref.tasks.gym\n"
         "from langpref.tasks import task_names, get_task\n"
         "assert {'metaworld', 'robosuite'} <= set(task_names()); [get_task(n) for n in task_names()]\n"

@@ -454,8 +454,8 @@ def selection_timings(
     the sizes): the Laplace posterior at the fit, its draws and the scores. Milliseconds per trial, (median, p95)."""
     from langpref.feedback import get_kind, random_query, sample_weights, toy_latent_space
     from langpref.feedback.humans import HumanConfig
-    from langpref.feedback.selection import make_selector
     from langpref.reward import RewardConfig, RewardLearner
+    from langpref.reward.selection import make_selector
     from langpref.study.serve import limit_blas_threads
 
     limit_blas_threads(1)  # as `langpref study serve` runs it (one BLAS thread per request)

@@ -152,7 +152,7 @@ def cmd_improve(args: argparse.Namespace) -> None:
             default=None,
             metavar="DIR",
             help="write each run's r_xi into DIR (reward.json is "
-            "the first run's) for the Gymnasium wrapper langpref.rewards.LearnedReward",
+            "the first run's) for the Gymnasium wrapper langpref.reward.saved.LearnedReward",
         ),
         path("--figure", default=None, help="also draw the curves into this PNG"),
         JSON,

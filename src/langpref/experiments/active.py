@@ -2,12 +2,12 @@
 and a learner that asks either kind.
 
 Language x {random (the paper's), lal-infogain (the authors' follow-up), infogain (ours: the latent Eq. 10 answer
-model, `langpref.feedback.selection`)}, comparisons x {random, infogain (mutual information), volume-removal}, and
+model, `langpref.reward.selection`)}, comparisons x {random, infogain (mutual information), volume-removal}, and
 mixed-infogain (both kinds in one learner, each query of the kind and item with the most information per modelled
-second, `langpref.feedback.mixed`), 10 synthetic humans x 3 seeds, Q = 40, the same learner (Eq. 9 / Bradley-Terry,
+second, `langpref.reward.mixed`), 10 synthetic humans x 3 seeds, Q = 40, the same learner (Eq. 9 / Bradley-Terry,
 L-BFGS, L2 prior) for all: only what is shown differs.
 
-Over queries and over the person's time. A query's modelled seconds are its kind's (`langpref.feedback.cost`: the
+Over queries and over the person's time. A query's modelled seconds are its kind's (`langpref.reward.cost`: the
 paper's measurement, language 11.3% faster than a comparison, unless given), so every run also has a curve over
 modelled seconds (a step function: at time t, the metrics after the last query finished by t). These are compared up
 to the horizon every run reaches (the least total time of any run: Q queries of the cheaper kind, which no mixed run
@@ -31,7 +31,7 @@ import numpy as np
 from langpref.experiments.common import SweepConfig, figure_link
 from langpref.experiments.reward import _run_methods, _save, _table, paired_difference
 from langpref.extras import pyplot
-from langpref.feedback.cost import elapsed, on_time_grid, time_average
+from langpref.reward.cost import elapsed, on_time_grid, time_average
 
 METHODS = {
     "language-random": ("language", None),

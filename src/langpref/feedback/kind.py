@@ -71,7 +71,7 @@ class FeedbackKind:
 KINDS: dict[str, FeedbackKind] = {}
 """The registered kinds by name."""
 MIXED = "mixed"
-"""The `feedback` of a learner that asks either kind, chosen per query (`langpref.feedback.mixed`); not a kind."""
+"""The `feedback` of a learner that asks either kind, chosen per query (`langpref.reward.mixed`); not a kind."""
 MIXED_KINDS = ("language", "comparison")
 """The kinds a mixed learner chooses between, in this order."""
 

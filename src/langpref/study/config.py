@@ -41,7 +41,7 @@ class StudyConfig:
     """Seed of the study: with the participant's own seed it fixes every trajectory drawn for them."""
     query_selection: str = "random"
     """Study 2: how each query is chosen from the study set, from the participant's answers so far
-    (`langpref.feedback.selection`): `random` (the paper's), `infogain` (both methods), or one per method as
+    (`langpref.reward.selection`): `random` (the paper's), `infogain` (both methods), or one per method as
     `language=lal-infogain,comparison=volume-removal` (language: random, infogain, lal-infogain; comparisons: random,
     infogain, volume-removal; a method left out is random)."""
     query_candidates: int = 60
@@ -66,7 +66,7 @@ class StudyConfig:
 
     def selections(self) -> dict[str, str]:
         """The query selection strategy of each Study-2 method, checked (one line naming the choices otherwise)."""
-        from langpref.feedback.selection import STRATEGIES, check_strategy
+        from langpref.reward.selection import STRATEGIES, check_strategy
 
         text = str(self.query_selection).strip()
         if "=" not in text:

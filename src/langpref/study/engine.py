@@ -9,7 +9,7 @@
   (`langpref.feedback.kind`: its `pairs`, explicit + implicit losses for language, Bradley-Terry for comparisons),
   refit after every answer;
 - which trajectories each query shows (`langpref.study.queries`: random, as in the paper, or an active strategy of
-  `langpref.feedback.selection` over the participant's learner; fixed by the study and participant seeds).
+  `langpref.reward.selection` over the participant's learner; fixed by the study and participant seeds).
 
 The database is the only state that counts: a learner lost with a restart is rebuilt by replaying the participant's
 stored answers (`history`), with the same seeds, so it learns what it had learned.

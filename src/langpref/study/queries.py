@@ -3,7 +3,7 @@
 - `random` (the paper's, the default): language shows one pass over the study set in a random order, then another;
   comparisons show two distinct trajectories drawn afresh for every query. Both fixed by the study and participant
   seeds, as before active selection existed.
-- an active strategy of `langpref.feedback.selection` (`infogain`, `lal-infogain` for language; `infogain`,
+- an active strategy of `langpref.reward.selection` (`infogain`, `lal-infogain` for language; `infogain`,
   `volume-removal` for comparisons): the library's scores, over at most `query_candidates` trajectories of the study
   set drawn for the query, from the participant's reward learner fit on their answers so far (`infogain`,
   `volume-removal`: its Laplace posterior) or from their answers themselves (`lal-infogain`). The highest score is
@@ -29,10 +29,10 @@ import numpy as np
 
 from langpref.feedback.kind import get_kind
 from langpref.feedback.language import LanguageAnswer
-from langpref.feedback.posterior import laplace_posterior
-from langpref.feedback.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain, candidate_rows
 from langpref.feedback.space import LatentSpace
 from langpref.reward import RewardConfig, RewardLearner
+from langpref.reward.posterior import laplace_posterior
+from langpref.reward.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain, candidate_rows
 from langpref.study.config import METHODS, StudyConfig
 
 Rng = Callable[..., np.random.Generator]

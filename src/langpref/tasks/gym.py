@@ -9,7 +9,7 @@ Every task with a simulator is also registered as `langpref/TASK` (built-ins and
 float32 vectors laid out as the task's datasets store them (`langpref tasks --json` lists the layout), actions are in
 [-1, 1]^A, an episode is truncated after `horizon` steps and `reset(seed=...)` fixes the scene as a dataset
 trajectory's seed does. The environment has no reward of its own (0 every step; `info` carries the step's features
-and success): wrap it in `langpref.rewards.LearnedReward` for a learned one, or in your own.
+and success): wrap it in `langpref.reward.saved.LearnedReward` for a learned one, or in your own.
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ import torch
 
 from langpref.errors import LangprefError
 from langpref.feedback import HumanConfig, get_kind, random_query, sample_weights, toy_latent_space
-from langpref.feedback.posterior import laplace_posterior, pair_arrays
 from langpref.reward import RewardConfig, RewardLearner
+from langpref.reward.posterior import laplace_posterior, pair_arrays
 
 torch.set_num_threads(1)
 

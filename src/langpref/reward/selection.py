@@ -5,17 +5,17 @@ drawn afresh for every query):
 
 - `random`: uniform, the paper's (`langpref.feedback.kind.random_query`; the reward loop calls it as before).
 - `infogain`, language: the mutual information between xi and the person's answer, under the *answer model* below,
-  with xi drawn from the Laplace posterior (`langpref.feedback.posterior`). Comparisons: the mutual information
+  with xi drawn from the Laplace posterior (`langpref.reward.posterior`). Comparisons: the mutual information
   between xi and the Bradley-Terry choice over every pair of candidates (APReL's `mutual_information`).
 - `volume-removal`, comparisons: the expected removed volume 1 - sum_answers P(answer)^2 (Sadigh et al. 2017; APReL's
   `volume_removal` returns the remaining sum, which it minimises).
 - `lal-infogain`, language: the follow-up's selection (Hirota, Yang et al., USC-Lira/language_active_learning,
   `lal/active_learning/{laplace,info,next_traj}.py`, the `--active=1 --reward=3 --lang=3` setting of its scripts).
-- `infogain` with both kinds in one learner (`--feedback mixed`, `langpref.feedback.mixed`): the language and the
+- `infogain` with both kinds in one learner (`--feedback mixed`, `langpref.reward.mixed`): the language and the
   comparison scores above, from the same posterior draws, per modelled second of the person's time.
 
-Every strategy scores all its candidates at once (`langpref.feedback.batch.Scored`); `select` asks the best, and
-`select_batch` K at once, greedily with a diversity penalty (`langpref.feedback.batch.pick`).
+Every strategy scores all its candidates at once (`langpref.reward.batch.Scored`); `select` asks the best, and
+`select_batch` K at once, greedily with a diversity penalty (`langpref.reward.batch.pick`).
 
 The answer model of `infogain` for language. With a linear r_xi the likelihood the learner fits (Eq. 5-9) does not
 depend on the shown trajectory (r(phi + psi_l) - r(phi) = xi . psi_l), so its information cannot rank trajectories.
@@ -55,8 +55,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.batch import Scored, comparison_candidates, language_candidates, pick
-from langpref.feedback.posterior import laplace_posterior, require_linear
+from langpref.reward.batch import Scored, comparison_candidates, language_candidates, pick
+from langpref.reward.posterior import laplace_posterior, require_linear
 
 if TYPE_CHECKING:
     from langpref.feedback.kind import FeedbackKind
@@ -71,7 +71,7 @@ BY_KIND = {
     "mixed": ("infogain",),
 }
 """The strategies each built-in kind has (`random` works for every registered kind); `mixed` (both kinds in one
-learner, `langpref.feedback.mixed`) chooses by information per second, so only `infogain`."""
+learner, `langpref.reward.mixed`) chooses by information per second, so only `infogain`."""
 DEFAULT_SAMPLES = 64
 """Posterior draws of xi per selection."""
 ANSWER_TEMPERATURE = 1.0
@@ -144,7 +144,7 @@ class Selector:
         raise NotImplementedError
 
     def select_batch(self, learner: RewardLearner, rng: np.random.Generator, k: int) -> list[Selection]:
-        """The next min(k, candidates) queries, chosen at once from one scoring (`langpref.feedback.batch.pick`);
+        """The next min(k, candidates) queries, chosen at once from one scoring (`langpref.reward.batch.pick`);
         k = 1 is `select`."""
         scored = self.score(learner, rng)
         n = len(scored.gains)

@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from langpref.feedback import toy_latent_space
-from langpref.feedback.batch import comparison_candidates, join, language_candidates, pick, similarity_to
-from langpref.feedback.selection import ComparisonActive, LanguageInfoGain
 from langpref.reward import LearnRewardConfig, RewardConfig, RewardLearner, human_weights, run_reward_learning
+from langpref.reward.batch import comparison_candidates, join, language_candidates, pick, similarity_to
+from langpref.reward.selection import ComparisonActive, LanguageInfoGain
 
 torch.set_num_threads(1)
 

@@ -3,12 +3,12 @@ and the item with the most expected information per expected second of the perso
 
 One candidate set of trajectories per query (the query split, or `candidates` of it drawn afresh), one set of draws
 xi from the Laplace posterior of the one learner that fits every answer, and on them each kind's `infogain` score
-(`langpref.feedback.selection`): for language, I(xi; answer | tau) under the latent Eq. 10 answer model, over every
+(`langpref.reward.selection`): for language, I(xi; answer | tau) under the latent Eq. 10 answer model, over every
 trajectory; for comparisons, I(xi; choice) under Bradley-Terry, over every pair. Both are mutual information in nats
 between the reward and the person's answer, from the same draws, so they are on one scale. Each is divided by its
-kind's modelled seconds per query (`langpref.feedback.cost`: by default the paper's measurement, language 11.3% faster
+kind's modelled seconds per query (`langpref.reward.cost`: by default the paper's measurement, language 11.3% faster
 than comparisons) and the best rate is asked, of whichever kind. Equal information goes to the cheaper kind; equal
-costs to the more informative query. A batch (`--query-batch K`) mixes kinds too (`langpref.feedback.batch`).
+costs to the more informative query. A batch (`--query-batch K`) mixes kinds too (`langpref.reward.batch`).
 
 The answers go into the same learner whatever their kind (`langpref.reward.RewardLearner`): each kind's `pairs`
 turns an answer into weighted Bradley-Terry pairs, and the fit is their weighted mean loss plus the prior. In
@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from langpref.feedback.batch import Scored, join
 from langpref.feedback.kind import MIXED, MIXED_KINDS
-from langpref.feedback.posterior import laplace_posterior
-from langpref.feedback.selection import DEFAULT_SAMPLES, ComparisonActive, LanguageInfoGain, Selector, candidate_rows
+from langpref.reward.batch import Scored, join
+from langpref.reward.posterior import laplace_posterior
+from langpref.reward.selection import DEFAULT_SAMPLES, ComparisonActive, LanguageInfoGain, Selector, candidate_rows
 
 if TYPE_CHECKING:
     from langpref.feedback.space import LatentSpace

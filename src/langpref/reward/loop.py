@@ -1,28 +1,13 @@
-"""Reward learning from comparative language feedback (paper Eq. 5-9) and the comparison baseline, with metrics.
-
-r_xi is a function of the frozen trajectory embedding phi. Every answer, of any kind, becomes weighted Bradley-Terry
-pairs (winner embedding, loser embedding) by its kind's `pairs` (`langpref.feedback.kind`): language feedback by
-L_Explicit and L_Implicit (Eq. 7, 9; `langpref.feedback.language`), a comparison by one pair, preferred beats rejected
-(Eq. 11; `langpref.feedback.comparison`). The loop, the fit and the metrics are the same for every kind.
-
-L = sum_pairs weight * BT-loss / sum_pairs weight + (weight_decay / 2) |xi|^2, the weighted mean over every pair so
-far plus a Gaussian prior. A language query of L_Explicit + L_Implicit weighs 2 (its explicit pair, and k implicit
-pairs of weight 1/k); one of either loss alone, or a comparison, weighs 1. Eq. 9 divides by the number of queries
-instead, which for `both` is our loss times 2: the same minimiser without a prior. With one, dividing by the total
-weight lets the prior weigh the same against every loss term of every method; divided by the queries, `both` would
-meet a prior half as strong as a comparison fit does, and be overconfident after one query.
-
-After every query the model is refit on all feedback so far with full-batch L-BFGS, warm-started from the last fit.
-The default r_xi is linear, r = xi . phi, as in the authors' code; then the loss is convex and the L2 term makes its
-minimum unique, so the result does not depend on optimiser details; `model="mlp"` gives a small network instead.
-With a linear r, r(phi + psi_l) - r(phi) = xi . psi_l: what language teaches does not depend on the shown trajectory.
+"""The reward-learning loop (`langpref learn-reward`): a synthetic human answers Q queries, the learner
+(`langpref.reward.learner` for `--learner paper`, `langpref.reward.answer_model` for `--learner answer-model`) is
+refit after each, and the metrics (`langpref.reward.metrics`) are recorded after every query.
 
 Queries are drawn uniformly from the query split (the paper's), or chosen by an active strategy from the learner's
-Laplace posterior (`query_selection`; `langpref.feedback.selection`, `langpref.feedback.posterior`) from a separate
+Laplace posterior (`query_selection`; `langpref.reward.selection`, `langpref.reward.posterior`) from a separate
 random stream, so that the human's answers and the negatives draw from the same streams whatever the strategy. With
 `feedback="mixed"` one learner asks either kind, each query of the kind and item with the most information per
-modelled second of the person's time (`langpref.feedback.mixed`, `langpref.feedback.cost`), and its answers, of both
-kinds, enter the same fit. With `query_batch` K > 1, K queries are chosen at once (`langpref.feedback.batch`) and the
+modelled second of the person's time (`langpref.reward.mixed`, `langpref.reward.cost`), and its answers, of both
+kinds, enter the same fit. With `query_batch` K > 1, K queries are chosen at once (`langpref.reward.batch`) and the
 learner is refit only after the K-th answer; the metrics are still recorded after every query, so within a batch the
 curves stay where the last refit left them.
 
@@ -33,207 +18,29 @@ Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged 
 Beyond the dataset (`learn-reward --optimize`, `langpref.propose`): after the last query, r_xi's own optimum is
 generated in the simulator (CMA-ES on a surrogate of phi, decided by r_xi of real rollouts embedded by the real
 encoder) and `optimized_true_reward` is its true reward on the same scale, so above 1 is better than any trajectory of
-the eval split. `--save-reward DIR` writes each run's r_xi for `langpref.rewards.LearnedReward`.
+the eval split. `--save-reward DIR` writes each run's r_xi for `langpref.reward.saved.LearnedReward`.
 """
 
 from __future__ import annotations
 
 import sys
-import threading
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback import bradley_terry
-from langpref.feedback.bradley_terry import PairBatch
-from langpref.feedback.cost import query_costs
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.kind import KINDS, MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_of, random_query
 from langpref.feedback.space import LatentSpace
-
-LOSSES = ("both", "explicit", "implicit")
-NEGATIVES = ("other_meaning", "any")
-MODELS = ("linear", "mlp")
-DEFAULT_WEIGHT_DECAY = {"linear": 1.0, "mlp": 0.25}
+from langpref.reward.cost import query_costs
+from langpref.reward.learner import RewardConfig, RewardLearner
+from langpref.reward.metrics import cross_entropy, reward_of_best
 
 
 def feedback_choices() -> tuple[str, ...]:
     """Every `feedback` a learner takes: each registered kind, and `mixed` (language and comparisons, chosen per
     query)."""
     return (*KINDS, MIXED)
-
-
-@dataclass
-class RewardConfig:
-    """The reward model r_xi and how it is fit."""
-
-    model: str = "linear"
-    """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units)."""
-    hidden: int = 32
-    """Hidden units of the `mlp` model."""
-    weight_decay: float | None = None
-    """L2 penalty (weight_decay / 2) |xi|^2 added to the weighted mean loss over pairs: a Gaussian prior on xi. It
-    fixes the reward's scale, which language feedback alone leaves open (its explicit pairs are separable), and so
-    matters for the cross-entropy. None: the model's default in `DEFAULT_WEIGHT_DECAY`. For the linear model, 1.0 is
-    what language, comparisons and L_Explicit alone each pick by their own mean cross-entropy on the val split, with
-    humans the test experiments never see, in both envs (L_Implicit alone picks 0.5, by 0.002); `langpref experiment
-    prior --env ENV` reruns that choice. On the mlp's two layers the same L2 acts as a stronger penalty on the
-    function: at 1.0 it stays at the flat reward, hence its weaker default."""
-    loss: str = "both"
-    """`both` (L_Explicit + L_Implicit, Eq. 9), `explicit` or `implicit` (the ablation)."""
-    num_negatives: int = 20
-    """k, other utterances per language query for L_Implicit."""
-    negatives: str = "other_meaning"
-    """`other_meaning`: negatives of other (feature, direction) meanings than the model's reading of l;
-    `any`: any pool utterance with another text (the paper's wording)."""
-    negative_split: str = "train"
-    """Bank split the robot draws implicit negatives from."""
-    max_iter: int = 100
-    """L-BFGS iterations per refit."""
-
-    def __post_init__(self) -> None:
-        if self.weight_decay is None:
-            self.weight_decay = DEFAULT_WEIGHT_DECAY.get(self.model, DEFAULT_WEIGHT_DECAY["linear"])
-
-    def validate(self) -> None:
-        if self.model not in MODELS:
-            raise LangprefError(f"unknown reward model {self.model!r}: choose one of {', '.join(MODELS)}")
-        if self.loss not in LOSSES:
-            raise LangprefError(f"unknown loss {self.loss!r}: choose one of {', '.join(LOSSES)}")
-        if self.negatives not in NEGATIVES:
-            raise LangprefError(f"unknown negatives {self.negatives!r}: choose one of {', '.join(NEGATIVES)}")
-        if self.num_negatives < 1 and self.loss != "explicit":
-            raise LangprefError(f"num_negatives (k) must be >= 1 for L_Implicit, got {self.num_negatives}")
-        if self.weight_decay < 0 or self.hidden < 1 or self.max_iter < 1:
-            raise LangprefError("weight_decay must be >= 0, hidden and max_iter >= 1")
-
-
-class RewardLearner:
-    """r_xi on phi, refit on all pairs so far after every query (`add` then `fit`)."""
-
-    def __init__(self, dim: int, cfg: RewardConfig | None = None, seed: int = 0):
-        import torch
-
-        self.cfg = cfg or RewardConfig()
-        self.cfg.validate()
-        self._torch = torch
-        gen = torch.Generator().manual_seed(int(seed))
-        if self.cfg.model == "linear":
-            self.params = [torch.zeros(dim, dtype=torch.float64, requires_grad=True)]
-        else:
-            h = self.cfg.hidden
-            self.params = [
-                (torch.randn(dim, h, generator=gen, dtype=torch.float64) / dim**0.5).requires_grad_(),
-                torch.zeros(h, dtype=torch.float64, requires_grad=True),
-                (torch.randn(h, generator=gen, dtype=torch.float64) / h**0.5).requires_grad_(),
-            ]
-        self.batches: list[PairBatch] = []
-        self._data: tuple | None = None
-
-    @property
-    def num_queries(self) -> int:
-        return len(self.batches)
-
-    def _reward(self, x):
-        if self.cfg.model == "linear":
-            return x @ self.params[0]
-        w1, b1, w2 = self.params
-        return self._torch.relu(x @ w1 + b1) @ w2
-
-    def add(self, batch: PairBatch) -> None:
-        self.batches.append(batch)
-        self._data = None
-
-    def loss(self):
-        """The weighted mean Bradley-Terry loss over all pairs plus the L2 term, as a torch scalar."""
-        torch = self._torch
-        if self._data is None:
-            w = np.concatenate([b.weights for b in self.batches])
-            w = w / w.sum()
-            self._data = tuple(
-                torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))
-                for a in (
-                    np.concatenate([b.winners for b in self.batches]),
-                    np.concatenate([b.losers for b in self.batches]),
-                    w,
-                )
-            )
-        win, lose, weight = self._data
-        margin = self._reward(win) - self._reward(lose)
-        reg = sum((p * p).sum() for p in self.params)
-        return (weight * bradley_terry.nll(margin)).sum() + 0.5 * self.cfg.weight_decay * reg
-
-    def fit(self) -> None:
-        """Refit on all pairs so far. On one thread: the problem is small, and the fit (the mlp's above all, which is
-        not convex) then does not depend on how many threads or sweep workers the machine has."""
-        if not self.batches:
-            return
-        torch = self._torch
-        opt = torch.optim.LBFGS(
-            self.params,
-            lr=1.0,
-            max_iter=self.cfg.max_iter,
-            tolerance_grad=1e-9,
-            tolerance_change=1e-12,
-            history_size=20,
-            line_search_fn="strong_wolfe",
-        )
-
-        def closure():
-            opt.zero_grad()
-            value = self.loss()
-            value.backward()
-            return value
-
-        with _one_thread(torch):
-            opt.step(closure)
-
-    def predict(self, phi: np.ndarray) -> np.ndarray:
-        with self._torch.no_grad(), _one_thread(self._torch):
-            return self._reward(self._torch.from_numpy(np.asarray(phi, dtype=np.float64))).numpy().copy()
-
-
-_THREADS = threading.Lock()
-
-
-@contextmanager
-def _one_thread(torch):
-    """torch on one thread, one such section at a time: the thread count is process-wide, and concurrent fits (the
-    study server answers participants on several threads) must not interleave its save and restore."""
-    with _THREADS:
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            yield
-        finally:
-            torch.set_num_threads(threads)
-
-
-# ---- metrics ------------------------------------------------------------------------------------------------------
-
-
-def cross_entropy(true_values: np.ndarray, learned_values: np.ndarray, rationality: float = 1.0) -> float:
-    """CE(P_w, P_xi) averaged over all unordered pairs (i < j): P_w = sigmoid(rationality (R_i - R_j)) and
-    P_xi = sigmoid(r_i - r_j)."""
-    R = np.asarray(true_values, dtype=np.float64)
-    r = np.asarray(learned_values, dtype=np.float64)
-    if R.shape != r.shape or R.ndim != 1 or len(R) < 2:
-        raise LangprefError(f"cross-entropy needs two equal vectors of >= 2 rewards, got {R.shape} and {r.shape}")
-    i, j = np.triu_indices(len(R), k=1)
-    p = bradley_terry.probability(rationality * (R[i] - R[j]))
-    d = r[i] - r[j]
-    return float(np.mean(-(p * bradley_terry.log_likelihood(d) + (1.0 - p) * bradley_terry.log_likelihood(-d))))
-
-
-def reward_of_best(true_values: np.ndarray, learned_values: np.ndarray) -> float:
-    """Normalised true reward (0 worst, 1 best of the set) of the trajectory ranked first by the learned reward;
-    ties share the rank, so the mean over the tied trajectories."""
-    R = np.asarray(true_values, dtype=np.float64)
-    r = np.asarray(learned_values, dtype=np.float64)
-    top = r >= r.max() - 1e-9 * max(1.0, abs(float(r.max())))
-    return float(((R[top] - R.min()) / max(float(R.max() - R.min()), 1e-12)).mean())
 
 
 @dataclass
@@ -247,7 +54,7 @@ class Curves:
     kinds: list[str] = field(default_factory=list)
     """The kind of feedback asked at queries 1..Q."""
     seconds: list[float] = field(default_factory=list)
-    """Modelled seconds of the person's time after 0, 1, ..., Q queries (`langpref.feedback.cost`)."""
+    """Modelled seconds of the person's time after 0, 1, ..., Q queries (`langpref.reward.cost`)."""
 
     def record(
         self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray, rationality: float
@@ -283,7 +90,7 @@ class LearnRewardConfig:
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     query_selection: str | None = None
-    """How each query is chosen (`langpref.feedback.selection`): None or `random` (uniform, the paper's); `infogain`
+    """How each query is chosen (`langpref.reward.selection`): None or `random` (uniform, the paper's); `infogain`
     (language and comparisons: information about the reward, Laplace posterior); `lal-infogain` (language: the
     authors' follow-up); `volume-removal` (comparisons). Active strategies need the linear reward model."""
     candidates: int | None = None
@@ -314,12 +121,12 @@ class LearnRewardConfig:
 
     @property
     def costs(self) -> dict[str, float]:
-        """Modelled seconds per query by kind (`langpref.feedback.cost.query_costs`)."""
+        """Modelled seconds per query by kind (`langpref.reward.cost.query_costs`)."""
         return query_costs(self.language_seconds, self.comparison_seconds)
 
     def validate(self) -> None:
-        from langpref.feedback.posterior import require_linear
-        from langpref.feedback.selection import check_strategy
+        from langpref.reward.posterior import require_linear
+        from langpref.reward.selection import check_strategy
 
         if self.feedback not in feedback_choices():
             raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(feedback_choices())}")
@@ -357,7 +164,7 @@ def run_reward_learning(
     so the human's answers and the negatives use the same streams whatever the strategy), `cfg.batch` at a time,
     the learner refit after each batch. `mixed` asks a language human and a comparison human with the same `w`,
     each on the answer stream of its kind's single-kind runs, so a mixed run that asks one kind only is that kind's
-    `infogain` run, answer for answer. With `record`, appends each query's `langpref.feedback.selection.Selection`
+    `infogain` run, answer for answer. With `record`, appends each query's `langpref.reward.selection.Selection`
     (score None for random) and answer as a pair. With `generation` (`langpref.propose.Generation`), generates r_xi's
     optimum after the last query and scores it (`Curves.optimized_true_reward`); with `learners`, appends the final
     reward model."""
@@ -410,11 +217,11 @@ def run_reward_learning(
 
 def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
     """The active strategy of `cfg` (None for random: the loop draws uniformly)."""
-    from langpref.feedback.selection import make_selector
+    from langpref.reward.selection import make_selector
 
     if cfg.feedback == MIXED:  # validate() has checked the strategy (infogain) and the linear reward
-        from langpref.feedback.mixed import MixedInfoGain
-        from langpref.feedback.selection import DEFAULT_SAMPLES
+        from langpref.reward.mixed import MixedInfoGain
+        from langpref.reward.selection import DEFAULT_SAMPLES
 
         samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
         return MixedInfoGain(space, pool, cfg.reward, cfg.costs, cfg.candidates, samples)
@@ -424,7 +231,7 @@ def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
 
 def _random_batch(kind: FeedbackKind, pool: np.ndarray, rng: np.random.Generator, size: int) -> list:
     """`size` uniform queries of `kind`, one after another from the query stream (a batch of 1 is the paper's)."""
-    from langpref.feedback.selection import Selection
+    from langpref.reward.selection import Selection
 
     return [Selection(random_query(kind, pool, rng), None, "random", len(pool)) for _ in range(size)]
 
@@ -499,13 +306,13 @@ def learn_reward(
 ) -> dict:
     """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config. With `generation`
     (`langpref.propose.Generation`), each run also generates r_xi's optimum (`optimized_true_reward`, one per run);
-    with `save_reward` (a directory), each run's r_xi is written there for `langpref.rewards.LearnedReward`, beside
+    with `save_reward` (a directory), each run's r_xi is written there for `langpref.reward.saved.LearnedReward`, beside
     a reference to the checkpoint `model` whose trajectory encoder it reads."""
     from tqdm import tqdm
 
     cfg.validate()
     if save_reward:
-        from langpref.rewards import check_saveable
+        from langpref.reward.saved import check_saveable
 
         check_saveable(model)
     runs, saved = [], []
@@ -523,7 +330,7 @@ def learn_reward(
                     run_reward_learning(space, w, cfg, (cfg.seed, h, s), generation=generation, learners=learners)
                 )
                 if save_reward:
-                    from langpref.rewards import save_learned_reward
+                    from langpref.reward.saved import save_learned_reward
 
                     saved.append(
                         str(

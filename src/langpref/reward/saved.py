@@ -2,7 +2,7 @@
 by a Gymnasium wrapper any RL library can train on.
 
     import gymnasium as gym
-    from langpref.rewards import LearnedReward
+    from langpref.reward.saved import LearnedReward
     env = LearnedReward(gym.make("langpref/metaworld-button-press"), "DIR")   # DIR/reward.json, or a reward file
 
 A saved reward (`reward-NAME.json`) holds r_xi's parameters, the task, and a reference to the checkpoint whose

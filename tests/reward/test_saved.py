@@ -72,7 +72,7 @@ def test_per_step_rewards_sum_to_T_r_xi_on_a_real_rollout(checkpoint, tmp_path, 
     import gymnasium as gym
 
     from langpref.model.checkpoint import load_model
-    from langpref.rewards import LearnedReward, save_learned_reward
+    from langpref.reward.saved import LearnedReward, save_learned_reward
     from langpref.tasks.metaworld.controller import expert_unit, make_controller
 
     learner = _learner(kind)
@@ -100,7 +100,7 @@ def test_a_reward_of_another_task_is_refused(checkpoint, tmp_path):
     import gymnasium as gym
 
     from langpref.errors import LangprefError
-    from langpref.rewards import LearnedReward, save_learned_reward
+    from langpref.reward.saved import LearnedReward, save_learned_reward
 
     save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=checkpoint, default=True)
     with pytest.raises(LangprefError, match="langpref/metaworld"):
@@ -128,7 +128,7 @@ def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp
     )
     import gymnasium as gym
 
-    from langpref.rewards import LearnedReward, save_learned_reward
+    from langpref.reward.saved import LearnedReward, save_learned_reward
 
     save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=checkpoint, default=True)
     env = LearnedReward(gym.make("langpref/metaworld-button-press", horizon=64), tmp_path)

@@ -12,7 +12,10 @@ import torch
 from langpref.errors import LangprefError
 from langpref.feedback import LatentSpace, get_kind, phrase_table, random_query, toy_latent_space
 from langpref.feedback.bradley_terry import PairBatch
-from langpref.feedback.selection import (
+from langpref.feedback.space import perfect_encoder
+from langpref.language.bank import load_bank
+from langpref.reward import LearnRewardConfig, RewardConfig, RewardLearner, human_weights, run_reward_learning
+from langpref.reward.selection import (
     ComparisonActive,
     LalInfoGain,
     LanguageInfoGain,
@@ -20,9 +23,6 @@ from langpref.feedback.selection import (
     make_selector,
     mutual_information,
 )
-from langpref.feedback.space import perfect_encoder
-from langpref.language.bank import load_bank
-from langpref.reward import LearnRewardConfig, RewardConfig, RewardLearner, human_weights, run_reward_learning
 
 torch.set_num_threads(1)
 

@@ -12,11 +12,7 @@ import torch
 
 from langpref.errors import LangprefError
 from langpref.feedback import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery, toy_latent_space
-from langpref.feedback.cost import PAPER_COSTS, on_time_grid, query_costs, time_average
 from langpref.feedback.kind import kind_of
-from langpref.feedback.mixed import MixedInfoGain
-from langpref.feedback.posterior import laplace_posterior
-from langpref.feedback.selection import candidate_rows
 from langpref.reward import (
     LearnRewardConfig,
     RewardConfig,
@@ -25,6 +21,10 @@ from langpref.reward import (
     learn_reward,
     run_reward_learning,
 )
+from langpref.reward.cost import PAPER_COSTS, on_time_grid, query_costs, time_average
+from langpref.reward.mixed import MixedInfoGain
+from langpref.reward.posterior import laplace_posterior
+from langpref.reward.selection import candidate_rows
 
 torch.set_num_threads(1)
 

@@ -1,0 +1,55 @@
+"""Reward learning from feedback: the learners, the loop that asks a (synthetic) person, active query selection, and
+the saved reward other tools train on.
+
+    learner.py       the paper's learner (Eq. 5-9, Eq. 11): r_xi fit to weighted Bradley-Terry pairs (`--learner paper`)
+    answer_model.py  the trajectory-conditional answer-model learner: a particle belief over the reward
+                     (`--learner answer-model`)
+    loop.py          `langpref learn-reward`: Q queries per run, metrics after each, humans x seeds
+    metrics.py       cross-entropy and the best trajectory's true reward (Sec. 5.1)
+    selection.py     active queries (`--query-selection`), scored on a posterior (`posterior.py`), in batches
+                     (`batch.py`), over both kinds per modelled second (`mixed.py`, `cost.py`)
+    saved.py         the learned reward saved for outside tools (`--save-reward`, a Gymnasium wrapper)
+"""
+
+from langpref.reward.learner import (
+    DEFAULT_WEIGHT_DECAY,
+    LOSSES,
+    MODELS,
+    NEGATIVES,
+    LinearReward,
+    MlpReward,
+    RewardConfig,
+    RewardLearner,
+    RewardModel,
+)
+from langpref.reward.loop import (
+    Curves,
+    LearnRewardConfig,
+    feedback_choices,
+    human_weights,
+    learn_reward,
+    run_reward_learning,
+    summarise,
+)
+from langpref.reward.metrics import cross_entropy, reward_of_best
+
+__all__ = [
+    "DEFAULT_WEIGHT_DECAY",
+    "LOSSES",
+    "MODELS",
+    "NEGATIVES",
+    "Curves",
+    "LearnRewardConfig",
+    "LinearReward",
+    "MlpReward",
+    "RewardConfig",
+    "RewardLearner",
+    "RewardModel",
+    "cross_entropy",
+    "feedback_choices",
+    "human_weights",
+    "learn_reward",
+    "reward_of_best",
+    "run_reward_learning",
+    "summarise",
+]
