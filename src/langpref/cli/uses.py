@@ -21,6 +21,7 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
     from langpref.feedback.space import PHRASING_SPLITS
     from langpref.improve import OBJECTIVES, STRATEGIES
     from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES, feedback_choices
+    from langpref.reward.answer_model import LEARNERS
 
     docs, out = cc.field_docs(HumanConfig), (lambda s: f" Results go to ENV-{s} unless --out." if experiment else "")
     return {
@@ -47,6 +48,7 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
         "strategy": {"choices": STRATEGIES},
         "objective": {"choices": OBJECTIVES},
         "feedback": {"required": True, "choices": feedback_choices()},
+        "learner": {"choices": LEARNERS},
     }
 
 

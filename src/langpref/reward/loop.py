@@ -32,6 +32,7 @@ from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.kind import KINDS, MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_of, random_query
 from langpref.feedback.space import LatentSpace
+from langpref.reward.answer_model import LEARNERS, AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner
 from langpref.reward.cost import query_costs
 from langpref.reward.learner import RewardConfig, RewardLearner
 from langpref.reward.metrics import cross_entropy, reward_of_best
@@ -89,6 +90,11 @@ class LearnRewardConfig:
     """Split of the metrics."""
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
+    learner: str = "paper"
+    """`paper`: Eq. 5-9's Bradley-Terry pairs fit by `reward` (`langpref.reward.learner`, the reproduction);
+    `answer-model`: a belief over the reward whose likelihood of a sentence depends on the trajectory it was said
+    about, with comparisons in the same belief (`langpref.reward.answer_model`; `random` or `infogain` queries)."""
+    answer_model: AnswerModelConfig = field(default_factory=AnswerModelConfig)
     query_selection: str | None = None
     """How each query is chosen (`langpref.reward.selection`): None or `random` (uniform, the paper's); `infogain`
     (language and comparisons: information about the reward, Laplace posterior); `lal-infogain` (language: the
@@ -130,6 +136,16 @@ class LearnRewardConfig:
 
         if self.feedback not in feedback_choices():
             raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(feedback_choices())}")
+        if self.learner not in LEARNERS:
+            raise LangprefError(f"unknown learner {self.learner!r}: choose one of {', '.join(LEARNERS)}")
+        if self.learner == "answer-model":
+            self.answer_model.validate()
+            if self.selection not in ("random", "infogain"):
+                raise LangprefError(
+                    f"the answer-model learner asks with random or infogain queries, not {self.selection!r}"
+                )
+            if self.feedback not in (*MIXED_KINDS, MIXED):
+                raise LangprefError(f"the answer-model learner takes language and comparisons, not {self.feedback!r}")
         check_strategy(self.selection, self.feedback)
         if self.query_batch is not None and self.query_batch < 1:
             raise LangprefError(f"query_batch must be >= 1, got {self.query_batch}")
@@ -143,6 +159,15 @@ class LearnRewardConfig:
             raise LangprefError("queries, humans and seeds must each be >= 1")
         self.human.validate()
         self.reward.validate()
+
+
+def config_record(cfg: LearnRewardConfig) -> dict:
+    """The config as written into results; the paper's learner leaves out the answer-model fields, so that its
+    output stays what it was before that learner existed, byte for byte."""
+    record = asdict(cfg)
+    if cfg.learner == "paper":
+        del record["learner"], record["answer_model"]
+    return record
 
 
 def human_weights(num_features: int, seed: int, human: int) -> np.ndarray:
@@ -173,7 +198,11 @@ def run_reward_learning(
     eval_rows = space.split(cfg.eval_split)
     R_eval = true_reward(w, space.theta[eval_rows])
     rng_query, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
-    learner = RewardLearner(space.dim, cfg.reward, seed=int(np.random.default_rng([*run_seed, 4]).integers(2**31)))
+    learner_seed = int(np.random.default_rng([*run_seed, 4]).integers(2**31))
+    if cfg.learner == "answer-model":
+        learner = AnswerModelLearner(space, pool, cfg.answer_model, cfg.reward.negative_split, seed=learner_seed)
+    else:
+        learner = RewardLearner(space.dim, cfg.reward, seed=learner_seed)
     selector = _selector(cfg, space, pool)
     rng_select = np.random.default_rng([*run_seed, 5])
     costs = cfg.costs
@@ -200,7 +229,10 @@ def run_reward_learning(
                 selector.observe(space, answer)
             if record is not None:
                 record.append((chosen, answer))
-            learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
+            if cfg.learner == "answer-model":
+                learner.observe(kind.name, answer)
+            else:
+                learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
             if n == len(batch):
                 learner.fit()
             curves.kinds.append(kind.name)
@@ -217,11 +249,16 @@ def run_reward_learning(
 
 def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
     """The active strategy of `cfg` (None for random: the loop draws uniformly)."""
-    from langpref.reward.selection import make_selector
+    from langpref.reward.selection import DEFAULT_SAMPLES, make_selector
 
+    if cfg.learner == "answer-model":
+        if cfg.selection == "random":
+            return None
+        kinds = MIXED_KINDS if cfg.feedback == MIXED else (cfg.feedback,)
+        samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
+        return AnswerModelInfoGain(space, pool, kinds, cfg.costs, cfg.candidates, samples)
     if cfg.feedback == MIXED:  # validate() has checked the strategy (infogain) and the linear reward
         from langpref.reward.mixed import MixedInfoGain
-        from langpref.reward.selection import DEFAULT_SAMPLES
 
         samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
         return MixedInfoGain(space, pool, cfg.reward, cfg.costs, cfg.candidates, samples)
@@ -353,7 +390,7 @@ def learn_reward(
         "feedback": cfg.feedback,
         "loss": cfg.reward.loss,
         "query_selection": cfg.selection,
-        "config": asdict(cfg),
+        "config": config_record(cfg),
         "space": space.description,
         **extra,
     }

@@ -1,0 +1,350 @@
+"""The answer-model learner (`--learner answer-model`): a belief over the reward that reads a sentence as evidence
+about the reward *given the trajectory it was said about*, asks actively under that same model, and holds language
+and comparisons in one posterior.
+
+Why. Under the paper's learner (Eq. 5-9) with a linear r_xi, r(phi + psi_l) - r(phi) = xi . psi_l: phi of the shown
+trajectory cancels out of every pair, so the learner learns only how often each meaning is named, and a strategy
+that chooses what to show distorts those counts (docs/results.md, "Active queries on the default data").
+
+The reward. Each feature f the bank has phrasings of gets an axis a_f in the latent space (from the mean psi of its
+`decrease` phrasings to that of its `increase` ones, over the robot's own bank split; `feature_axes`). A trajectory's
+reading along the axes, standardised over the query pool, is z_f(tau) = (a_f . phi(tau) - mu_f) / sd_f, and the
+reward is r_v(tau) = v . z(tau), v in R^F. As a reward on phi it is linear, xi = sum_f (v_f / sd_f) a_f (plus a
+constant), so it is saved and used like the paper's linear reward.
+
+The likelihood of a language answer l about tau is normalised over the 2F meanings m = (feature, direction) the
+person could have meant:
+
+    P(l | v, tau) = sum_m P(m | l) P(m | v, tau)
+    P(f | v, tau) = softmax_f( v_f (z_f(tau*_v) - z_f(tau)) / T ),     tau*_v = argmax_{pool} r_v
+    P(d | f, v)   = 1 - slip for the direction that raises r_v (sign of v_f), slip for the other
+    P(m | v, tau) = (1 - lapse) P(f | v, tau) P(d | f, v) + lapse / 2F
+
+P(m | l) is the model's soft reading of the sentence: softmax over meanings of cos(psi_l, prototype_m) / T_read,
+prototypes the mean psi of each meaning's phrasings in the robot's bank split, T_read fitted to the bank's own val
+phrasings (their meanings are the bank's labels, never a synthetic human's). P(f | v, tau) is the paper's Eq. 10
+in the latent space: it depends on tau, so showing a trajectory that is already far along feature f makes "more f"
+strong evidence and "more g" evidence that g matters more. `slip` and `lapse` make the model robust to people it does
+not describe (a human who says the direction toward the best trajectory, or something vague).
+
+A comparison's likelihood is Bradley-Terry on the same reward, sigmoid(beta (r_v(preferred) - r_v(rejected))).
+
+The belief. Weighted particles v ~ N(0, prior_scale^2 I) (the scale is learned with the direction: a sharper person
+is a larger v), reweighted by each answer's likelihood; when the effective sample size falls below half, they are
+resampled and moved by a few Metropolis steps on the full posterior (resample-move), so the belief keeps contracting
+as answers arrive. The learned reward is the posterior mean of v. Everything random draws from the learner's seed.
+
+Active selection (`AnswerModelInfoGain`, `--query-selection infogain`) scores the mutual information between v and
+the person's answer under this same model, from draws of the belief: over the 2F meanings for a language query (a
+trajectory whose answer is already certain, such as the belief's own optimum, scores 0 whatever was shown before),
+over the binary choice for a comparison, and, for `--feedback mixed`, both in nats per modelled second.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from langpref.errors import LangprefError
+from langpref.feedback.space import LatentSpace
+from langpref.reward.batch import Scored, comparison_candidates, join, language_candidates
+from langpref.reward.selection import (
+    Selector,
+    binary_mutual_information,
+    candidate_rows,
+    feature_axes,
+    mutual_information,
+)
+
+LEARNERS = ("paper", "answer-model")
+"""`--learner`: Eq. 9's Bradley-Terry pairs (the paper's, `langpref.reward.learner`) or this module's."""
+READING_TEMPERATURES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+"""The grid T_read is fitted on."""
+
+
+@dataclass
+class AnswerModelConfig:
+    """The answer-model learner's knobs (`--learner answer-model`)."""
+
+    particles: int = 2048
+    """Particles of the belief over the reward weights v."""
+    answer_temperature: float = 1.0
+    """T of the answer model's softmax over features (Eq. 10's is 1)."""
+    direction_slip: float = 0.1
+    """Probability that the person names the direction of a feature that lowers the reward (or says the direction
+    toward the best trajectory instead)."""
+    lapse: float = 0.05
+    """Probability that an answer says nothing about the reward (uniform over meanings: vague, misheard)."""
+    reading_temperature: float | None = None
+    """T_read of P(meaning | sentence) = softmax(cos(psi_l, prototype_m) / T_read); None: fitted on the bank's val
+    phrasings (the train split's when the bank has no val split)."""
+    comparison_rationality: float = 1.0
+    """beta of a comparison's Bradley-Terry likelihood in the same belief."""
+    prior_scale: float = 1.0
+    """Standard deviation of the Gaussian prior on each reward weight."""
+    move_steps: int = 4
+    """Metropolis steps per particle after each resampling."""
+
+    def validate(self) -> None:
+        if self.particles < 16 or self.move_steps < 0:
+            raise LangprefError("the answer-model learner needs particles >= 16 and move_steps >= 0")
+        if not (0 <= self.direction_slip < 0.5 and 0 <= self.lapse < 1):
+            raise LangprefError("direction_slip must be in [0, 0.5) and lapse in [0, 1)")
+        if not (self.answer_temperature > 0 and self.prior_scale > 0 and self.comparison_rationality >= 0):
+            raise LangprefError("answer_temperature and prior_scale must be > 0, comparison_rationality >= 0")
+        if self.reading_temperature is not None and not self.reading_temperature > 0:
+            raise LangprefError(f"reading_temperature must be > 0, got {self.reading_temperature}")
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    return x / np.maximum(np.linalg.norm(x, axis=-1, keepdims=True), 1e-12)
+
+
+def _log_softmax(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    return x - np.logaddexp.reduce(x, axis=axis, keepdims=True)
+
+
+class AnswerReader:
+    """P(meaning | sentence): the model's soft reading of a sentence over the 2F meanings of the answer model
+    (meaning 2k + d: feature `features[k]`, d = 0 increase)."""
+
+    def __init__(self, space: LatentSpace, features: np.ndarray, split: str, temperature: float | None):
+        table = space.table(split)
+        protos = []
+        for f in features:
+            inc, dec = table.rows(int(f), 0), table.rows(int(f), 1)
+            p_inc = _unit(table.psi[inc].mean(axis=0)) if len(inc) else None
+            p_dec = _unit(table.psi[dec].mean(axis=0)) if len(dec) else None
+            protos += [p_inc if p_inc is not None else -p_dec, p_dec if p_dec is not None else -p_inc]
+        self.prototypes = np.stack(protos)
+        self.space = space
+        self.temperature = self.fit_temperature(space, features) if temperature is None else float(temperature)
+
+    def log_probabilities(self, psi: np.ndarray) -> np.ndarray:
+        """(..., 2F) log P(m | l) of embeddings psi (..., D)."""
+        return _log_softmax((_unit(psi) @ self.prototypes.T) / self.temperature)
+
+    def fit_temperature(self, space: LatentSpace, features: np.ndarray) -> float:
+        """The T_read of `READING_TEMPERATURES` under which the bank's val phrasings are likeliest as their own
+        meanings (the train split's when there are no val phrasings)."""
+        table = None
+        for split in ("val", "train"):
+            try:
+                table = space.table(split)
+            except (KeyError, LangprefError):
+                continue
+            if len(table):
+                break
+        position = {int(f): k for k, f in enumerate(features)}
+        keep = np.array([int(f) in position for f in table.feature], dtype=bool)
+        if not keep.any():
+            return 0.1
+        target = np.array([2 * position[int(f)] + int(d) for f, d in zip(table.feature[keep], table.direction[keep])])
+        cos = _unit(table.psi[keep]) @ self.prototypes.T
+        scores = [_log_softmax(cos / t)[np.arange(len(target)), target].mean() for t in READING_TEMPERATURES]
+        return float(READING_TEMPERATURES[int(np.argmax(scores))])
+
+
+class AnswerModelLearner:
+    """The belief over v (module docstring): `observe` answers of either kind, `fit` folds them in, `predict` the
+    posterior-mean reward of latent points phi, `draw` samples of the belief for active selection."""
+
+    def __init__(
+        self,
+        space: LatentSpace,
+        pool: Sequence[int],
+        cfg: AnswerModelConfig | None = None,
+        bank_split: str = "train",
+        seed: int = 0,
+    ):
+        self.cfg = cfg or AnswerModelConfig()
+        self.cfg.validate()
+        self.space = space
+        self.pool = np.asarray(pool, dtype=np.int64)
+        self.features, axes = feature_axes(space, bank_split)
+        proj = space.phi @ axes.T
+        self.mu = proj[self.pool].mean(axis=0)
+        self.sd = np.maximum(proj[self.pool].std(axis=0), 1e-9)
+        self.axes = axes
+        self.z = (proj - self.mu) / self.sd
+        self.z_pool = self.z[self.pool]
+        self.reader = AnswerReader(space, self.features, bank_split, self.cfg.reading_temperature)
+        self.rng = np.random.default_rng(seed)
+        self.v = self.cfg.prior_scale * self.rng.standard_normal((self.cfg.particles, len(self.features)))
+        self.log_weights = np.zeros(self.cfg.particles)
+        self.best = self._best(self.v)
+        self.answers: list[tuple] = []
+        self._pending: list[tuple] = []
+
+    # ---- the answer model --------------------------------------------------------------------------------------
+
+    @property
+    def num_features(self) -> int:
+        return len(self.features)
+
+    @property
+    def num_queries(self) -> int:
+        return len(self.answers) + len(self._pending)
+
+    def _best(self, v: np.ndarray) -> np.ndarray:
+        """(n,) position in the pool of tau*_v for each row of v."""
+        return np.argmax(v @ self.z_pool.T, axis=1)
+
+    def meaning_probabilities(self, v: np.ndarray, best: np.ndarray, shown: np.ndarray) -> np.ndarray:
+        """(n, C, 2F) P(m | v_s, tau_c) for particles v (n, F) with optima `best` and trajectories `shown` (C,)."""
+        cfg = self.cfg
+        gap = self.z_pool[best][:, None, :] - self.z[np.asarray(shown)][None, :, :]  # (n, C, F)
+        pf = np.exp(_log_softmax(v[:, None, :] * gap / cfg.answer_temperature))
+        up = np.where(v >= 0, 1.0 - cfg.direction_slip, cfg.direction_slip)[:, None, :]  # (n, 1, F) P(increase)
+        out = np.empty(pf.shape[:2] + (2 * pf.shape[2],))
+        out[..., 0::2] = pf * up
+        out[..., 1::2] = pf * (1.0 - up)
+        return (1.0 - cfg.lapse) * out + cfg.lapse / out.shape[-1]
+
+    def _log_likelihood(self, v: np.ndarray, best: np.ndarray, answer: tuple) -> np.ndarray:
+        """(n,) log-likelihood of one recorded answer under each particle."""
+        if answer[0] == "language":
+            _, shown, reading = answer
+            p = self.meaning_probabilities(v, best, np.array([shown]))[:, 0, :]
+            return np.log(np.maximum(p @ reading, 1e-300))
+        _, winner, loser = answer
+        margin = self.cfg.comparison_rationality * (v @ (self.z[winner] - self.z[loser]))
+        return -np.logaddexp(0.0, -margin)
+
+    def _total_log_likelihood(self, v: np.ndarray, best: np.ndarray) -> np.ndarray:
+        total = np.zeros(len(v))
+        for answer in self.answers:
+            total += self._log_likelihood(v, best, answer)
+        return total
+
+    # ---- learning ----------------------------------------------------------------------------------------------
+
+    def observe(self, kind: str, answer: Any) -> None:
+        """Record an answer of `kind` (`language` or `comparison`); `fit` folds it into the belief."""
+        if kind == "language":
+            reading = np.exp(self.reader.log_probabilities(self.space.psi_of(answer.text)))
+            self._pending.append(("language", int(answer.query.shown), reading))
+        elif kind == "comparison":
+            q = answer.query
+            loser = q.a if answer.preferred == q.b else q.b
+            self._pending.append(("comparison", int(answer.preferred), int(loser)))
+        else:
+            raise LangprefError(f"the answer-model learner takes language and comparisons, not {kind!r} feedback")
+
+    def fit(self) -> None:
+        """Reweight the particles by every answer observed since the last fit; resample and move them when the
+        effective sample size falls below half."""
+        for answer in self._pending:
+            self.log_weights += self._log_likelihood(self.v, self.best, answer)
+            self.answers.append(answer)
+            self.log_weights -= self.log_weights.max()
+            if self.effective_sample_size() < 0.5 * len(self.v):
+                self._resample_move()
+        self._pending = []
+
+    def weights(self) -> np.ndarray:
+        w = np.exp(self.log_weights - self.log_weights.max())
+        return w / w.sum()
+
+    def effective_sample_size(self) -> float:
+        w = self.weights()
+        return float(1.0 / np.sum(w * w))
+
+    def _resample(self, n: int) -> np.ndarray:
+        """n particle indices, systematic resampling by weight."""
+        positions = (self.rng.random() + np.arange(n)) / n
+        return np.minimum(np.searchsorted(np.cumsum(self.weights()), positions), len(self.v) - 1)
+
+    def _resample_move(self) -> None:
+        idx = self._resample(len(self.v))
+        v, best = self.v[idx], self.best[idx]
+        log_post = self._total_log_likelihood(v, best) - 0.5 * np.sum(v * v, axis=1) / self.cfg.prior_scale**2
+        step = 0.5 * np.maximum(v.std(axis=0), 0.02 * self.cfg.prior_scale)
+        for _ in range(self.cfg.move_steps):
+            proposal = v + step * self.rng.standard_normal(v.shape)
+            best_p = self._best(proposal)
+            log_p = (
+                self._total_log_likelihood(proposal, best_p)
+                - 0.5 * np.sum(proposal * proposal, axis=1) / self.cfg.prior_scale**2
+            )
+            accept = np.log(self.rng.random(len(v))) < log_p - log_post
+            v = np.where(accept[:, None], proposal, v)
+            best = np.where(accept, best_p, best)
+            log_post = np.where(accept, log_p, log_post)
+        self.v, self.best = v, best
+        self.log_weights = np.zeros(len(v))
+
+    # ---- what it learned ---------------------------------------------------------------------------------------
+
+    def mean(self) -> np.ndarray:
+        """The posterior mean of v (F,)."""
+        return self.weights() @ self.v
+
+    def latent_weights(self) -> np.ndarray:
+        """The posterior-mean reward as a linear reward on phi: xi (D,) with xi . phi = r + a constant."""
+        return (self.mean() / self.sd) @ self.axes
+
+    def predict(self, phi: np.ndarray) -> np.ndarray:
+        """The posterior-mean reward of each row of `phi` (latent points: dataset or generated trajectories)."""
+        z = (np.asarray(phi, dtype=np.float64) @ self.axes.T - self.mu) / self.sd
+        return z @ self.mean()
+
+    def draw(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """n draws of the belief (v (n, F), their optima in the pool (n,)), resampled by weight."""
+        idx = self._resample(int(n))
+        return self.v[idx], self.best[idx]
+
+    def credible(self, v_true: np.ndarray, level: float = 0.9) -> bool:
+        """Whether the direction of `v_true` lies in the belief's `level` credible region of directions (the
+        particles' cosines to the posterior-mean direction, weighted): for calibration checks."""
+        u = _unit(self.v)
+        centre = _unit(self.weights() @ u)
+        cos = u @ centre
+        order = np.argsort(-cos)
+        cutoff = cos[order][np.searchsorted(np.cumsum(self.weights()[order]), level)]
+        return bool(_unit(np.asarray(v_true, dtype=np.float64)) @ centre >= cutoff)
+
+
+class AnswerModelInfoGain(Selector):
+    """`infogain` under the answer model: I(v; answer | query) from draws of the learner's belief, for language
+    queries, comparisons, or both per modelled second (`costs`, a mixed learner)."""
+
+    name = "infogain"
+
+    def __init__(
+        self,
+        space: LatentSpace,
+        pool: Sequence[int],
+        kinds: Sequence[str],
+        costs: Mapping[str, float] | None = None,
+        candidates: int | None = None,
+        samples: int = 64,
+    ):
+        unknown = [k for k in kinds if k not in ("language", "comparison")]
+        if unknown:
+            raise LangprefError(f"the answer-model learner asks language and comparisons, not {', '.join(unknown)}")
+        self.space = space
+        self.pool = np.asarray(pool, dtype=np.int64)
+        self.kinds = tuple(kinds)
+        self.costs = dict(costs or {})
+        self.candidates = candidates
+        self.samples = int(samples)
+
+    def score(self, learner: AnswerModelLearner, rng: np.random.Generator) -> Scored:
+        rows = candidate_rows(self.pool, self.candidates, rng)
+        v, best = learner.draw(self.samples)
+        phi = self.space.phi[rows]
+        parts = []
+        if "language" in self.kinds:
+            gains = mutual_information(learner.meaning_probabilities(v, best, rows))
+            star = self.space.phi[learner.pool[best]].mean(axis=0)
+            parts.append(language_candidates(rows, gains, phi, star))
+        if "comparison" in self.kinds:
+            r = learner.cfg.comparison_rationality * (learner.z[rows] @ v.T).astype(np.float32)  # (C, S)
+            i, j = np.triu_indices(len(rows), k=1)
+            gains = binary_mutual_information(0.5 * (1.0 + np.tanh(0.5 * (r[i] - r[j]))))
+            parts.append(comparison_candidates(rows, i, j, gains, phi))
+        return parts[0] if len(parts) == 1 else join(parts, self.costs)
