@@ -1,11 +1,13 @@
 """`langpref experiment active --env ENV`: active queries against random ones, for language and for comparisons,
 and a learner that asks either kind.
 
-Language x {random (the paper's), lal-infogain (the authors' follow-up), infogain (ours: the latent Eq. 10 answer
-model, `langpref.reward.selection`)}, comparisons x {random, infogain (mutual information), volume-removal}, and
+The learner is a dimension. Under the paper's learner (Eq. 9 / Bradley-Terry, L-BFGS, L2 prior): language x {random
+(the paper's), lal-infogain (the authors' follow-up), infogain (the latent Eq. 10 answer model,
+`langpref.reward.selection`)}, comparisons x {random, infogain (mutual information), volume-removal}, and
 mixed-infogain (both kinds in one learner, each query of the kind and item with the most information per modelled
-second, `langpref.reward.mixed`), 10 synthetic humans x 3 seeds, Q = 40, the same learner (Eq. 9 / Bradley-Terry,
-L-BFGS, L2 prior) for all: only what is shown differs.
+second, `langpref.reward.mixed`). Under the answer-model learner (`langpref.reward.answer_model`, methods prefixed
+`am-`): language x {random, infogain}, comparisons x infogain and mixed-infogain, all asking and learning under the
+one answer model. 10 synthetic humans x 3 seeds, Q = 40.
 
 Over queries and over the person's time. A query's modelled seconds are its kind's (`langpref.reward.cost`: the
 paper's measurement, language 11.3% faster than a comparison, unless given), so every run also has a curve over
@@ -34,17 +36,27 @@ from langpref.extras import pyplot
 from langpref.reward.cost import elapsed, on_time_grid, time_average
 
 METHODS = {
-    "language-random": ("language", None),
-    "language-lal-infogain": ("language", "lal-infogain"),
-    "language-infogain": ("language", "infogain"),
-    "comparison-random": ("comparison", None),
-    "comparison-infogain": ("comparison", "infogain"),
-    "comparison-volume-removal": ("comparison", "volume-removal"),
-    "mixed-infogain": ("mixed", "infogain"),
+    "language-random": ("language", None, "paper"),
+    "language-lal-infogain": ("language", "lal-infogain", "paper"),
+    "language-infogain": ("language", "infogain", "paper"),
+    "comparison-random": ("comparison", None, "paper"),
+    "comparison-infogain": ("comparison", "infogain", "paper"),
+    "comparison-volume-removal": ("comparison", "volume-removal", "paper"),
+    "mixed-infogain": ("mixed", "infogain", "paper"),
+    "am-language-random": ("language", None, "answer-model"),
+    "am-language-infogain": ("language", "infogain", "answer-model"),
+    "am-comparison-infogain": ("comparison", "infogain", "answer-model"),
+    "am-mixed-infogain": ("mixed", "infogain", "answer-model"),
 }
-"""Method name -> (feedback, query selection); None is random."""
+"""Method name -> (feedback, query selection, learner); None is random."""
 OURS, LAL, LANG_RANDOM = "language-infogain", "language-lal-infogain", "language-random"
 COMP, MIXED = "comparison-infogain", "mixed-infogain"
+AM_LANG, AM_RANDOM, AM_COMP, AM_MIXED = (
+    "am-language-infogain",
+    "am-language-random",
+    "am-comparison-infogain",
+    ("am-mixed-infogain"),
+)
 CONTRASTS = (
     (OURS, LANG_RANDOM),
     (OURS, LAL),
@@ -54,6 +66,13 @@ CONTRASTS = (
     ("comparison-volume-removal", "comparison-random"),
     (MIXED, OURS),
     (MIXED, COMP),
+    (AM_LANG, COMP),
+    (AM_LANG, AM_COMP),
+    (AM_LANG, AM_RANDOM),
+    (AM_RANDOM, LANG_RANDOM),
+    (AM_LANG, LANG_RANDOM),
+    (AM_MIXED, AM_LANG),
+    (AM_MIXED, AM_COMP),
 )
 """Paired differences reported (first minus second)."""
 METRICS = {"true_reward_of_best": "auc_true_reward", "cross_entropy": "auc_cross_entropy"}
@@ -130,7 +149,10 @@ def run_active_experiment(
 
     base = config or LearnRewardConfig(humans=10, seeds=3)
     base = replace(base, humans=base.humans if humans is None else humans, seeds=base.seeds if seeds is None else seeds)
-    methods = {name: replace(base, feedback=fb, query_selection=sel) for name, (fb, sel) in METHODS.items()}
+    methods = {
+        name: replace(base, feedback=fb, query_selection=sel, learner=learner)
+        for name, (fb, sel, learner) in METHODS.items()
+    }
     results, runs, space, data, model, out = _run_methods(
         "active", env, methods, data, model, out, perfect, force, progress, sweep
     )
@@ -169,6 +191,7 @@ def run_active_experiment(
         "ours not significantly worse than lal-infogain on AUC": vs_lal["high"] >= 0,
         f"active language (ours) beats active comparisons ({best_comp}) on AUC": ours["auc_true_reward"]
         > results[best_comp]["auc_true_reward"],
+        **answer_model_targets(results, contrasts),
     }
     figure = plot_active(
         results, timed, out / "active.png", f"Active queries, {env}" + (" (perfect latent)" if model is None else "")
@@ -186,6 +209,32 @@ def run_active_experiment(
         "per_run_auc_per_second": {m: auc_s[m][:, 0].tolist() for m in methods},
     }
     return _save("active", env, data, model, out, space, base, fields, _markdown)
+
+
+def answer_model_targets(results: dict[str, dict], contrasts: dict[str, dict]) -> dict[str, bool]:
+    """Issue 29's targets for the answer-model learner, from the summaries and the paired intervals."""
+
+    def above(a: str, b: str, per: str = "") -> bool:
+        return contrasts[f"{a} - {b}"][f"auc_true_reward{per}"]["low"] > 0
+
+    def not_below(a: str, b: str) -> bool:
+        return contrasts[f"{a} - {b}"]["auc_true_reward"]["high"] >= 0
+
+    am_q, rand_q = results[AM_LANG]["queries_to_0.95"], results["comparison-random"]["queries_to_0.95"]
+    better = max((AM_LANG, AM_COMP), key=lambda m: results[m]["auc_true_reward"])
+    return {
+        f"answer-model active language beats active comparisons ({COMP}, {AM_COMP}) on AUC, interval above 0, per "
+        "query and per second": all(above(AM_LANG, c, per) for c in (COMP, AM_COMP) for per in ("", "_per_second")),
+        "answer-model active language beats answer-model random language, interval above 0": above(AM_LANG, AM_RANDOM),
+        "answer-model active language not significantly worse than its random language": not_below(AM_LANG, AM_RANDOM),
+        "answer-model random language not below the paper's random language": not_below(AM_RANDOM, LANG_RANDOM),
+        f"answer-model active language reaches 0.95 in at most half the queries random comparisons need ({am_q} vs "
+        f"{rand_q})": am_q is not None and (rand_q is None or am_q <= rand_q / 2),
+        f"answer-model mixed at least as good as the better single kind ({better})": results[AM_MIXED][
+            "auc_true_reward"
+        ]
+        >= results[better]["auc_true_reward"] - 1e-9,
+    }
 
 
 def plot_active(results: dict[str, dict], timed: dict[str, Any], out: str | Path, title: str = "") -> Path:
@@ -228,9 +277,10 @@ def _markdown(summary: dict[str, Any]) -> str:
         f"### Active queries, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
         "",
         f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-        f"{summary['seeds']} seeds, Q = {q}; metrics on the test split; every method fits the same learner, "
-        "only the queries differ). CE: cross-entropy to the human's P_w; best: normalised true reward of the "
-        "test trajectory r_xi ranks first; AUC: mean of the best curve over query counts 0..Q.",
+        f"{summary['seeds']} seeds, Q = {q}; metrics on the test split; methods without `am-` fit the paper's "
+        "learner and differ only in the queries, `am-` ones the answer-model learner). CE: cross-entropy to the "
+        "human's P_w; best: normalised true reward of the test trajectory r_xi ranks first; AUC: mean of the best "
+        "curve over query counts 0..Q.",
         "",
     ]
     lines += _table(summary["methods"], at)
