@@ -17,7 +17,7 @@ from langpref.extras import require
 def _use_opts(experiment: bool = False) -> dict[str, Any]:
     """The flags of the fields of the synthetic human, the reward model and the splits, where they differ from the
     derived ones."""
-    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_SCALES, HumanConfig
+    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, FEATURE_SCALES, HumanConfig
     from langpref.feedback.space import PHRASING_SPLITS
     from langpref.improve import OBJECTIVES, STRATEGIES
     from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES, feedback_choices
@@ -29,6 +29,8 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
         "human.phrasings": {"metavar": "FILE", "help": docs["phrasings"] + out("phrasings")},
         "human.feature_scale": {"choices": FEATURE_SCALES, "help": docs["feature_scale"] + out("paper-scale")},
         "human.direction": {"choices": DIRECTION_RULES, "help": docs["direction"] + out("toward-best")},
+        "human.feature_rule": {"choices": FEATURE_RULES, "help": docs["feature_rule"] + out("largest-change")},
+        "human.vague": {"help": docs["vague"] + out("vagueP")},
         "reward.model": {"flag": "--reward-model", "choices": MODELS},
         "reward.hidden": "--reward-hidden",
         "reward.loss": {"choices": LOSSES},

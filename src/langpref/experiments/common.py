@@ -148,7 +148,7 @@ def cli_flags(base, default, names: tuple[str, ...]) -> str:
     flags = "".join(
         f" --{k.replace('_', '-')} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k)
     )
-    for k in ("feature_scale", "direction"):
+    for k in ("feature_scale", "direction", "feature_rule", "vague", "temperature"):
         if getattr(base.human, k) != getattr(default.human, k):
             flags += f" --{k.replace('_', '-')} {getattr(base.human, k)}"
     if base.human.phrasings:
@@ -182,6 +182,10 @@ def title_suffix(perfect: bool, human) -> str:
         parts.append(f"{human.feature_scale} feature scale")
     if human.direction != "reward":
         parts.append(f"direction {human.direction}")
+    if human.feature_rule != "eq10":
+        parts.append(f"feature rule {human.feature_rule}")
+    if human.vague:
+        parts.append(f"{human.vague:g} vague")
     return f" ({', '.join(parts)})" if parts else ""
 
 

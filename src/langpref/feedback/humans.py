@@ -60,6 +60,8 @@ FEATURE_SCALES = ("standardised", "paper")
 """What theta(tau) the synthetic humans' reward weighs (see the module docstring)."""
 DIRECTION_RULES = ("reward", "toward-best")
 """How the language human picks the direction of the feature it names (see `HumanConfig.direction`)."""
+FEATURE_RULES = ("eq10", "largest-change")
+"""How the language human picks the feature it names (see `HumanConfig.feature_rule`)."""
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -90,6 +92,12 @@ class HumanConfig:
     """The direction the language human says for the feature it picked (Eq. 10 does not say): `reward`, the one
     that raises its reward (sign of w_f), or `toward-best`, the one that moves tau^0 toward tau* (sign of theta*_f -
     theta0_f, the difference Eq. 10's softmax weighs; the sign of w_f when they are equal)."""
+    feature_rule: str = "eq10"
+    """How the language human picks the feature it names: `eq10` (the paper's softmax of w_f (theta*_f - theta0_f))
+    or `largest-change`, a human no learner models: the feature whose raw value differs most between tau^0 and tau*
+    (|theta*_f - theta0_f|, whatever its weight), said in the direction toward tau*."""
+    vague: float = 0.0
+    """Probability that the language human says something vague that names no feature ("Not quite.")."""
 
     @property
     def phrase_source(self) -> str:
@@ -105,6 +113,10 @@ class HumanConfig:
             raise LangprefError(
                 f"unknown feature scale {self.feature_scale!r}: choose one of {', '.join(FEATURE_SCALES)}"
             )
+        if self.feature_rule not in FEATURE_RULES:
+            raise LangprefError(f"unknown feature rule {self.feature_rule!r}: choose one of {', '.join(FEATURE_RULES)}")
+        if not 0.0 <= self.vague <= 1.0:
+            raise LangprefError(f"the share of vague answers must be in [0, 1], got {self.vague}")
         if self.direction not in DIRECTION_RULES:
             raise LangprefError(
                 f"unknown direction rule {self.direction!r}: choose one of {', '.join(DIRECTION_RULES)}"
@@ -112,6 +124,9 @@ class HumanConfig:
 
     def variant(self) -> list[str]:
         """What sets these humans apart from the default ones, for an output's name (none for the defaults)."""
-        return ([] if self.feature_scale == "standardised" else [f"{self.feature_scale}-scale"]) + (
-            [] if self.direction == "reward" else [self.direction]
+        return (
+            ([] if self.feature_scale == "standardised" else [f"{self.feature_scale}-scale"])
+            + ([] if self.direction == "reward" else [self.direction])
+            + ([] if self.feature_rule == "eq10" else [self.feature_rule])
+            + ([] if self.vague == 0 else [f"vague{self.vague:g}"])
         )

@@ -28,10 +28,10 @@ import numpy as np
 
 from langpref.errors import LangprefError
 from langpref.feedback.bradley_terry import PairBatch
-from langpref.feedback.humans import DIRECTION_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
+from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
 from langpref.feedback.kind import FeedbackKind, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
-from langpref.language.bank import DIRECTIONS
+from langpref.language.bank import DIRECTIONS, VAGUE_FEEDBACK
 
 if TYPE_CHECKING:
     from langpref.reward import RewardConfig
@@ -77,6 +77,8 @@ class LanguageHuman:
         temperature: float = 1.0,
         seed: Seed = 0,
         direction: str = "reward",
+        feature_rule: str = "eq10",
+        vague: float = 0.0,
     ):
         self.w = np.asarray(w, dtype=np.float64)
         self.theta = np.asarray(theta, dtype=np.float64)
@@ -90,6 +92,10 @@ class LanguageHuman:
         if direction not in DIRECTION_RULES:
             raise LangprefError(f"unknown direction rule {direction!r}: choose one of {', '.join(DIRECTION_RULES)}")
         self.direction_rule = direction
+        if feature_rule not in FEATURE_RULES:
+            raise LangprefError(f"unknown feature rule {feature_rule!r}: choose one of {', '.join(FEATURE_RULES)}")
+        self.feature_rule = feature_rule
+        self.vague = float(vague)
         cands = np.asarray(candidates, dtype=np.int64)
         self.best = int(cands[np.argmax(true_reward(self.w, self.theta[cands]))])
         """tau*, the best trajectory of the candidate set under w."""
@@ -109,8 +115,15 @@ class LanguageHuman:
         return 0 if self.w[feature] >= 0 else 1
 
     def answer(self, query: LanguageQuery) -> LanguageAnswer:
-        feature = int(self.rng.choice(len(self.w), p=self.feature_probabilities(query.shown)))
-        direction = self.direction(feature, query.shown)
+        if self.vague > 0 and self.rng.random() < self.vague:  # draws nothing for the default human
+            return LanguageAnswer(query, VAGUE_FEEDBACK[int(self.rng.integers(len(VAGUE_FEEDBACK)))])
+        if self.feature_rule == "largest-change":
+            gap = self.theta[self.best] - self.theta[query.shown]
+            feature = int(np.argmax(np.abs(gap)))
+            direction = 0 if gap[feature] > 0 or (gap[feature] == 0 and self.w[feature] >= 0) else 1
+        else:
+            feature = int(self.rng.choice(len(self.w), p=self.feature_probabilities(query.shown)))
+            direction = self.direction(feature, query.shown)
         rows = self.phrases.rows(feature, direction)
         if len(rows) == 0:
             raise LangprefError(
@@ -134,6 +147,8 @@ def make_human(
         cfg.temperature,
         rng,
         direction=cfg.direction,
+        feature_rule=cfg.feature_rule,
+        vague=cfg.vague,
     )
 
 

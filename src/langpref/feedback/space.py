@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.language.bank import DIRECTIONS, Bank, load_bank, load_user_utterances
+from langpref.language.bank import DIRECTIONS, VAGUE_FEEDBACK, Bank, load_bank, load_user_utterances
 
 BANK_SPLITS = ("train", "val", "test")
 """The bank splits a space embeds by default: any of them can be the synthetic humans' phrasings."""
@@ -250,7 +250,8 @@ def perfect_encoder(
     feature_names: Sequence[str], bank: Bank, scale: float = 1.0, extra: Sequence[tuple[str, str, str]] = ()
 ) -> Encoder:
     """An oracle language encoder: any phrasing of feature f maps to +scale e_f (increase) or -scale e_f. It knows
-    the bank's phrasings and the (text, feature, direction) entries of `extra` (e.g. an utterance file's)."""
+    the bank's phrasings and the (text, feature, direction) entries of `extra` (e.g. an utterance file's); vague
+    feedback (`VAGUE_FEEDBACK`), which names no feature, maps to 0."""
     meaning = {}
     for text, f, d in [e for split in BANK_SPLITS for e in bank.all_of_split(split)] + list(extra):
         if f not in feature_names:
@@ -262,6 +263,8 @@ def perfect_encoder(
     def encode(texts: Sequence[str]) -> np.ndarray:
         out = np.zeros((len(texts), len(feature_names)))
         for i, text in enumerate(texts):
+            if text in VAGUE_FEEDBACK and text not in meaning:
+                continue
             if text not in meaning:
                 raise LangprefError(f"the perfect encoder only knows the bank's phrasings, not {text!r}")
             f, sign = meaning[text]

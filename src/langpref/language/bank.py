@@ -28,6 +28,16 @@ from langpref.tasks import get_task, task_names
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 DIRECTIONS: tuple[str, ...] = ("increase", "decrease")
+VAGUE_FEEDBACK: tuple[str, ...] = (
+    "Not quite.",
+    "Hmm, try again.",
+    "Could be better.",
+    "Something is off.",
+    "Do it differently.",
+    "I don't like it.",
+)
+"""What a person says when they say nothing about any feature (a synthetic human's `vague` answers); the oracle
+encoder reads them as the zero vector."""
 SPLIT_SHARES = (0.6, 0.2, 0.2)  # the paper's real-robot bank: 297/99/100 phrasings
 
 _APOSTROPHES = {"'", "\u2019", "\u2018", "`"}
