@@ -91,10 +91,12 @@ class GenerateConfig:
         return cfg
 
     def identity(self) -> dict[str, Any]:
-        """What fixes the dataset's content (not where or how fast it is made); frames only when there are some,
-        so a dataset without them is stamped as before."""
+        """What fixes the dataset's content (not where or how fast it is made): the env and its simulator's version
+        (`Simulator.version`: data made before a change of the env is recognisable, and never resumed into), frames
+        only when there are some."""
         out: dict[str, Any] = {
             "env": self.env,
+            "env_version": get_simulator(self.env).version,
             "num_trajectories": self.num_trajectories,
             "horizon": self.horizon,
             "seed": self.seed,
