@@ -1,4 +1,4 @@
-"""Describe a dataset: sizes, splits, feature ranges, correlations and success rate (`langpref inspect`)."""
+"""Describe a dataset: sizes, splits, feature ranges, correlations, success rate and checksum (`langpref inspect`)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from langpref.dataset.checksum import checksum_parts, combine
 from langpref.dataset.storage import load_dataset
 
 
@@ -15,6 +16,7 @@ def describe(root: str | Path) -> dict[str, Any]:
     feats = ds.features
     corr = np.corrcoef(feats.T) if len(feats) > 1 else np.eye(feats.shape[1])
     corr = np.nan_to_num(corr)  # a constant feature has no correlation
+    parts = checksum_parts(ds)
     return {
         "path": str(ds.root),
         "env": ds.env,
@@ -35,6 +37,9 @@ def describe(root: str | Path) -> dict[str, Any]:
         "max_abs_off_diagonal_correlation": (
             float(np.max(np.abs(corr - np.diag(np.diag(corr))))) if len(corr) > 1 else 0.0
         ),
+        "env_version": ds.meta.config.get("env_version"),
+        "checksum": combine(parts),
+        "checksum_parts": parts,
     }
 
 
@@ -63,4 +68,5 @@ def format_description(d: dict[str, Any]) -> str:
     for name, row in zip(names, d["feature_correlation"]):
         lines.append(f"  {name:<20}" + "".join(f"{v:>7.2f}" for v in row))
     lines.append(f"largest |off-diagonal correlation|: {d['max_abs_off_diagonal_correlation']:.2f}")
+    lines.append(f"checksum (sha256 of the data, see `langpref.dataset.checksum`): {d['checksum']}")
     return "\n".join(lines)
