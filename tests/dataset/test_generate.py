@@ -52,6 +52,7 @@ def test_dataset_content(tiny):
     t = ds.load(0)
     assert t.observations.shape == (60, 39) and t.actions.shape == (60, 4) and t.qpos.shape[0] == 60
     assert np.isfinite(ds.features).all()
+    assert {"numpy", "mujoco", "metaworld"} <= set(ds.meta.config["made_with"])  # the stack that rolled them out
     assert len({tuple(ds.load(i).controller_params.values()) for i in range(len(ds))}) == len(ds)
     d = describe(tiny / "one")
     assert d["num_trajectories"] == 6 and d["splits"] == {"train": 4, "val": 1, "test": 1}

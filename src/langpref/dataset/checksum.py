@@ -5,8 +5,8 @@ success, and simulator state, seed and controller parameters when stored), `feat
 dataset has some, and meta.json in a canonical form (sorted keys). Each array enters as its name, dtype, shape and
 bytes. File timestamps, zip compression and the order files were written in do not enter, nor the parts of meta.json
 that say where or how fast the data was made rather than what it is (`PROVENANCE`: wall time, workers, backend, the
-paths of a recording and its task file). Recorded videos (`videos/`) are not hashed; the frames decoded from them
-are.
+paths of a recording and its task file, the numerical stack). Recorded videos (`videos/`) are not hashed; the frames
+decoded from them are.
 
 `checksum_parts` also gives one digest per part (meta, features, trajectories, frames), so two datasets that differ
 say where.
@@ -27,7 +27,7 @@ from langpref.dataset.frames import frames_path
 from langpref.dataset.storage import Dataset, trajectory_path
 from langpref.errors import LangprefError
 
-PROVENANCE = ("wall_s", "workers", "backend", "ray_address", "source", "task_file")
+PROVENANCE = ("wall_s", "workers", "backend", "ray_address", "source", "task_file", "made_with")
 """Keys of meta.json's `config` that say where, how or how fast a dataset was made, not what it holds."""
 
 
