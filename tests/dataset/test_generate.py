@@ -8,7 +8,7 @@ import pytest
 from langpref.cli import main
 from langpref.dataset.checksum import checksum_parts, dataset_checksum
 from langpref.dataset.generate import GenerateConfig, assign_splits, generate, split_sizes
-from langpref.dataset.inspect import describe
+from langpref.dataset.inspect import describe, format_description
 from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
 
@@ -91,6 +91,20 @@ def test_the_checksum_hashes_content_not_files(tiny, tmp_path):
     after = checksum_parts(load_dataset(root))
     assert {k for k in before if before[k] != after[k]} == {"trajectories"}
     assert dataset_checksum(load_dataset(root)) != dataset_checksum(load_dataset(tiny / "one"))
+
+
+def test_inspect_says_when_a_dataset_predates_the_simulator(tiny, tmp_path):
+    """A Meta-World dataset made before the goal-slot fix records no env_version: inspect says to regenerate it."""
+    root = tmp_path / "old"
+    shutil.copytree(tiny / "one", root)
+    meta = json.loads((root / "meta.json").read_text())
+    del meta["config"]["env_version"]
+    (root / "meta.json").write_text(json.dumps(meta))
+    old, new = describe(root), describe(tiny / "one")
+    assert (old["env_version"], old["env_version_current"]) == (None, 2)
+    assert "made by version 1 of the metaworld simulator" in format_description(old)
+    assert (new["env_version"], new["env_version_current"]) == (2, 2)
+    assert "made by version" not in format_description(new)
 
 
 def test_refuses_to_overwrite(tiny):
