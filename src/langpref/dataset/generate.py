@@ -190,14 +190,14 @@ def _rollout_job(
 
 
 def made_with(env: str) -> dict[str, Any]:
-    """The numerical stack that rolled the trajectories out (provenance, not content): machine, Python, numpy,
-    MuJoCo and the simulator's package versions, and numpy's BLAS with the kernel it chose for this CPU (needs
-    threadpoolctl; absent without it)."""
+    """The numerical stack that made the trajectories (provenance, not content): machine, Python, numpy, scipy (its
+    Latin hypercube draws the controllers), MuJoCo and the simulator's package versions, and numpy's BLAS with the
+    kernel it chose for this CPU (needs threadpoolctl; absent without it)."""
     import platform
     from importlib import metadata
 
     out: dict[str, Any] = {"machine": platform.machine(), "python": platform.python_version()}
-    for package in ("numpy", "mujoco", get_simulator(env).extra):
+    for package in ("numpy", "scipy", "mujoco", get_simulator(env).extra):
         try:
             out[package] = metadata.version(package) if package else None
         except metadata.PackageNotFoundError:
