@@ -13,6 +13,8 @@ version recorded, hold zeros there after the first step).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from langpref.tasks.base import ObsField
@@ -98,7 +100,7 @@ class MetaWorldButtonPress:
         self._env.close()
 
 
-def observe_goal(env: object) -> None:
+def observe_goal(env: Any) -> None:
     """Turn on full observability, so that obs[36:39] carries the goal on every step, not on reset alone.
 
     Meta-World builds (and caches) its observation space while the env is still partially observable, with the goal
