@@ -422,7 +422,7 @@ class GeneratedStore:
     def add(self, traj, **extra: Any) -> int:
         """Store a rollout (its parameters gain `extra`, e.g. the run and iteration); returns its index."""
         from langpref.dataset.storage import DatasetMeta, save_trajectory, write_meta, write_text_atomic
-        from langpref.tasks import get_task
+        from langpref.tasks import get_simulator, get_task
 
         task = get_task(self.env)
         traj.index = len(self.features)
@@ -438,7 +438,11 @@ class GeneratedStore:
             list(task.features),
             {GENERATED: list(range(n))},
             n,
-            config={"generator": "langpref.propose (CMA-ES on a surrogate, decided by real rollouts)", **self.info},
+            config={
+                "generator": "langpref.propose (CMA-ES on a surrogate, decided by real rollouts)",
+                "env_version": get_simulator(self.env).version,
+                **self.info,
+            },
         )
         write_meta(self.root, meta, np.array(self.features))
         write_text_atomic(self.root / "generated.json", json.dumps(self.info, indent=2, default=str) + "\n")

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from test_import import run_import, write_plain, write_task
 
+from langpref.dataset.checksum import checksum_parts
 from langpref.dataset.frames import FrameOptions, FrameSpec, frame_index, render_trajectory_frames, save_frames
 from langpref.dataset.generate import GenerateConfig, generate
 from langpref.dataset.storage import load_dataset
@@ -45,6 +46,8 @@ def test_generate_images_stores_small_frames_of_every_kth_step(generated):
     np.testing.assert_array_equal(again, frames[1])
     config = json.loads((generated / "generate_config.json").read_text())
     assert config["frames"] == ds.meta.frames
+    parts = checksum_parts(ds)
+    assert set(parts) == {"meta", "features", "trajectories", "frames"}  # the frames enter the checksum
 
 
 def test_a_dataset_without_frames_is_written_as_before(tmp_path):

@@ -71,3 +71,21 @@ def test_a_hovering_controller_does_not_press(env):
     for t in range(150):
         obs = env.step(ctrl.act(env, obs, t))
     assert not env.is_success()
+
+
+def test_every_step_observes_the_goal(env):
+    """obs[36:39] is the goal on reset and on every step after it (Meta-World clips each step's observation to a
+    space it cached with the goal slot bounded to zero), and the observation space admits it."""
+    from langpref.tasks import get_simulator
+
+    assert get_simulator("metaworld").version == 2
+    obs = env.reset(5)
+    goal = obs[36:39].copy()
+    assert np.linalg.norm(goal) > 0.5  # the button's pressed position, about 0.8 m from the origin
+    np.testing.assert_allclose(goal, env._env._target_pos, atol=1e-6)
+    space = env._env.observation_space
+    for t, action in enumerate([[1.0, 0.0, 0.0, -1.0], [0.0, 1.0, -1.0, 1.0], [-1.0, -1.0, 1.0, 0.0]] * 2):
+        obs = env.step(np.array(action))
+        np.testing.assert_array_equal(obs[36:39], goal, err_msg=f"step {t}")
+        assert space.contains(obs.astype(np.float64)), f"step {t}"
+    assert np.all(space.low[36:39] <= goal) and np.all(goal <= space.high[36:39])

@@ -124,7 +124,7 @@ def cmd_tasks(args: argparse.Namespace) -> None:
     )
 
 
-@command("inspect", "describe a dataset: sizes, splits, feature ranges and correlations", [DIR, JSON])
+@command("inspect", "describe a dataset: sizes, splits, feature ranges, correlations and checksum", [DIR, JSON])
 def cmd_inspect(args: argparse.Namespace) -> None:
     from langpref.dataset.inspect import describe, format_description
 

@@ -6,7 +6,13 @@ We reach the same coverage within a CPU budget: each env ships a closed-loop way
 parameters, and one Latin hypercube row per trajectory sets them (see each env module for what they mean).
 
 Determinism: the hypercube and every trajectory's seeds derive from `seed` alone, and each trajectory is rolled out
-independently, so the dataset is identical whatever the number of workers.
+independently (a reused env carries nothing from one episode into the next), so the dataset is identical whatever the
+number of workers, the order they take the trajectories in, or the BLAS threads. It is not identical across CPUs
+for every task: robosuite's arm controller (OSC) does its linear algebra through numpy's BLAS, whose kernel OpenBLAS
+picks at run time for the CPU, and contacts amplify the last-bit differences (with the kernel forced from SkylakeX to
+Haswell or Nehalem, trajectory 3 of the default robosuite data drifts by up to 0.27 in an observation; Meta-World's
+rollouts, which use no BLAS, stay bit-identical). `made_with` in meta.json's config records the stack and the kernel;
+`langpref inspect` prints the checksum that tells two datasets apart.
 """
 
 from __future__ import annotations
@@ -91,10 +97,12 @@ class GenerateConfig:
         return cfg
 
     def identity(self) -> dict[str, Any]:
-        """What fixes the dataset's content (not where or how fast it is made); frames only when there are some,
-        so a dataset without them is stamped as before."""
+        """What fixes the dataset's content (not where or how fast it is made): the env and its simulator's version
+        (`Simulator.version`: data made before a change of the env is recognisable, and never resumed into), frames
+        only when there are some."""
         out: dict[str, Any] = {
             "env": self.env,
+            "env_version": get_simulator(self.env).version,
             "num_trajectories": self.num_trajectories,
             "horizon": self.horizon,
             "seed": self.seed,
@@ -179,6 +187,30 @@ def _rollout_job(
     index, unit, traj_seed, horizon, spec = job
     traj = rollout(env, task, unit, traj_seed, horizon, index)
     return traj, None if spec is None else render_trajectory_frames(env, traj, spec)
+
+
+def made_with(env: str) -> dict[str, Any]:
+    """The numerical stack that made the trajectories (provenance, not content): machine, Python, numpy, scipy (its
+    Latin hypercube draws the controllers), MuJoCo and the simulator's package versions, and numpy's BLAS with the
+    kernel it chose for this CPU (needs threadpoolctl; absent without it)."""
+    import platform
+    from importlib import metadata
+
+    out: dict[str, Any] = {"machine": platform.machine(), "python": platform.python_version()}
+    for package in ("numpy", "scipy", "mujoco", get_simulator(env).extra):
+        try:
+            out[package] = metadata.version(package) if package else None
+        except metadata.PackageNotFoundError:
+            pass
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return {k: v for k, v in out.items() if v is not None}
+    blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
+    mine = [i for i in blas if "numpy" in str(i.get("filepath", ""))] or blas
+    if mine:
+        out["blas"] = f"{mine[0].get('internal_api')} {mine[0].get('version')} {mine[0].get('architecture')}"
+    return {k: v for k, v in out.items() if v is not None}
 
 
 def _prepare_out(cfg: GenerateConfig) -> None:
@@ -274,6 +306,7 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
             "workers": cfg.workers,
             "backend": cfg.backend,
             "success_rate": float(success.mean()),
+            "made_with": made_with(cfg.env),
         },
         frames=None if spec is None else spec.to_dict(),
     )

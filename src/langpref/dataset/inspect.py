@@ -1,4 +1,4 @@
-"""Describe a dataset: sizes, splits, feature ranges, correlations and success rate (`langpref inspect`)."""
+"""Describe a dataset: sizes, splits, feature ranges, correlations, success rate and checksum (`langpref inspect`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,10 @@ from typing import Any
 
 import numpy as np
 
+from langpref.dataset.checksum import checksum_parts, combine
 from langpref.dataset.storage import load_dataset
+from langpref.errors import LangprefError
+from langpref.tasks import get_task
 
 
 def describe(root: str | Path) -> dict[str, Any]:
@@ -15,6 +18,7 @@ def describe(root: str | Path) -> dict[str, Any]:
     feats = ds.features
     corr = np.corrcoef(feats.T) if len(feats) > 1 else np.eye(feats.shape[1])
     corr = np.nan_to_num(corr)  # a constant feature has no correlation
+    parts = checksum_parts(ds)
     return {
         "path": str(ds.root),
         "env": ds.env,
@@ -35,7 +39,22 @@ def describe(root: str | Path) -> dict[str, Any]:
         "max_abs_off_diagonal_correlation": (
             float(np.max(np.abs(corr - np.diag(np.diag(corr))))) if len(corr) > 1 else 0.0
         ),
+        "env_version": ds.meta.config.get("env_version"),
+        "env_version_current": _current_env_version(ds),
+        "checksum": combine(parts),
+        "checksum_parts": parts,
     }
+
+
+def _current_env_version(ds) -> int | None:
+    """This langpref's version of the simulator that made a generated dataset (None for a recorded one)."""
+    if "generator" not in ds.meta.config:
+        return None
+    try:
+        simulator = get_task(ds.env).simulator
+    except LangprefError:  # a plugin's task that is not installed here
+        return None
+    return None if simulator is None else simulator.version
 
 
 def _frames_line(frames: dict[str, Any] | None) -> str:
@@ -63,4 +82,11 @@ def format_description(d: dict[str, Any]) -> str:
     for name, row in zip(names, d["feature_correlation"]):
         lines.append(f"  {name:<20}" + "".join(f"{v:>7.2f}" for v in row))
     lines.append(f"largest |off-diagonal correlation|: {d['max_abs_off_diagonal_correlation']:.2f}")
+    lines.append(f"checksum (sha256 of the data, see `langpref.dataset.checksum`): {d['checksum']}")
+    made, now = d.get("env_version") or 1, d.get("env_version_current")
+    if now is not None and made != now:
+        lines.append(
+            f"made by version {made} of the {d['env']} simulator, this langpref has version {now} "
+            "(see CHANGELOG.md): regenerate it to get what this version makes"
+        )
     return "\n".join(lines)

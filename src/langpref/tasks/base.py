@@ -44,6 +44,10 @@ class Simulator:
     extra: str | None = None
     """The langpref extra that installs this simulator (`pip install 'langpref[EXTRA]'`), checked before any rollout
     starts; None for a plugin, whose own package brings its simulator."""
+    version: int = 1
+    """Bumped whenever what its env or controller roll out changes (observations, features, dynamics). `generate`
+    records it in every dataset (`env_version` in meta.json's config), so data made before a change is recognisable,
+    and an interrupted generation is never resumed across one."""
 
 
 @dataclass(frozen=True)

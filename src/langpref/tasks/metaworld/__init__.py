@@ -9,7 +9,7 @@ from importlib import resources
 
 from langpref.tasks.base import Simulator, Task
 from langpref.tasks.metaworld.controller import CONTROLLER_DIM, make_controller
-from langpref.tasks.metaworld.env import ACTION_DIM, FEATURES, OBS_LAYOUT, make
+from langpref.tasks.metaworld.env import ACTION_DIM, FEATURES, OBS_LAYOUT, SIMULATOR_VERSION, make
 
 TASK = Task(
     name="metaworld",
@@ -35,5 +35,6 @@ TASK = Task(
         default_num_trajectories=324,
         success_name="button pressed",
         extra="metaworld",
+        version=SIMULATOR_VERSION,
     ),
 )

@@ -6,10 +6,14 @@ Features per step (paper Appendix A), in metres and metres per second:
   distance_to_button  end-effector to the button face (both as Meta-World observes them)
 
 The env is built straight from Meta-World's class rather than through `gym.make`, so that `reset(seed)` fixes the
-button position from our seed alone and a stored trajectory replays exactly.
+button position from our seed alone and a stored trajectory replays exactly. It is fully observable: obs[36:39] is
+the goal (the button's pressed position) on every step (`SIMULATOR_VERSION` 2; datasets made before, version 1 or no
+version recorded, hold zeros there after the first step).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -31,6 +35,8 @@ OBS_LAYOUT = (
 )
 OBS_DIM = OBS_LAYOUT[-1].stop
 ACTION_DIM = 4
+SIMULATOR_VERSION = 2
+"""1: obs[36:39] (the goal) was zero after the first step of every rollout. 2: it carries the goal on every step."""
 
 
 class MetaWorldButtonPress:
@@ -46,8 +52,8 @@ class MetaWorldButtonPress:
         self.horizon = horizon
         self._env = SawyerButtonPressEnvV3()
         self._env.max_path_length = max(horizon, 1)
-        self._env._partially_observable = False
         self._env._set_task_called = True
+        observe_goal(self._env)
         self.dt = float(self._env.dt)
         self._obs = np.zeros(OBS_DIM)
         self._features = np.zeros(len(FEATURES))
@@ -92,6 +98,19 @@ class MetaWorldButtonPress:
 
     def close(self) -> None:
         self._env.close()
+
+
+def observe_goal(env: Any) -> None:
+    """Turn on full observability, so that obs[36:39] carries the goal on every step, not on reset alone.
+
+    Meta-World builds (and caches) its observation space while the env is still partially observable, with the goal
+    slot bounded to [0, 0], and `step()` clips every observation to that space: flipping `_partially_observable`
+    alone gives the goal at reset and zeros at every later step. Drop the cached space and rebuild it, as
+    `set_task` does when it changes observability, so the goal slot is bounded by the goal space instead.
+    """
+    env._partially_observable = False
+    env.__dict__.pop("sawyer_observation_space", None)  # a functools.cached_property: rebuilt on the next read
+    env.observation_space = env.sawyer_observation_space
 
 
 def step_features(prev_obs: np.ndarray, obs: np.ndarray, dt: float) -> np.ndarray:
