@@ -120,6 +120,21 @@ def test_flags_carry_the_dataclass_defaults_and_docstrings():
     assert serve["--video-format"].choices == ("webm", "mp4")
 
 
+def test_study_serve_takes_repeated_allowed_hosts_and_says_what_no_prerender_does():
+    from langpref.cli import build_parser
+    from langpref.cli_config import from_args
+    from langpref.study.config import ServeConfig
+
+    serve = {a.option_strings[0]: a for a in parsers()["study serve"]._actions if a.option_strings}
+    assert serve["--no-prerender"].help.startswith("Do not render")  # it said what the default does
+    assert "--allowed-host" in serve["--allowed-hosts"].option_strings
+    argv = ["study", "serve", "--model", "m", "--data", "d"]
+    given = [*argv, "--allowed-hosts", "a.example,b.example", "--allowed-host", "c.example"]
+    cfg = from_args(ServeConfig, build_parser(given).parse_args(given))
+    assert list(cfg.allowed_hosts) == ["a.example", "b.example", "c.example"]
+    assert list(from_args(ServeConfig, build_parser(argv).parse_args(argv)).allowed_hosts) == []
+
+
 def test_config_round_trip_through_the_parser():
     import argparse
     from dataclasses import dataclass, field

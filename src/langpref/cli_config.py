@@ -5,7 +5,8 @@ commands, and the resolved config written beside every output.
 to True becomes `--no-field-name`), typed by its annotation, defaulting to its default, with the docstring under the
 field as its help. A nested config's fields join in with `DEST.` in front of their destination (not of their flag),
 and `from_args(Cls, args)` builds the config back from the parsed arguments. `opts` renames a flag (a string), leaves
-a field out (None), or overrides argparse keywords (a dict) for the few flags whose names predate this module.
+a field out (None), or overrides argparse keywords (a dict, where "aliases" adds more flags) for the few flags whose
+names predate this module.
 
 `@command(name, help, options)` registers a command; `make_parser` builds only the options of the command being
 run, so `--help` imports nothing heavy. `record(args, where, config)` writes the resolved config of a command with
@@ -98,6 +99,7 @@ def add_config(
             continue
         spec = {"flag": spec} if isinstance(spec, str) else dict(spec)
         flag = spec.pop("flag", "--" + flag_prefix + f.name.replace("_", "-"))
+        aliases = spec.pop("aliases", ())
         text = spec.pop("help", None) or docs.get(f.name, "")
         kw: dict[str, Any] = {"dest": name}
         if hint is bool:
@@ -115,7 +117,7 @@ def add_config(
         elif "type" in kw and "choices" not in spec:
             kw["metavar"] = flag.lstrip("-").replace("-", "_").upper()
         kw.update(spec)
-        p.add_argument(flag, help=text.replace("%", "%%"), **kw)
+        p.add_argument(flag, *aliases, help=text.replace("%", "%%"), **kw)
 
 
 def args_of(args: argparse.Namespace, prefix: str = "") -> dict[str, Any]:

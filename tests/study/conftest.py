@@ -81,6 +81,7 @@ def serve_config(model: Path, data: Path, db: Path, **study):
         db=str(db),
         admin_token=ADMIN,
         prerender=False,
+        allowed_hosts=("testserver",),  # the Host of Starlette's TestClient
         study=StudyConfig(**{**TINY, **study}),
     )
 

@@ -97,3 +97,56 @@ def test_bad_bodies_are_one_line_4xx_on_a_connection_that_survives(live, h):
         assert status == 200 and json.loads(body)["seq"] == step["seq"]
     conn = state.connect()
     assert conn.execute("SELECT count(*) FROM answers").fetchone()[0] == 1
+
+
+def walk_to(client, h, kind: str) -> tuple[str, dict[str, str], dict]:
+    """A new participant, answered up to the first step of `kind`."""
+    pid, headers = h.join(client)
+    step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
+    while step["kind"] != kind:
+        step = client.post(f"/api/participants/{pid}/answer", json=h.answer_for(step), headers=headers).json()
+    return pid, headers, step
+
+
+def test_lone_surrogates_are_refused_where_text_comes_in(client, h, study_state):
+    """`"\\ud800"` in JSON is no character: stored, it broke the export; in feedback and a reason it was a 500."""
+    pid, headers, step = walk_to(client, h, "survey")
+    survey = json.dumps(h.answer_for(step)).replace('"some words"', '"3\\ud800"')
+    assert "\\ud800" in survey
+    feedback = b'{"feedback": "Move faster.\\udfff", "client_ms": 1.0}'
+    reason = b'{"excluded": true, "reason": "bot \\ud83d"}'
+    for path, body, hdrs in (
+        (f"/api/participants/{pid}/answer", survey.encode(), headers),
+        (f"/api/participants/{pid}/answer", b'{"answers": {"\\ud800": 1}}', headers),
+        (f"/api/admin/participants/{pid}/exclude", reason, h.admin),
+    ):
+        r = client.post(path, content=body, headers={**hdrs, "Content-Type": "application/json"})
+        assert r.status_code == 400 and "surrogate" in r.json()["error"], (path, r.status_code, r.text)
+    pid, headers, step = walk_to(client, h, "language")
+    r = client.post(f"/api/participants/{pid}/answer", content=feedback, headers=headers)
+    assert r.status_code == 400 and "surrogate" in r.json()["error"], r.text
+    conn = study_state.connect()
+    assert conn.execute("SELECT count(*) FROM participants WHERE excluded=1").fetchone()[0] == 0
+    assert conn.execute("SELECT count(*) FROM feedback").fetchone()[0] == 0
+    # a pair of surrogates is one character (an emoji), and is taken
+    r = client.post(
+        f"/api/participants/{pid}/answer",
+        content=b'{"feedback": "Move faster \\ud83d\\ude80", "client_ms": 1.0}',
+        headers=headers,
+    )
+    assert r.status_code == 200, r.text
+
+
+def test_feedback_padded_past_the_limit_is_refused_before_it_is_stored(client, h, study_state):
+    from langpref.feedback.language import MAX_FEEDBACK
+
+    pid, headers, step = walk_to(client, h, "language")
+    padded = "Move faster. " + "x" * (MAX_FEEDBACK - 31) + " " * 60_000  # under the limit once trimmed
+    r = client.post(f"/api/participants/{pid}/answer", json={"feedback": padded, "client_ms": 1.0}, headers=headers)
+    assert r.status_code == 400 and "characters long" in r.json()["error"], r.text[:300]
+    conn = study_state.connect()
+    assert conn.execute("SELECT max(length(body)) FROM answers").fetchone()[0] < 10_000
+    r = client.post(
+        f"/api/participants/{pid}/answer", json={"feedback": "Move faster.  ", "client_ms": 1.0}, headers=headers
+    )
+    assert r.status_code == 200

@@ -98,3 +98,26 @@ def test_cli_export_and_its_errors(simulated_db, tmp_path, capsys):
     sqlite3.connect(other).execute("CREATE TABLE t (x)").connection.commit()
     assert main(["study", "export", "--db", str(other), "--out", str(tmp_path / "y")]) == 2
     assert "schema version" in capsys.readouterr().err
+
+
+def test_a_stored_lone_surrogate_does_not_stop_the_export(simulated_db, tmp_path):
+    """A server before issue 31 stored `"3\\ud800"` (JSON-escaped) from a survey answer: the export still writes
+    every file, the character shown as U+FFFD."""
+    from langpref.study.export import export
+
+    db = tmp_path / "bad.sqlite"
+    conn = sqlite3.connect(db)
+    with sqlite3.connect(simulated_db) as src:  # a copy of the WAL database as it reads
+        src.backup(conn)
+    with conn:
+        n = conn.execute(
+            "UPDATE survey_responses SET value=? WHERE survey='pre' AND question_id='age'", ('"3\\ud800"',)
+        ).rowcount
+    conn.close()
+    assert n == 4
+    out = export(db, tmp_path / "out")
+    assert out["participants"] == 4
+    html = (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
+    assert "Study 1" in html and "3\ufffd" in html
+    with open(tmp_path / "out" / "tables" / "survey_responses.csv", encoding="utf-8") as fh:
+        assert sum('"3\\ud800"' in r["value"] for r in csv.DictReader(fh)) == 4  # the table as stored

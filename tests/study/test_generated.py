@@ -154,3 +154,23 @@ def test_simulated_participants_answer_generated_trajectories_by_their_features(
         feature = int(np.argmax(w * (best - theta)))  # Eq. 10 at temperature -> 0
         direction = 0 if w[feature] >= 0 else 1
         assert row["text"] in {phrases.texts[i] for i in phrases.rows(feature, direction)}, (row, feature)
+
+
+def test_a_later_round_is_made_before_sign_ups_first_feedback():
+    """Made-up participants that each give one feedback queue one job each; a participant further into Study 1 is
+    not held up behind them (the queue alone, without a simulator)."""
+    import threading
+    from collections import deque
+
+    from langpref.study.generated import Generator, Job
+
+    g = Generator.__new__(Generator)  # no engine or worker: only the queue
+    g._cond, g._queue, g._made, g._running, g._known = threading.Condition(), deque(), {}, None, set()
+    g._failed, g._retry, g._thread, g._stopped = {}, {}, None, True
+    for k in range(5):
+        g.submit(Job(100 + k, f"junk{k}", k, 2, 1, 0, "Move faster."))
+    g.submit(Job(200, "real", 9, 6, 3, 0, "Move faster."))
+    g.submit(Job(201, "other", 8, 4, 2, 0, "Move faster."))
+    g.submit(Job(105, "late", 7, 2, 1, 0, "Move faster."))
+    assert [j.id for j in g._queue] == [200, 201, 100, 101, 102, 103, 104, 105]
+    assert g.status(200) == ("generating", 0) and g.status(105) == ("generating", 7)

@@ -140,7 +140,9 @@ def test_hanging_hook_is_killed_at_its_timeout_and_never_delays_a_step(hooked, h
     assert status["counts"]["timeout"] >= 2 and status["counts"]["ok"] == 0
     run = status["recent"][0]
     assert run["status"] == "timeout" and 1.0 <= run["seconds"] < 5.0 and "killed after 1 s" in run["output"]
-    assert status["queued"] + status["counts"]["timeout"] + (status["running"] is not None) == len(shown(state, steps))
+    # every shown trajectory ran, waits, or was skipped (one participant holds at most a quarter of the queue)
+    held = status["queued"] + status["counts"]["timeout"] + (status["running"] is not None)
+    assert held + status["counts"]["skipped"] == len(shown(state, steps))
 
 
 def test_a_hook_that_cannot_run_is_refused_at_start(h, tmp_path):
@@ -208,3 +210,105 @@ def test_hook_runs_for_a_generated_trajectory_once_it_is_made(engine, h, tmp_pat
     ]
     assert all(r["made"] for r in runs) and {r["LANGPREF_PARTICIPANT"] for r in runs} == {pid}
     assert state.hook.status()["counts"]["ok"] == 3
+
+
+class Dataset:
+    """What the hook reads of a dataset: an episode name per trajectory and the folder."""
+
+    root = Path(".")
+
+    def load(self, index: int):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(source=None)
+
+
+def wait_until(predicate, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.02)
+
+
+def test_made_up_participants_cannot_take_the_robot():
+    """Sign-ups that stop at their first step fill the queue; a participant further in still gets the robot, and one
+    participant holds at most `per_participant` waiting runs."""
+    from langpref.study.hook import ShowHook
+
+    hook = ShowHook("sleep 60", Dataset(), queue_size=4)
+    try:
+        assert hook.per_participant == 2
+        hook.show("first", 1, "language", [0])
+        wait_until(lambda: hook.status()["running"] is not None)  # the robot is busy
+        for k in range(4):
+            hook.show(f"junk{k}", 1, "language", [k])  # step 1: the first with a video
+        assert hook.status()["queued"] == 4
+        hook.show("real", 5, "comparison", [7, 8])  # further in: two junk runs make room
+        hook.show("real", 6, "language", [9])  # a third waiting run of one participant: skipped
+        status = hook.status()
+        assert status["queued"] == 4 and status["counts"]["skipped"] == 3
+        skipped = [r for r in status["recent"] if r["status"] == "skipped"]
+        assert [(r["participant"], r["trajectory"]) for r in skipped] == [("real", 9), ("junk2", 2), ("junk3", 3)]
+        assert "runs waiting" in skipped[0]["output"] and "further into the study" in skipped[1]["output"]
+        hook.show("late", 1, "language", [10])  # as far in as the junk: no room is made
+        assert hook.status()["counts"]["skipped"] == 4
+    finally:
+        hook.close()
+
+
+KEEP_GOING = """import os, subprocess, sys
+child = subprocess.Popen(["sleep", "300"])  # a replay's own child: the whole group must end
+with open(sys.argv[1] + ".tmp", "w") as f:
+    f.write(f"{os.getpid()} {child.pid}")
+os.rename(sys.argv[1] + ".tmp", sys.argv[1])
+child.wait()
+"""
+
+SERVER = """import sys, time
+sys.path.insert(0, sys.argv[3])
+from pathlib import Path
+from types import SimpleNamespace
+from langpref.study.hook import ShowHook
+
+class Dataset:
+    root = Path(".")
+    def load(self, index):
+        return SimpleNamespace(source=None)
+
+hook = ShowHook(sys.argv[1], Dataset(), timeout_s=float(sys.argv[2]))
+hook.show("p", 1, "language", [0])
+time.sleep(600)
+"""
+
+
+def test_a_replay_in_flight_ends_when_the_server_is_killed(tmp_path):
+    """kill -9 of the server leaves no replay driving the robot: the watchdog ends the hook's process group."""
+    import os
+    import signal
+    import subprocess
+
+    from langpref.study.faultbench import alive
+
+    src = str(Path(__file__).resolve().parents[2] / "src")
+
+    pids = tmp_path / "pids"
+    (tmp_path / "keep_going.py").write_text(KEEP_GOING)
+    (tmp_path / "server.py").write_text(SERVER)
+    command = python_command(tmp_path / "keep_going.py", pids)
+    server = subprocess.Popen([sys.executable, str(tmp_path / "server.py"), command, "600", src])
+    try:
+        wait_until(lambda: pids.exists() or server.poll() is not None)
+        assert server.poll() is None, "the server script ended"
+        hook_pid, child_pid = map(int, pids.read_text().split())
+        assert alive({hook_pid, child_pid}) == {hook_pid, child_pid}
+        os.kill(server.pid, signal.SIGKILL)
+        server.wait()
+        wait_until(lambda: not alive({hook_pid, child_pid}), timeout=10)
+    finally:
+        if server.poll() is None:
+            server.kill()
+            server.wait()
+        if pids.exists():
+            for pid in map(int, pids.read_text().split()):
+                if alive({pid}):
+                    os.kill(pid, signal.SIGKILL)

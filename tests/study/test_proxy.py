@@ -10,6 +10,7 @@ import shutil
 import socket
 import subprocess
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import httpx
@@ -101,7 +102,8 @@ def test_cross_site_posts_are_refused(client, h):
 def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine, h, tmp_path):
     from langpref.study.serve import BackgroundServer, build_state
 
-    state = build_state(h.serve_config(tmp_path / "p.sqlite"), engine=engine, progress=False)
+    cfg = replace(h.serve_config(tmp_path / "p.sqlite"), allowed_hosts=("study.lab.example",))  # as documented
+    state = build_state(cfg, engine=engine, progress=False)
     with BackgroundServer(state) as url:
         upstream = int(url.rsplit(":", 1)[1])
         https, http = free_port(), free_port()
@@ -134,6 +136,9 @@ def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine,
                 r = c.post("/api/participants", json={}, headers={"Origin": "https://evil.example"})
                 assert r.status_code == 403
                 assert c.get("/").headers["strict-transport-security"]
+                # the public name passes through the proxy; a DNS-rebinding page's name does not
+                assert c.get("/healthz", headers={"Host": "study.lab.example"}).status_code == 200
+                assert c.get("/healthz", headers={"Host": "rebind.evil.example"}).status_code == 400
             r = httpx.get(f"http://127.0.0.1:{http}/study", follow_redirects=False)
             assert r.status_code == 301 and r.headers["location"].startswith("https://")
         finally:

@@ -66,3 +66,15 @@ def test_a_video_is_served_once_made(client, study_state):
         assert time.time() < deadline
         time.sleep(0.2)
     assert r.content[:4] == b"\x1a\x45\xdf\xa3"
+
+
+def test_video_names_take_ascii_digits_and_nothing_after(study_state, client):
+    index = int(study_state.engine.study[0])
+    name = study_state.videos.name(index)
+    assert study_state.videos.index_of(name) == index
+    digits = name[4:10]
+    wide = "".join(chr(0xFF10 + int(d)) for d in digits)  # full-width digits: `\d` took them
+    arabic = "".join(chr(0x0660 + int(d)) for d in digits)
+    for bad in (name + "\n", name.replace(digits, wide), name.replace(digits, arabic), " " + name, name + "x"):
+        assert study_state.videos.index_of(bad) is None, ascii(bad)
+    assert client.get(f"/videos/{name}%0A").status_code == 404

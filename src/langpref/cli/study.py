@@ -23,6 +23,17 @@ from langpref.cli_config import command, config, emit, from_args, record
                 "on_show": {"metavar": "CMD"},
                 "on_show_timeout": {"metavar": "SECONDS"},
                 "generated": {"metavar": "DIR"},
+                # repeatable, and each may list several: --allowed-hosts a.example,b.example --allowed-host c
+                "allowed_hosts": {
+                    "metavar": "NAME[,NAME...]",
+                    "aliases": ("--allowed-host",),
+                    "action": "extend",
+                    "default": [],
+                },
+                "prerender": {
+                    "help": "Do not render the study videos ahead at start: each is made when a participant first "
+                    "needs it (they may then wait for it)."
+                },
             },
         ),
         config(

@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 
 MAX_FEEDBACK = 500
 """Longest feedback a study participant may send, in characters."""
+MAX_FEEDBACK_RAW = 2 * MAX_FEEDBACK
+"""Longest feedback text taken before it is trimmed (the request's text is stored as sent)."""
 
 
 @dataclass(frozen=True)
@@ -200,9 +202,12 @@ def language_pairs(
 
 
 def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
-    """The body's `feedback`: text, trimmed, not empty, at most MAX_FEEDBACK characters."""
+    """The body's `feedback`: text, trimmed, not empty, at most MAX_FEEDBACK characters (and at most
+    MAX_FEEDBACK_RAW before trimming: the answer body stores the text as sent)."""
     if not isinstance(value, str):
         raise LangprefError("'feedback' must be text")
+    if len(value) > MAX_FEEDBACK_RAW:
+        raise LangprefError(f"Your feedback is {len(value)} characters long; please keep it under {MAX_FEEDBACK}.")
     text = value.strip()
     if not text:
         raise LangprefError('Please type your feedback before continuing (for example: "Move faster.").')

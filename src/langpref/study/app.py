@@ -45,13 +45,13 @@ from langpref.study.flow import (
     questions,
 )
 from langpref.study.generated import Generator, NotReady
+from langpref.study.guard import HostCheck, HttpError, RateLimiter, client_key, cross_site, decode_json, read_body
 from langpref.study.hook import ShowHook
 from langpref.study.surveys import METHOD_LABELS, SURVEY_TITLES, task_text
 from langpref.study.videos import VideoCache
 
 log = logging.getLogger("langpref.study")
 HERE = Path(__file__).parent
-MAX_BODY = 64 * 1024
 TIME_TOLERANCE_MS = 1000.0
 """A client time per query may exceed the server's (step shown -> answer received) by this much (clock grain)."""
 NOT_FEEDBACK = (
@@ -68,37 +68,14 @@ MAX_VIDEO_WAITERS = 32
 VIDEO_RETRY_S = 2
 LOCK_STRIPES = 64
 MAX_RESUME_FAILURES = 20
-"""Wrong resume codes accepted per minute, all clients together (then 429): about 2^50 codes cannot be tried."""
-
-
-class HttpError(Exception):
-    def __init__(self, status: int, message: str, headers: dict[str, str] | None = None):
-        super().__init__(message)
-        self.status = status
-        self.message = message
-        self.headers = headers
+"""Wrong resume codes taken per minute from one client (an address; IPv6 by its /64), then 429 for that client only:
+about 2^50 codes cannot be tried, and no client can lock resume for the others."""
+MAX_RESUMES_PER_CODE = 10
+"""Sessions restored per minute with one resume code (each adds a token), then 429 for that code."""
 
 
 def _sha256(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _decode(body: bytes, allow_empty: bool = False) -> Any:
-    if len(body) > MAX_BODY:
-        raise HttpError(413, f"the body is over {MAX_BODY // 1024} KiB")
-    if allow_empty and not body.strip():
-        return {}
-    try:
-        return json.loads(body, parse_constant=_no_constant)
-    except RecursionError:
-        raise HttpError(400, "the body is nested too deeply") from None
-    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError, and integers of over 4300 digits
-        line = " ".join(str(exc).split())[:80]
-        raise HttpError(400, f"the body is not valid JSON ({exc.__class__.__name__}: {line})") from None
-
-
-def _no_constant(name: str):
-    raise ValueError(f"{name} is not a JSON number")
 
 
 class StudyApp:
@@ -116,6 +93,8 @@ class StudyApp:
         hook: ShowHook | None = None,
         allowed_origins: tuple[str, ...] = (),
         generated: Generator | None = None,
+        allowed_hosts: tuple[str, ...] = (),
+        bind_host: str | None = None,
     ):
         self.db_path = str(db_path)
         self.engine = engine
@@ -128,11 +107,12 @@ class StudyApp:
         # answers of one participant run one at a time; a fixed set of locks (by hash of the id, taken only after
         # the token is checked) keeps memory bounded whatever ids unauthenticated requests send
         self._locks = [threading.Lock() for _ in range(LOCK_STRIPES)]
-        self._resume_failures: list[float] = []
-        self._resume_guard = threading.Lock()
+        self._resume_failures = RateLimiter(MAX_RESUME_FAILURES)
+        self._resumes = RateLimiter(MAX_RESUMES_PER_CODE)
         self._local = threading.local()
         self.video_waiters = 0  # changed only on the event loop
         self.allowed_origins = {o.rstrip("/").lower() for o in allowed_origins}
+        self.hosts = HostCheck(allowed_hosts, bind_host, self.allowed_origins)
 
     # ---- database helpers ----
 
@@ -213,7 +193,7 @@ class StudyApp:
 
     def create_participant(self, body: bytes) -> dict[str, Any]:
         """A new participant; nothing about the browser or the person is stored (no User-Agent, no address)."""
-        data = _decode(body, allow_empty=True)
+        data = decode_json(body, allow_empty=True)
         if not isinstance(data, dict):
             raise HttpError(400, "the body must be a JSON object ({})")
         pid, token = secrets.token_hex(16), secrets.token_urlsafe(32)
@@ -235,26 +215,28 @@ class StudyApp:
             )
         return {"participant_id": pid, "token": token}
 
-    def resume(self, body: bytes) -> dict[str, Any]:
+    def resume(self, body: bytes, client: str | None = None) -> dict[str, Any]:
         """`{"code": "XXXXX-XXXXX"}` -> a new token of the participant with that resume code (their other tokens
-        keep working). Failed tries are limited for everyone together, so codes cannot be guessed by trying."""
-        data = _decode(body)
+        keep working). Wrong codes are limited per client (`client`: its address), so codes cannot be guessed by
+        trying and one client's wrong codes never block another's right one."""
+        data = decode_json(body)
         code = (
             sdb.normalise_resume_code(data.get("code", ""))
             if isinstance(data, dict) and isinstance(data.get("code"), str)
             else None
         )
-        now = time.time()
-        with self._resume_guard:
-            self._resume_failures = [t for t in self._resume_failures if now - t < 60.0]
-            if len(self._resume_failures) >= MAX_RESUME_FAILURES:
-                raise HttpError(429, "too many wrong resume codes; wait a minute and try again", {"Retry-After": "60"})
+        who = client_key(client)
+        if self._resume_failures.blocked(who):
+            raise HttpError(429, "too many wrong resume codes; wait a minute and try again", {"Retry-After": "60"})
         conn = self.connect()
         row = conn.execute("SELECT id FROM participants WHERE resume_code=?", (code,)).fetchone() if code else None
         if row is None:
-            with self._resume_guard:
-                self._resume_failures.append(now)
+            self._resume_failures.add(who)
             raise HttpError(404, "no participant has this resume code; check it (it looks like ABCDE-FGH23)")
+        if self._resumes.blocked(code):
+            raise HttpError(429, "this resume code was used many times just now; wait a minute", {"Retry-After": "60"})
+        self._resumes.add(code)
+        now = time.time()
         token = secrets.token_urlsafe(32)
         with sdb.transaction(conn):
             conn.execute(
@@ -280,7 +262,7 @@ class StudyApp:
         p, prow = self._auth(conn, pid, token)  # before the lock: unknown ids never reach it
         with self._lock(pid):
             step, row = self._current(conn, pid)
-            data = _decode(body)
+            data = decode_json(body)
             try:
                 ans = parse_answer(data, step)
             except AnswerError as exc:
@@ -415,7 +397,7 @@ class StudyApp:
 
     def set_excluded(self, pid: str, body: bytes) -> dict[str, Any]:
         """`{"excluded": true|false, "reason": "..."}`: leave a participant out of the analyses (or back in)."""
-        data = _decode(body)
+        data = decode_json(body)
         if not isinstance(data, dict) or not isinstance(data.get("excluded"), bool):
             raise HttpError(400, 'send {"excluded": true or false, "reason": "why (optional)"}')
         try:
@@ -483,31 +465,6 @@ SECURITY_HEADERS = {
 }
 
 
-def cross_site(headers, allowed: set[str]) -> str | None:
-    """Why a state-changing request comes from another site's page (None when it does not): its Origin (or, without
-    one, its Referer) must be the host it was sent to, or one of `allowed`. Requests of tools, which send neither,
-    pass: they hold a token or create only a participant, and no browser page of another site can make them."""
-    from urllib.parse import urlsplit
-
-    origin = headers.get("origin")
-    if origin is None and headers.get("referer"):
-        parts = urlsplit(headers["referer"])
-        origin = f"{parts.scheme}://{parts.netloc}"
-    if origin is None:
-        return None
-    origin = origin.strip().rstrip("/").lower()
-    if origin in allowed:
-        return None
-    netloc = urlsplit(origin).netloc if "://" in origin else ""
-    host = (headers.get("host") or "").strip().lower()
-    if netloc and netloc == host:
-        return None
-    return (
-        f"cross-site request refused: the page at {origin[:100]} is not this study's; open the study at its own "
-        "address (behind a proxy that rewrites Host, list its address in allowed_origins)"
-    )
-
-
 def create_app(state: StudyApp) -> FastAPI:
     """The FastAPI application over `state`."""
     app = FastAPI(title="langpref study", docs_url=None, redoc_url=None, openapi_url=None)
@@ -538,6 +495,9 @@ def create_app(state: StudyApp) -> FastAPI:
 
     @app.middleware("http")
     async def _headers(request: Request, call_next):
+        refused = state.hosts.refused(request.headers.get("host"))
+        if refused:
+            return error(400, refused)
         if request.method not in ("GET", "HEAD", "OPTIONS"):
             refused = cross_site(request.headers, state.allowed_origins)
             if refused:
@@ -581,13 +541,13 @@ def create_app(state: StudyApp) -> FastAPI:
     # participants
     @app.post("/api/participants")
     async def new_participant(request: Request):
-        body = await request.body()
+        body = await read_body(request)
         return await run_in_threadpool(state.create_participant, body)
 
     @app.post("/api/participants/resume")
     async def resume(request: Request):
-        body = await request.body()
-        return await run_in_threadpool(state.resume, body)
+        body = await read_body(request)
+        return await run_in_threadpool(state.resume, body, request.client.host if request.client else None)
 
     @app.get("/api/participants/{pid}/step")
     def get_step(pid: str, request: Request):
@@ -595,15 +555,16 @@ def create_app(state: StudyApp) -> FastAPI:
 
     @app.post("/api/participants/{pid}/answer")
     async def post_answer(pid: str, request: Request):
-        body = await request.body()
+        body = await read_body(request)
         return await run_in_threadpool(state.answer, pid, request.headers.get("x-participant-token"), body)
 
     # videos
     @app.get("/videos/{name:path}")
-    async def video(name: str):
+    async def video(request: Request):
         # async and never blocking: a video that is not made yet holds no worker thread (issue: 80 such requests
-        # froze every other endpoint); it waits here a little, then the client is told to come back
-        index = state.videos.index_of(name)
+        # froze every other endpoint); it waits here a little, then the client is told to come back. The name is
+        # read from the path itself: the route's pattern ends in `$`, which lets a trailing newline through
+        index = state.videos.index_of(request.scope["path"].removeprefix("/videos/"))
         if index is None:
             raise HttpError(404, "no such video")
         status, info = state.videos.request(index)
@@ -642,7 +603,7 @@ def create_app(state: StudyApp) -> FastAPI:
     @app.post("/api/admin/participants/{pid}/exclude")
     async def admin_exclude(pid: str, request: Request):
         state.check_admin(request.headers.get("authorization"))
-        body = await request.body()
+        body = await read_body(request)
         return await run_in_threadpool(state.set_excluded, pid, body)
 
     @app.get("/api/admin/export")

@@ -166,6 +166,10 @@ class ServeConfig:
     allowed_origins: tuple[str, ...] = ()
     """Origins (`https://study.lab.example`) whose pages may send answers besides the server's own (the Host it was
     reached at): needed only behind a proxy that rewrites the Host header. Cross-site POSTs are refused."""
+    allowed_hosts: tuple[str, ...] = ()
+    """Host names the study may be reached under besides localhost, 127.0.0.1, ::1, any address (`192.168.1.5`),
+    the `host` it listens on and the hosts of `allowed_origins`: e.g. the machine's name when participants open
+    `http://labpc.local:8000`. A request for any other name is refused (a DNS-rebinding page's)."""
     on_show_timeout: float = 60.0
     """Seconds an `on_show` run may take before it is killed and reported as timed out."""
     study: StudyConfig = field(default_factory=StudyConfig)
@@ -190,6 +194,10 @@ class ServeConfig:
                 raise LangprefError(
                     f"--on-show: program {program!r} not found or not executable; give its path or put it on PATH"
                 )
+        self.allowed_hosts = tuple(self.allowed_hosts or ())
+        for name in self.allowed_hosts:
+            if not name.strip() or "/" in name or any(c.isspace() for c in name):
+                raise LangprefError(f"--allowed-hosts {name!r}: give a host name such as labpc.local, not a URL")
         if not self.on_show_timeout > 0:
             raise LangprefError(f"--on-show-timeout must be > 0 seconds, got {self.on_show_timeout}")
         self.study.validate()

@@ -28,6 +28,7 @@ from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 from langpref.study import db as sdb
 from langpref.study.config import METHODS
+from langpref.study.flow import SURROGATES
 from langpref.study.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM, PREF_LIKERT
 
 FIGURES = ("study1_attributes", "study1_iterations", "study2_attributes", "study2_ratings", "study2_time")
@@ -61,12 +62,26 @@ def _stats(values) -> dict[str, Any]:
     }
 
 
+def stored_value(text: str) -> Any:
+    """A stored answer value (JSON), its text made writable: a lone surrogate (which the server took before issue
+    31) becomes U+FFFD, so one bad row cannot stop the export."""
+    return _writable(json.loads(text))
+
+
+def _writable(value: Any) -> Any:
+    if isinstance(value, str):
+        return SURROGATES.sub("\ufffd", value)
+    if isinstance(value, list):
+        return [_writable(v) for v in value]
+    return value
+
+
 def _survey(tables, survey: str) -> dict[str, dict[str, Any]]:
     """participant -> {question_id: value}."""
     out: dict[str, dict[str, Any]] = {}
     for r in tables["survey_responses"]:
         if r["survey"] == survey:
-            out.setdefault(r["participant_id"], {})[r["question_id"]] = json.loads(r["value"])
+            out.setdefault(r["participant_id"], {})[r["question_id"]] = stored_value(r["value"])
     return out
 
 
@@ -506,7 +521,8 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
     try:
         (out / "tables").mkdir(parents=True, exist_ok=True)
         for name, rows_ in tables.items():
-            with open(out / "tables" / f"{name}.csv", "w", newline="") as fh:
+            # UTF-8 whatever the locale; a character that has none (a lone surrogate) is written as "?"
+            with open(out / "tables" / f"{name}.csv", "w", newline="", encoding="utf-8", errors="replace") as fh:
                 w = csv.DictWriter(fh, fieldnames=[c for c in columns[name] if c not in PRIVATE.get(name, ())])
                 w.writeheader()
                 w.writerows({k: csv_cell(v) for k, v in r.items()} for r in rows_)
@@ -514,14 +530,14 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
         excluded = {e["participant_id"] for e in summary["excluded"]}
         text_ids = {(s, q["id"]) for s, qs in SURVEYS.items() for q in qs if q["type"] == "text"}
         texts = [
-            (r["participant_id"], r["question_id"], json.loads(r["value"]))
+            (r["participant_id"], r["question_id"], stored_value(r["value"]))
             for r in tables["survey_responses"]
             if (r["survey"], r["question_id"]) in text_ids
             and json.loads(r["value"])
             and r["participant_id"] not in excluded
         ]
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        (out / "report.html").write_text(report_html(summary, figs, texts))
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        (out / "report.html").write_text(report_html(summary, figs, texts), encoding="utf-8", errors="replace")
     except OSError as exc:
         raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
     return {

@@ -5,6 +5,10 @@
 2. SIGTERM while a video is being made: seconds until the server has exited (target: under 5 s), and whether any
    process of it is left.
 3. SIGKILL of the server while a video is being made: whether any process of it is left 5 s later (target: none).
+4. Three parallel 256 MiB uploads to `POST /api/participants`, announced by Content-Length, then three sent chunked:
+   how they were answered and the server's resident memory before and at its peak (target: a few MiB more).
+5. SIGKILL of a server whose `--on-show` hook is running (a replay that would take 5 minutes and has a child of its
+   own): whether any process of the hook is left 5 s later (target: none).
 
 Each server is `langpref study serve` in its own process on loopback, with a fresh database in a temporary folder.
 Prints one JSON object.
@@ -24,6 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from langpref.study.bench import start_server
+
+CASES = ("freeze", "sigterm", "sigkill", "uploads", "hook_kill")
 
 
 def descendants(pid: int) -> set[int]:
@@ -158,22 +164,143 @@ def stop(model: Path, data: Path, work: Path, split: str, sig: int) -> dict[str,
     }
 
 
+def rss_mib(pid: int) -> float:
+    """Resident memory of process `pid` in MiB (from /proc)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def uploads(url: str, pid: int, mib: int = 256, parallel: int = 3) -> dict[str, Any]:
+    """`parallel` uploads of `mib` MiB each, first with Content-Length, then chunked: their answers and the server's
+    memory (before, peak while they ran)."""
+    import httpx
+
+    block = b" " * (1 << 20)
+
+    async def body():
+        for _ in range(mib):
+            yield block
+
+    async def one(c: httpx.AsyncClient, chunked: bool) -> str:
+        headers = {"Content-Type": "application/json"}
+        if not chunked:
+            headers["Content-Length"] = str(mib << 20)
+        try:
+            r = await c.post("/api/participants", content=body(), headers=headers)
+        except httpx.HTTPError as exc:  # the server answered and closed while the body was still being sent
+            return type(exc).__name__
+        return str(r.status_code)
+
+    async def run(chunked: bool) -> list[str]:
+        async with httpx.AsyncClient(base_url=url, timeout=300) as c:
+            return await asyncio.gather(*(one(c, chunked) for _ in range(parallel)))
+
+    out: dict[str, Any] = {"uploads": parallel, "mib_each": mib}
+    for chunked in (False, True):
+        before = rss_mib(pid)
+        t0 = time.perf_counter()
+        answers, peak = while_sampling(pid, lambda chunked=chunked: asyncio.run(run(chunked)))
+        out["chunked" if chunked else "content_length"] = {
+            "answered": {a: answers.count(a) for a in sorted(set(answers))},
+            "seconds": round(time.perf_counter() - t0, 2),
+            "rss_before_mib": round(before),
+            "rss_peak_mib": round(max(peak, before)),
+        }
+    return out
+
+
+def while_sampling(pid: int, fn) -> tuple[Any, float]:
+    """`fn()`, and the peak resident memory of process `pid` (MiB) while it ran, sampled every 20 ms."""
+    import threading
+
+    peak, done = [0.0], threading.Event()
+
+    def sample() -> None:
+        while not done.is_set():
+            peak[0] = max(peak[0], rss_mib(pid))
+            done.wait(0.02)
+
+    sampler = threading.Thread(target=sample)
+    sampler.start()
+    try:
+        return fn(), peak[0]
+    finally:
+        done.set()
+        sampler.join()
+
+
+HANGING_REPLAY = "import subprocess; subprocess.Popen(['sleep', '300']).wait()"
+
+
+def hook_kill(model: Path, data: Path, work: Path, split: str) -> dict[str, Any]:
+    """SIGKILL of a server while its `--on-show` hook runs a replay (with a child of its own): what is left of it."""
+    import shlex
+    import sys
+
+    hook = shlex.join([sys.executable, "-c", HANGING_REPLAY])
+    proc, url = start_server(
+        model,
+        data,
+        work / "hook.sqlite",
+        split,
+        env={"LANGPREF_STUDY_ADMIN_TOKEN": "faultbench-admin-token-0123"},
+        quiet=True,
+        extra=("--on-show", hook, "--on-show-timeout", "600"),
+    )
+    _video_urls(url, 1)  # a step with a video: the hook starts
+    deadline = time.time() + 60
+    while not any(_cmdline(p).startswith("sleep ") for p in descendants(proc.pid)):  # the replay's own child
+        if time.time() > deadline:
+            proc.kill()
+            raise RuntimeError("the hook did not start")
+        time.sleep(0.05)
+    kids = {p for p in descendants(proc.pid) if _cmdline(p).startswith("sleep ") or HANGING_REPLAY in _cmdline(p)}
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=60)
+    deadline = time.time() + 5
+    while alive(kids) and time.time() < deadline:
+        time.sleep(0.05)
+    left = alive(kids)
+    for p in left:  # leave nothing behind on the machine that ran the bench
+        os.kill(p, signal.SIGKILL)
+    return {"hook_processes": len(kids), "left_after_5_s": len(left)}
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", type=Path, required=True)
     p.add_argument("--data", type=Path, required=True)
     p.add_argument("--split", default="all")
+    p.add_argument("--only", nargs="+", choices=CASES, default=CASES, help="the cases to run (default: all)")
     args = p.parse_args(argv)
+    out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        proc, url = _start(args.model, args.data, work / "freeze.sqlite", args.split)
-        try:
-            out: dict[str, Any] = {"freeze": freeze(url)}
-        finally:
-            proc.terminate()
-            proc.wait(timeout=60)
-        out["sigterm"] = stop(args.model, args.data, work, args.split, signal.SIGTERM)
-        out["sigkill"] = stop(args.model, args.data, work, args.split, signal.SIGKILL)
+        if "freeze" in args.only or "uploads" in args.only:
+            proc, url = _start(args.model, args.data, work / "freeze.sqlite", args.split)
+            try:
+                if "freeze" in args.only:
+                    out["freeze"] = freeze(url)
+                if "uploads" in args.only:
+                    out["uploads"] = uploads(url, proc.pid)
+            finally:
+                proc.terminate()
+                proc.wait(timeout=60)
+        if "sigterm" in args.only:
+            out["sigterm"] = stop(args.model, args.data, work, args.split, signal.SIGTERM)
+        if "sigkill" in args.only:
+            out["sigkill"] = stop(args.model, args.data, work, args.split, signal.SIGKILL)
+        if "hook_kill" in args.only:
+            out["hook_kill"] = hook_kill(args.model, args.data, work, args.split)
     print(json.dumps(out), flush=True)
     return out
 

@@ -114,20 +114,44 @@ class Answer:
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
 _BIDI = re.compile(r"[\u202a-\u202e\u2066-\u2069]")
 """Bidirectional embeddings, overrides and isolates: invisible, they reverse how a line is shown (dashboard, CSV)."""
+SURROGATES = re.compile(r"[\ud800-\udfff]")
+"""Lone UTF-16 surrogates (`"\\ud800"` in JSON): no character, they cannot be written as UTF-8 (database, export)."""
+MAX_TEXT_DEPTH = 32
+"""Deepest nesting of lists and objects `clean_text` walks (the app refuses deeper bodies before)."""
 
 
 def clean_text(value: Any) -> Any:
     """Every string in `value` with bidirectional controls removed; control characters (NUL, escape, ...; tab and
-    line breaks are fine) refused with an AnswerError."""
-    if isinstance(value, str):
-        if _CONTROL.search(value):
-            raise AnswerError("the answer contains control characters (such as NUL); send plain text")
-        return _BIDI.sub("", value)
-    if isinstance(value, list):
-        return [clean_text(v) for v in value]
-    if isinstance(value, dict):
-        return {clean_text(k): clean_text(v) for k, v in value.items()}
-    return value
+    line breaks are fine), lone surrogates and nesting deeper than MAX_TEXT_DEPTH refused with an AnswerError.
+    Walks without recursion."""
+    out: list[Any] = [None]
+    todo: list[tuple[Any, Any, Any, int]] = [(value, out, 0, 0)]  # (value, where its clean copy goes, key, depth)
+    while todo:
+        item, parent, key, level = todo.pop()
+        if level > MAX_TEXT_DEPTH:
+            raise AnswerError(f"the answer is nested too deeply (more than {MAX_TEXT_DEPTH} levels)")
+        if isinstance(item, str):
+            parent[key] = _clean_string(item)
+        elif isinstance(item, list):
+            parent[key] = copy = [None] * len(item)
+            todo.extend((v, copy, i, level + 1) for i, v in enumerate(item))
+        elif isinstance(item, dict):
+            parent[key] = copy = {}
+            for k, v in item.items():
+                k = _clean_string(k) if isinstance(k, str) else k
+                copy[k] = None  # keeps the order of the keys
+                todo.append((v, copy, k, level + 1))
+        else:
+            parent[key] = item
+    return out[0]
+
+
+def _clean_string(text: str) -> str:
+    if _CONTROL.search(text):
+        raise AnswerError("the answer contains control characters (such as NUL); send plain text")
+    if SURROGATES.search(text):
+        raise AnswerError("the answer contains a lone UTF-16 surrogate (\\ud800-\\udfff), which is no character")
+    return _BIDI.sub("", text)
 
 
 class Robot(Protocol):

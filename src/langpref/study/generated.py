@@ -16,8 +16,9 @@ Where things live and how a restart continues:
   The feedback row (stored with the answer) is the job: once it is stored, the job is queued; a server that starts
   finds the stored feedback rows whose trajectory is not made yet and queues them again.
 - One worker process (the model's trajectory encoder and a live simulator, apart from the server's threads, like
-  the video worker) makes them one at a time; every seed comes from (study seed, participant seed, round), so a job
-  run again makes the same trajectory.
+  the video worker) makes them one at a time, a later round before an earlier one (in the order of the answers
+  within a round; a participant has at most one waiting, as their next answer waits for it); every seed comes
+  from (study seed, participant seed, round), so a job run again makes the same trajectory.
 - A made trajectory is appended to a dataset (`langpref.propose.GeneratedStore`, one split `generated`, default
   `DB.generated/` beside the database) that replays, renders and loads like any other, and its row in the database
   table `generated` (id, round, where the search started, scores, its parameters and phi, its index in that dataset)
@@ -258,7 +259,11 @@ class Generator:
             if queued or any(j.id == job.id for j in self._queue):
                 return
             self._failed.pop(job.id, None)
-            self._queue.append(job)
+            # a later round first: sign-ups that gave one feedback and left cannot hold up a participant further
+            # into Study 1 (each participant has at most one job waiting: an answer about a trajectory that is not
+            # made yet is not taken)
+            place = next((k for k, j in enumerate(self._queue) if j.round < job.round), len(self._queue))
+            self._queue.insert(place, job)
             self._ensure_thread()
             self._cond.notify_all()
 

@@ -25,8 +25,18 @@ bound, holding no thread) and joins the queue when it is made, so it may run aft
 Hooks run one at a time, in the order steps were handed out (one robot replays one trajectory at a time), in one
 background thread; a request only appends to a bounded queue, so a slow or failing hook never delays a step, an
 answer or another participant. A run that exits non-zero (`failed`), cannot start (`error`), or outlives its
-timeout (`timeout`: its process group is killed) is logged; a trajectory that finds the queue full is dropped
-(`skipped`). The admin dashboard shows the counts and the last runs.
+timeout (`timeout`: its process group is killed) is logged; a trajectory that finds no room is dropped (`skipped`).
+The admin dashboard shows the counts and the last runs.
+
+Room is shared out so that made-up participants cannot take the robot: only steps with videos run the hook, which
+a participant reaches past the consent page and the first survey; one participant holds at most `per_participant`
+runs waiting (a quarter of the queue); and when the queue is full, a run of a participant further into the study
+(a later step) takes the place of the newest waiting run of the participant least far into it.
+
+A run in flight when the server ends is killed with its whole process group: on a stop (Ctrl-C, SIGTERM) by the
+server, and when the server is killed outright (`kill -9`, a crash) by a small watchdog process that holds a pipe
+from the server and kills the groups of the runs in flight as soon as that pipe closes. No replay outlives the
+server, so none goes on driving the robot unwatched, and its timeout always holds.
 """
 
 from __future__ import annotations
@@ -36,6 +46,7 @@ import os
 import shlex
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -96,12 +107,22 @@ class HookRun:
 class ShowHook:
     """Runs the `--on-show` command for every trajectory shown, in a background thread with a bounded queue."""
 
-    def __init__(self, command: str, dataset: Dataset, timeout_s: float = 60.0, queue_size: int = 64, keep: int = 20):
+    def __init__(
+        self,
+        command: str,
+        dataset: Dataset,
+        timeout_s: float = 60.0,
+        queue_size: int = 64,
+        keep: int = 20,
+        per_participant: int | None = None,
+    ):
         self.command = command
         self.argv = parse_command(command)
         self.dataset = dataset
         self.timeout_s = timeout_s
         self.queue_size = queue_size
+        self.per_participant = per_participant or max(2, queue_size // 4)
+        """Runs one participant may have waiting at once (2: a comparison step's)."""
         self._queue: deque[ShowEvent] = deque()
         self._recent: deque[HookRun] = deque(maxlen=keep)
         self._counts: Counter[str] = Counter()
@@ -114,6 +135,7 @@ class ShowHook:
         self._proc: subprocess.Popen[bytes] | None = None
         self._stopped = False
         self._cond = threading.Condition()
+        self._watchdog = Watchdog()
         self._thread = threading.Thread(target=self._run, name="on-show-hook", daemon=True)
         self._thread.start()
 
@@ -133,18 +155,10 @@ class ShowHook:
             self._handed_out.add((participant, seq))
             for position, index in enumerate(trajectories):
                 event = ShowEvent(participant, seq, kind, position, int(index))
-                if len(self._queue) + self._waiting_runs() >= self.queue_size:
-                    self._record(
-                        HookRun(
-                            event,
-                            None,
-                            "skipped",
-                            None,
-                            time.time(),
-                            0.0,
-                            f"{self.queue_size} runs were already waiting",
-                        )
-                    )
+                if sum(e.participant == participant for e in self._waiting_events()) >= self.per_participant:
+                    self._skip(event, f"this participant already had {self.per_participant} runs waiting")
+                elif len(self._queue) + self._waiting_runs() >= self.queue_size and not self._make_room(seq):
+                    self._skip(event, f"{self.queue_size} runs were already waiting")
                 elif self.generated is not None and self.generated.owns(index):
                     # checked under our lock: `_made` takes it too, so no run is left waiting for a made trajectory
                     row = self.generated.store_index(index)
@@ -155,6 +169,33 @@ class ShowHook:
                 else:
                     self._queue.append(event)
             self._cond.notify_all()
+
+    def _skip(self, event: ShowEvent, why: str) -> None:
+        self._record(HookRun(event, None, "skipped", None, time.time(), 0.0, why))
+
+    def _waiting_events(self) -> list[ShowEvent]:
+        """Every run waiting, for its turn or for its trajectory to be made (call with `_cond` held)."""
+        return [*self._queue, *(e for events in self._waiting.values() for e in events)]
+
+    def _make_room(self, seq: int) -> bool:
+        """Drop the newest waiting run of the participant least far into the study (the lowest step seq), if that is
+        before step `seq`; whether a run was dropped (call with `_cond` held)."""
+        waiting = self._waiting_events()
+        if not waiting:
+            return False
+        lowest = min(e.seq for e in waiting)
+        if lowest >= seq:
+            return False
+        victim = [e for e in waiting if e.seq == lowest][-1]
+        if victim in self._queue:
+            self._queue.remove(victim)
+        else:
+            for events in self._waiting.values():
+                if victim in events:
+                    events.remove(victim)
+        self._waiting = {k: v for k, v in self._waiting.items() if v}
+        self._skip(victim, "made room for a participant further into the study")
+        return True
 
     def _waiting_runs(self) -> int:
         """Runs waiting for a generated trajectory to be made (call with `_cond` held); they count in the bound."""
@@ -203,6 +244,7 @@ class ShowHook:
                 _kill_group(self._proc)
             self._cond.notify_all()
         self._thread.join(timeout=10)
+        self._watchdog.close()
 
     # ---- the background thread ----
 
@@ -277,6 +319,7 @@ class ShowHook:
                     time.monotonic() - t0,
                     f"cannot start {self.argv[0]}: {exc.strerror or exc}",
                 )
+            self._watchdog.watch(proc.pid)  # its own session: the group id is its pid
             with self._cond:
                 self._proc = proc
                 if self._stopped:
@@ -291,6 +334,7 @@ class ShowHook:
             finally:
                 with self._cond:
                     self._proc = None
+                self._watchdog.forget(proc.pid)
             size = out.seek(0, os.SEEK_END)
             out.seek(max(0, size - 4 * OUTPUT_TAIL))  # at most 4 bytes per character
             output = out.read().decode("utf-8", "replace")[-OUTPUT_TAIL:]
@@ -307,3 +351,67 @@ def _kill_group(proc: subprocess.Popen[bytes]) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
         pass
+
+
+WATCHDOG = """
+import os, signal, sys
+groups = set()
+for line in sys.stdin:
+    (groups.add if line[0] == "+" else groups.discard)(int(line[1:]))
+for group in groups:
+    try:
+        os.killpg(group, signal.SIGKILL)
+    except OSError:
+        pass
+"""
+"""The watchdog's program: it reads `+GROUP` / `-GROUP` lines until the server's end of the pipe closes (the server
+has ended, however), then kills the process groups still listed."""
+
+
+class Watchdog:
+    """A process that kills the hook runs in flight when the server ends, even by `kill -9`: it is told each run's
+    process group over a pipe, and the pipe closes when the server's process does. Without it (it could not start)
+    only a stop the server sees kills them."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        try:
+            self._proc: subprocess.Popen[bytes] | None = subprocess.Popen(
+                [sys.executable, "-I", "-S", "-c", WATCHDOG],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,  # a Ctrl-C of the server's terminal leaves it to do its job
+            )
+        except OSError as exc:
+            log.warning("--on-show: no watchdog (%s); a hook run may outlive a server that is killed", exc)
+            self._proc = None
+
+    def _send(self, line: str) -> None:
+        with self._lock:
+            if self._proc is None or self._proc.stdin is None:
+                return
+            try:
+                self._proc.stdin.write(line.encode())
+                self._proc.stdin.flush()
+            except (BrokenPipeError, ValueError):
+                pass
+
+    def watch(self, group: int) -> None:
+        self._send(f"+{group}\n")
+
+    def forget(self, group: int) -> None:
+        self._send(f"-{group}\n")
+
+    def close(self) -> None:
+        """End the watchdog (every run has ended or was killed): it kills what is still listed and exits."""
+        with self._lock:
+            proc, self._proc = self._proc, None
+        if proc is not None:
+            if proc.stdin is not None:
+                proc.stdin.close()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()

@@ -109,7 +109,16 @@ def build_state(
         hook.attach(generated)
     token = admin_token or cfg.resolve_admin_token() or secrets.token_urlsafe(24)
     return StudyApp(
-        cfg.db, engine, videos, token, cfg.study, hook=hook, allowed_origins=cfg.allowed_origins, generated=generated
+        cfg.db,
+        engine,
+        videos,
+        token,
+        cfg.study,
+        hook=hook,
+        allowed_origins=cfg.allowed_origins,
+        generated=generated,
+        allowed_hosts=cfg.allowed_hosts,
+        bind_host=cfg.host,
     )
 
 

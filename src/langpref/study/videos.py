@@ -34,7 +34,8 @@ from langpref.errors import LangprefError
 from langpref.study.config import VideoConfig
 
 MEDIA_TYPES = {"webm": "video/webm", "mp4": "video/mp4"}
-_NAME = re.compile(r"^(traj|gen)(\d{6})-([0-9a-f]{10})\.(webm|mp4)$")
+_NAME = re.compile(r"(traj|gen)([0-9]{6})-([0-9a-f]{10})\.(webm|mp4)", re.ASCII)
+"""A video's name, matched whole (`fullmatch`: no trailing newline) and in ASCII digits only."""
 
 # ---- the worker process ----------------------------------------------------------------------------------------
 
@@ -157,7 +158,7 @@ class VideoCache:
 
     def index_of(self, name: str) -> int | None:
         """The study trajectory a video name stands for; None for anything else (other tags, `../`, unknown)."""
-        m = _NAME.match(name)
+        m = _NAME.fullmatch(name)
         if not m or m.group(4) != self.cfg.format:
             return None
         index = int(m.group(2))

@@ -1,0 +1,204 @@
+"""What the server refuses before a request reaches the study (`langpref.study.guard`): bodies over the limit before
+they are read (by Content-Length, or counted as they stream in chunked), JSON nested too deeply, Host names that are
+not the study's (DNS rebinding), and wrong resume codes per client, so that one client cannot lock resume for all."""
+
+from __future__ import annotations
+
+import json
+import socket
+
+import pytest
+
+from langpref.study.guard import MAX_BODY, HostCheck, RateLimiter, client_key, depth
+
+RECV_S = 10.0
+"""How long a test waits for the server's answer to a body it never finishes sending: without the guard the server
+waits for the rest of the body, and the test fails at this timeout."""
+
+
+@pytest.fixture
+def live(engine, h, tmp_path):
+    from langpref.study.serve import BackgroundServer, build_state
+
+    state = build_state(h.serve_config(tmp_path / "guard.sqlite"), engine=engine, progress=False)
+    with BackgroundServer(state) as url:
+        yield state, int(url.rsplit(":", 1)[1])
+    state.videos.close()
+
+
+def response(sock: socket.socket) -> tuple[int, dict]:
+    """The status and JSON body of the response on `sock` (it may close the connection after it)."""
+    sock.settimeout(RECV_S)
+    buf = b""
+    while b"\r\n\r\n" not in buf:
+        chunk = sock.recv(65536)
+        assert chunk, "the server closed the connection without answering"
+        buf += chunk
+    head, rest = buf.split(b"\r\n\r\n", 1)
+    lines = head.decode("latin-1").split("\r\n")
+    headers = {k.lower(): v.strip() for k, v in (x.split(":", 1) for x in lines[1:])}
+    n = int(headers["content-length"])
+    while len(rest) < n:
+        chunk = sock.recv(65536)
+        assert chunk
+        rest += chunk
+    return int(lines[0].split()[1]), json.loads(rest[:n])
+
+
+def test_a_body_announced_over_the_limit_is_refused_before_it_is_sent(live):
+    state, port = live
+    with socket.create_connection(("127.0.0.1", port), timeout=RECV_S) as sock:
+        head = (
+            "POST /api/participants HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+            f"Content-Length: {256 * 1024 * 1024}\r\n\r\n"
+        )
+        sock.sendall(head.encode() + b"{" + b" " * 1000)  # 256 MiB announced, a kilobyte sent
+        status, body = response(sock)
+    assert status == 413 and set(body) == {"error"} and "64 KiB" in body["error"]
+    assert state.connect().execute("SELECT count(*) FROM participants").fetchone()[0] == 0
+
+
+def test_a_chunked_body_is_refused_once_it_passes_the_limit(live):
+    state, port = live
+    with socket.create_connection(("127.0.0.1", port), timeout=RECV_S) as sock:
+        head = (
+            "POST /api/participants HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+            "Transfer-Encoding: chunked\r\n\r\n"
+        )
+        sock.sendall(head.encode())
+        chunk = b" " * 16384
+        for _ in range(MAX_BODY // len(chunk) + 2):  # past the limit, and the last chunk never comes
+            sock.sendall(f"{len(chunk):x}\r\n".encode() + chunk + b"\r\n")
+        status, body = response(sock)
+    assert status == 413 and set(body) == {"error"}
+    assert state.connect().execute("SELECT count(*) FROM participants").fetchone()[0] == 0
+
+
+def test_a_content_length_that_is_no_number_is_refused():
+    import asyncio
+
+    from langpref.study.guard import HttpError, read_body
+
+    class Request:
+        def __init__(self, length: str):
+            self.headers = {"content-length": length}
+
+        async def stream(self):
+            yield b"{}"
+
+    assert asyncio.run(read_body(Request("2"))) == b"{}"
+    for length in ("abc", "\uff11\uff12", "-1"):  # full-width digits pass str.isdigit()
+        with pytest.raises(HttpError) as exc:
+            asyncio.run(read_body(Request(length)))
+        assert exc.value.status == 400
+
+
+def test_deep_nesting_is_a_one_line_400_wherever_it_is(client, h):
+    pid, headers = h.join(client)
+    step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
+    answers = h.answer_for(step)
+    under_question = json.dumps({**answers, "answers": {**answers["answers"], "race": "NESTED"}})
+    under_unknown = json.dumps({**answers, "extra": "NESTED"})  # a field that is dropped, after parsing
+    for level in (40, 500, 700, 980):
+        nested = "[" * level + "]" * level
+        for body in (under_question, under_unknown):
+            r = client.post(
+                f"/api/participants/{pid}/answer", content=body.replace('"NESTED"', nested).encode(), headers=headers
+            )
+            assert r.status_code == 400, (level, r.status_code, r.text[:200])
+            assert set(r.json()) == {"error"} and "nested too deeply" in r.json()["error"]
+    assert client.get(f"/api/participants/{pid}/step", headers=headers).json()["seq"] == step["seq"]
+
+
+def test_depth_is_measured_without_recursion():
+    value: list = []
+    for _ in range(100_000):
+        value = [value]
+    assert depth(value) == 100_001 and depth({"a": [1, {"b": 2}]}) == 3 and depth("x") == 0
+
+
+def test_clean_text_refuses_deep_values_without_recursion():
+    from langpref.study.flow import AnswerError, clean_text
+
+    value: dict = {}
+    for _ in range(100_000):
+        value = {"k": value}
+    with pytest.raises(AnswerError, match="nested too deeply"):
+        clean_text(value)
+    assert clean_text({"a": ["x\u202ey", {"b": 1}], "c": None}) == {"a": ["xy", {"b": 1}], "c": None}
+
+
+# ---- Host ----
+
+
+def test_a_rebinding_host_is_refused_and_the_study_names_pass(client, study_state):
+    evil = {"Host": "rebind.evil.example:8000", "Origin": "http://rebind.evil.example:8000"}
+    r = client.post("/api/participants", json={}, headers=evil)
+    assert r.status_code == 400 and set(r.json()) == {"error"} and "--allowed-hosts" in r.json()["error"]
+    assert client.get("/healthz", headers={"Host": "rebind.evil.example"}).status_code == 400
+    assert study_state.connect().execute("SELECT count(*) FROM participants").fetchone()[0] == 0
+    for host in ("localhost:8000", "127.0.0.1:8000", "[::1]:8000", "192.168.1.5:8000", "study.localhost"):
+        r = client.post("/api/participants", json={}, headers={"Host": host, "Origin": f"http://{host}"})
+        assert r.status_code == 200, (host, r.text)
+
+
+def test_host_check_takes_the_bind_host_allowed_names_and_origins():
+    check = HostCheck(["labpc.local"], bind_host="study.lab.example", origins=["https://proxy.lab.example"])
+    for ok in ("LABPC.local:8000", "study.lab.example", "proxy.lab.example:443", "localhost", "[::1]", "10.0.0.7"):
+        assert check.refused(ok) is None, ok
+    for bad in ("evil.example", "localhost.evil.example", "labpc.local.evil.example", ""):
+        assert check.refused(bad), bad
+    assert HostCheck().refused(None) is None  # HTTP/1.0 without Host: a tool, not a browser
+
+
+# ---- resume codes ----
+
+
+def test_one_clients_wrong_codes_do_not_lock_the_others_out(client, h, study_state):
+    from langpref.study.app import MAX_RESUME_FAILURES
+    from langpref.study.guard import HttpError
+
+    pid, headers = h.join(client)
+    code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]
+    wrong = json.dumps({"code": "BBBBB-BBBBB"}).encode()
+    for _ in range(MAX_RESUME_FAILURES):
+        with pytest.raises(HttpError) as exc:
+            study_state.resume(wrong, "203.0.113.7")
+        assert exc.value.status == 404
+    for body in (wrong, json.dumps({"code": code}).encode()):  # that client is held back, even with a right code
+        with pytest.raises(HttpError) as exc:
+            study_state.resume(body, "203.0.113.7")
+        assert exc.value.status == 429
+    # everyone else: the right code restores the session, a wrong one is a plain 404
+    assert study_state.resume(json.dumps({"code": code}).encode(), "198.51.100.2")["participant_id"] == pid
+    with pytest.raises(HttpError) as exc:
+        study_state.resume(wrong, "198.51.100.3")
+    assert exc.value.status == 404
+    # over HTTP the client is the connection's address
+    assert client.post("/api/participants/resume", json={"code": code}).status_code == 200
+
+
+def test_one_code_restores_a_bounded_number_of_sessions_a_minute(client, h, study_state):
+    from langpref.study.app import MAX_RESUMES_PER_CODE
+
+    pid, headers = h.join(client)
+    code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]
+    statuses = [client.post("/api/participants/resume", json={"code": code}).status_code for _ in range(15)]
+    assert statuses == [200] * MAX_RESUMES_PER_CODE + [429] * (15 - MAX_RESUMES_PER_CODE)
+
+
+def test_rate_limiter_forgets_old_events_and_bounds_its_keys():
+    limiter = RateLimiter(2, window_s=60.0, max_keys=3)
+    limiter.add("a", now=0.0)
+    limiter.add("a", now=1.0)
+    assert limiter.blocked("a", now=2.0) and not limiter.blocked("b", now=2.0)
+    assert not limiter.blocked("a", now=60.5)  # the first one has left the window
+    for key in "bcde":
+        limiter.add(key, now=3.0)
+    assert len(limiter._events) == 3
+
+
+def test_client_key_groups_an_ipv6_network():
+    assert client_key("2001:db8::1") == client_key("2001:db8::ffff") == "2001:db8::/64"
+    assert client_key("::ffff:192.0.2.1") == "192.0.2.1" and client_key("192.0.2.1") == "192.0.2.1"
+    assert client_key(None) == "?" and client_key("testclient") == "testclient"
