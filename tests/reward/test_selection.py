@@ -213,7 +213,7 @@ def test_active_experiment_writes_curves_intervals_and_targets(tmp_path, make_sy
     res = run_active_experiment(
         "metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=2, seeds=1, progress=False
     )
-    assert set(res["methods"]) == set(METHODS) and len(res["targets"]) == 5
+    assert set(res["methods"]) == set(METHODS) and len(res["targets"]) == 11
     assert all(len(r["true_reward_of_best"]) == 4 for r in res["methods"].values())
     assert "language-infogain - language-lal-infogain" in res["contrasts"]
     assert (tmp_path / "a" / "active.png").read_bytes()[:4] == b"\x89PNG"

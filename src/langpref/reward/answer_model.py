@@ -253,9 +253,9 @@ class AnswerModelLearner:
         w = self.weights()
         return float(1.0 / np.sum(w * w))
 
-    def _resample(self, n: int) -> np.ndarray:
-        """n particle indices, systematic resampling by weight."""
-        positions = (self.rng.random() + np.arange(n)) / n
+    def _resample(self, n: int, rng: np.random.Generator | None = None) -> np.ndarray:
+        """n particle indices, systematic resampling by weight (from `rng`, default the learner's own)."""
+        positions = ((self.rng if rng is None else rng).random() + np.arange(n)) / n
         return np.minimum(np.searchsorted(np.cumsum(self.weights()), positions), len(self.v) - 1)
 
     def _resample_move(self) -> None:
@@ -292,10 +292,21 @@ class AnswerModelLearner:
         z = (np.asarray(phi, dtype=np.float64) @ self.axes.T - self.mu) / self.sd
         return z @ self.mean()
 
-    def draw(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """n draws of the belief (v (n, F), their optima in the pool (n,)), resampled by weight."""
-        idx = self._resample(int(n))
+    def draw(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """n draws of the belief (v (n, F), their optima in the pool (n,)), resampled by weight with `rng` (the
+        selection's stream, so that choosing a query leaves the belief's own stream untouched)."""
+        idx = self._resample(int(n), rng)
         return self.v[idx], self.best[idx]
+
+    def language_gains(self, v: np.ndarray, best: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """I(v; meaning | tau) in nats for each of `rows`, from draws (v, best)."""
+        return mutual_information(self.meaning_probabilities(v, best, rows))
+
+    def comparison_gains(self, v: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, I(v; choice) in nats) over the pairs i < j of `rows` (positions in rows), from draws v."""
+        r = self.cfg.comparison_rationality * (self.z[rows] @ v.T).astype(np.float32)  # (C, S)
+        i, j = np.triu_indices(len(rows), k=1)
+        return i, j, binary_mutual_information(0.5 * (1.0 + np.tanh(0.5 * (r[i] - r[j]))))
 
     def credible(self, v_true: np.ndarray, level: float = 0.9) -> bool:
         """Whether the direction of `v_true` lies in the belief's `level` credible region of directions (the
@@ -335,16 +346,12 @@ class AnswerModelInfoGain(Selector):
 
     def score(self, learner: AnswerModelLearner, rng: np.random.Generator) -> Scored:
         rows = candidate_rows(self.pool, self.candidates, rng)
-        v, best = learner.draw(self.samples)
+        v, best = learner.draw(self.samples, rng)
         phi = self.space.phi[rows]
         parts = []
         if "language" in self.kinds:
-            gains = mutual_information(learner.meaning_probabilities(v, best, rows))
             star = self.space.phi[learner.pool[best]].mean(axis=0)
-            parts.append(language_candidates(rows, gains, phi, star))
+            parts.append(language_candidates(rows, learner.language_gains(v, best, rows), phi, star))
         if "comparison" in self.kinds:
-            r = learner.cfg.comparison_rationality * (learner.z[rows] @ v.T).astype(np.float32)  # (C, S)
-            i, j = np.triu_indices(len(rows), k=1)
-            gains = binary_mutual_information(0.5 * (1.0 + np.tanh(0.5 * (r[i] - r[j]))))
-            parts.append(comparison_candidates(rows, i, j, gains, phi))
+            parts.append(comparison_candidates(rows, *learner.comparison_gains(v, rows), phi))
         return parts[0] if len(parts) == 1 else join(parts, self.costs)

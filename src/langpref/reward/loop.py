@@ -161,12 +161,20 @@ class LearnRewardConfig:
         self.reward.validate()
 
 
+NEWER_HUMAN_FIELDS = {"feature_rule": "eq10", "vague": 0.0}
+"""Fields of the synthetic human added with the answer-model learner, and their defaults."""
+
+
 def config_record(cfg: LearnRewardConfig) -> dict:
-    """The config as written into results; the paper's learner leaves out the answer-model fields, so that its
-    output stays what it was before that learner existed, byte for byte."""
+    """The config as written into results. Fields added with the answer-model learner are left out while they hold
+    their defaults (the paper's learner, the Eq. 10 human), so that the paper's output stays what it was before that
+    learner existed, byte for byte (tests/reward/test_answer_model.py pins it)."""
     record = asdict(cfg)
     if cfg.learner == "paper":
         del record["learner"], record["answer_model"]
+    for name, default in NEWER_HUMAN_FIELDS.items():
+        if record["human"][name] == default:
+            del record["human"][name]
     return record
 
 
