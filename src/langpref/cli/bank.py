@@ -167,3 +167,104 @@ def cmd_bank_augment(args: argparse.Namespace) -> None:
         args.json,
         lambda o: f"wrote {sum(counts.values())} proposed phrasings for {o['task']} to {o['out']} (for review)",
     )
+
+
+@command(
+    "lang-models",
+    "the registered language models (--lang-model NAME); with --measure, their size, speed and reading of banks",
+    [
+        opt("--measure", action="store_true", help="load each installed model and measure it (about a minute)"),
+        opt(
+            "--bank",
+            action="append",
+            default=None,
+            metavar="DATASET_OR_TASK",
+            help="a bank to read (repeatable; default metaworld and robosuite); a task file or dataset works too",
+        ),
+        opt("--repeats", type=int, default=200, help="one-sentence embeddings timed per model (default 200)"),
+        opt("--threads", type=int, default=1, help="torch CPU threads while measuring (default 1)"),
+        JSON,
+    ],
+    "Lists every registered language model with its packages and whether they are installed. With --measure, for each "
+    "installed one: install size (its packages, and what it unpacks into the cache), p50/p95 time to embed one "
+    "sentence on this CPU, and how well the frozen pretrained model alone reads each bank's val and test phrasings "
+    "by the nearest prototype of the train phrasings.",
+)
+def cmd_lang_models(args: argparse.Namespace) -> None:
+    import datetime
+    import time
+
+    from langpref.language.models import REGISTRY
+
+    if args.repeats < 1:
+        raise LangprefError(f"--repeats must be >= 1, got {args.repeats}")
+    out: dict = {"models": {}}
+    sources = []
+    if args.measure:
+        import torch
+
+        from langpref.language.banksource import open_bank
+
+        if args.threads < 1:
+            raise LangprefError(f"--threads must be >= 1, got {args.threads}")
+        torch.set_num_threads(args.threads)
+        sources = [open_bank(w) for w in (args.bank or ["metaworld", "robosuite"])]
+        out["measured"] = {
+            "date": datetime.date.today().isoformat(),
+            "torch_threads": torch.get_num_threads(),
+            "cpu_count": os.cpu_count(),
+            "load_average_before": [round(x, 2) for x in os.getloadavg()],
+            "banks": [s.origin for s in sources],
+        }
+    for name, spec in REGISTRY.items():
+        row = {
+            "title": spec.title,
+            "installed": spec.installed(),
+            "extra": spec.extra,
+            "install": spec.install_hint(),
+            "packages": spec.versions(),
+        }
+        if args.measure and row["installed"]:
+            row.update(_measure(spec, sources, args.repeats, time))
+        out["models"][name] = row
+    if args.measure:
+        out["measured"]["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
+    emit(out, args.json, _human_models)
+
+
+def _measure(spec, sources, repeats: int, time) -> dict:
+    from langpref.language.measure import bank_accuracy, latency_ms, package_bytes, unpacked_bytes
+    from langpref.language.models import resolve
+    from langpref.language.transformer import sentence_embedder
+
+    start = time.perf_counter()
+    local = resolve(spec.name)
+    embed = sentence_embedder(spec.name)
+    load_s = time.perf_counter() - start
+    sentences = [t for s in sources for by in s.split("test").values() for ts in by.values() for t in ts]
+    return {
+        "package_mb": round(package_bytes(spec) / 2**20, 1),
+        "unpacked_mb": round(unpacked_bytes(spec, local) / 2**20, 1),
+        "load_s": round(load_s, 1),
+        "latency_ms": latency_ms(embed, sentences or ["Move faster."], repeats),
+        "accuracy": {s.task: bank_accuracy(embed, s) for s in sources},
+    }
+
+
+def _human_models(out: dict) -> str:
+    lines = []
+    for name, m in out["models"].items():
+        state = "installed" if m["installed"] else f"not installed ({m['install']})"
+        lines.append(f"{name:<8} {m['title']}: {state}")
+        if "latency_ms" in m:
+            lat = m["latency_ms"]
+            lines.append(
+                f"         {m['package_mb']:.0f} MB packages + {m['unpacked_mb']:.0f} MB unpacked; one sentence "
+                f"p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms"
+            )
+            for task, acc in m["accuracy"].items():
+                lines.append(
+                    f"         {task}: val {acc['val']:.3f} ({acc['val_phrasings']}), "
+                    f"test {acc['test']:.3f} ({acc['test_phrasings']})"
+                )
+    return "\n".join(lines)
