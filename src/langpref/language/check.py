@@ -102,12 +102,16 @@ class BankCheck:
         if not self.weak:
             return head + "; no weak meaning"
         parts = []
-        for name in self.weak:
+        weakest = sorted(
+            self.weak, key=lambda n: -1.0 if self.meanings[n].accuracy is None else self.meanings[n].accuracy
+        )
+        for name in weakest[:3]:
             m = self.meanings[name]
             top = next(iter(m.confused_with), None)
             score = "n/a" if m.accuracy is None else f"{m.accuracy:.2f}"
             parts.append(f"{name} {score}" + (f" (read as {top})" if top else ""))
-        return head + "; weak: " + ", ".join(parts)
+        more = f" and {len(weakest) - 3} more" if len(weakest) > 3 else ""
+        return head + f"; {len(weakest)} of {len(self.meanings)} meanings weak: " + ", ".join(parts) + more
 
 
 def _unit(x: np.ndarray) -> np.ndarray:
