@@ -57,7 +57,12 @@ def _embedder(args: argparse.Namespace, task: str):
             default=None,
             help="read this file's phrasings (DESIGN.md schema) against the bank's instead of leaving one out",
         ),
-        opt("--split", default="train", choices=("train", "val", "test"), help="bank split to check (default train)"),
+        opt(
+            "--split",
+            default="train",
+            choices=("train", "val", "test"),
+            help="bank split to check (default train; with --model, val or test holds phrasings the model never saw)",
+        ),
         opt("--threshold", type=float, default=None, help="flag a meaning read right less often (default 0.8)"),
         SEED,
         JSON,
