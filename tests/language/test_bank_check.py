@@ -118,3 +118,10 @@ def test_open_bank_refuses_a_file_that_is_not_a_task_file(tmp_path):
     (tmp_path / "x.json").write_text("{}")
     with pytest.raises(LangprefError, match="not a task file"):
         open_bank(tmp_path / "x.json")
+
+
+def test_a_task_file_whose_split_bank_is_malformed_is_one_line(tmp_path):
+    from langpref.language.banksource import open_bank
+
+    with pytest.raises(LangprefError, match="not a bank of the utterance schema"):
+        open_bank(_task_file(tmp_path, {"train": ["Move faster."], "val": {}, "test": {}}))

@@ -34,8 +34,18 @@ class BankSource:
         return self.splits[name]
 
 
-def _filled(raw: dict, features: tuple[str, ...]) -> dict[str, Phrasings]:
+def _filled(raw: dict, features: tuple[str, ...], where: str = "the bank") -> dict[str, Phrasings]:
     """Every split, feature and direction present (missing ones as empty lists), texts stripped."""
+    try:
+        return _fill(raw, features)
+    except (AttributeError, TypeError):
+        raise LangprefError(
+            f"{where} is not a bank of the utterance schema: "
+            "{split: {feature: {increase: [...], decrease: [...]}}}"
+        ) from None
+
+
+def _fill(raw: dict, features: tuple[str, ...]) -> dict[str, Phrasings]:
     return {
         split: {
             f: {d: [str(t).strip() for t in raw.get(split, {}).get(f, {}).get(d, [])] for d in DIRECTIONS}
@@ -70,7 +80,7 @@ def open_bank(where: str | Path, seed: int = 0) -> BankSource:
         return BankSource(
             tf.name,
             tf.features,
-            _filled(raw, tf.features),
+            _filled(raw, tf.features, f"utterances file {tf.utterances}"),
             (tf.utterances.resolve(), path.resolve()),
             f"task file {path}",
         )
