@@ -76,3 +76,10 @@ def test_cli_refuses_to_write_into_the_bank_or_task_file_even_with_force(tmp_pat
     assert main(["bank", "augment", str(task), "--out", str(target), "--force"]) == 2
     assert "never writes into a bank" in capsys.readouterr().err
     assert _sha(target) == before
+
+
+def test_adverbs_of_manner_only():
+    from langpref.language.augment import adverbs
+
+    assert adverbs("Move slowly.") == ["slowly"] and adverbs("Go slowly to the button.") == ["slowly"]
+    assert adverbs("Lift the cube less effectively.") == [] and adverbs("Pass dangerously close.") == []

@@ -122,8 +122,19 @@ def is_imperative(text: str) -> bool:
 
 
 def adverbs(text: str) -> list[str]:
-    """-ly adverbs of manner in a phrasing ("slowly"), not "only" or "really"."""
-    return [w.lower() for w in _words(text) if w.lower().endswith("ly") and len(w) > 4 and w.lower() not in _NOT_ADVERB]
+    """-ly adverbs of manner in a phrasing ("Move slowly."): at the end of the clause or before a preposition, not
+    after "less" (negating "less X" is not "so X"), not degree words ("dangerously close") nor "only" or "really"."""
+    words = [w.lower() for w in _words(text)]
+    out = []
+    for i, w in enumerate(words):
+        if not (w.endswith("ly") and len(w) > 4) or w in _NOT_ADVERB:
+            continue
+        if i > 0 and words[i - 1] == "less":
+            continue
+        if i + 1 < len(words) and words[i + 1] not in _PREPOSITIONS and words[i + 1] != "please":
+            continue
+        out.append(w)
+    return out
 
 
 def _sentence(text: str) -> str:
