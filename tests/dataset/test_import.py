@@ -312,7 +312,25 @@ def test_cli_import_and_errors(tmp_path):
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["num_trajectories"] == 8
+    assert "bank check of toy-reach" in out.stderr and "bank_check" in json.loads(out.stdout)
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 2 and again.stderr.startswith("error:") and "already exists" in again.stderr
     typo = subprocess.run([*cmd[:4], str(tmp_path / "recc"), *cmd[5:]], capture_output=True, text=True, timeout=120)
     assert typo.returncode == 2 and "not found" in typo.stderr and len(typo.stderr.strip().splitlines()) == 1
+
+
+def test_cli_import_warns_on_a_weak_meaning(tmp_path, capsys):
+    from langpref.cli import main
+
+    bank = json.loads(json.dumps(BANK))
+    bank["effort"]["decrease"] = [t.replace(".", ", please.") for t in bank["effort"]["increase"]]  # near-copies
+    rec, task = write_plain(tmp_path / "rec"), write_task(tmp_path / "task", bank=bank)
+    assert main(["import", str(rec), "--task", str(task), "--out", str(tmp_path / "ds"), "--json"]) == 0
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    summary = [line for line in lines if line.startswith("bank check of toy-reach")]
+    assert len(summary) == 1 and "effort/decrease" in summary[0]
+    assert any(line.startswith("warning: weak meaning effort/decrease") for line in lines)
+    assert "effort/decrease" in json.loads(captured.out)["bank_check"]["weak"]
+    assert main(["import", str(rec), "--task", str(task), "--out", str(tmp_path / "ds2"), "--no-bank-check"]) == 0
+    assert "bank check" not in capsys.readouterr().err

@@ -12,6 +12,7 @@ BACKENDS = ("local", "ray")
 # Command groups: name -> (help, dest, metavar)
 GROUPS = {
     "experiment": ("the paper's experiments, one command each", "experiment", "EXPERIMENT"),
+    "bank": ("a task's bank of phrasings before a study: check and augment it", "bank_command", "SUBCOMMAND"),
     "study": ("the web app for user studies with real people (paper Sec. 5.2)", "study_command", "SUBCOMMAND"),
 }
 

@@ -78,6 +78,8 @@ def cmd_import(args: argparse.Namespace) -> None:
         )
     summary = import_recording(cfg, task, bank)
     record(args, Path(summary["out"]) / "import.config.json", cfg)
+    if cfg.bank_check:
+        summary["bank_check"] = _bank_check(Path(summary["out"]))
     emit(
         summary,
         args.json,
@@ -86,6 +88,36 @@ def cmd_import(args: argparse.Namespace) -> None:
             f"{s['out']} (splits {s['splits']}, videos: {'yes' if s['videos'] else 'no'}, {s['wall_s']:.1f} s)"
         ),
     )
+
+
+def _bank_check(dataset: Path) -> dict:
+    """`langpref bank check DATASET` with the pretrained language model: its one-line summary and a warning per weak
+    meaning on stderr; overall accuracy and weak meanings for the --json summary."""
+    import sys
+
+    from langpref.language.banksource import open_bank
+    from langpref.language.check import leave_one_out
+    from langpref.language.transformer import sentence_embedder
+
+    source = open_bank(dataset)
+    result = leave_one_out(
+        source.split("train"),
+        source.features,
+        sentence_embedder("minilm"),
+        task=source.task,
+        encoder="pretrained minilm",
+    )
+    print(result.summary(), file=sys.stderr)
+    for name in result.weak:
+        m = result.meanings[name]
+        print(f"warning: weak meaning {name}: {m.advice}", file=sys.stderr)
+    if result.weak:
+        print(
+            "note: this reads the bank with the pretrained language model alone; training on the bank teaches it "
+            f"more. After `langpref train`, check again with `langpref bank check {dataset} --model MODEL`",
+            file=sys.stderr,
+        )
+    return {"accuracy": result.accuracy, "weak": result.weak}
 
 
 @command(

@@ -67,6 +67,9 @@ class ImportConfig:
     --images only); default the first video feature, else the first image feature; '' for none."""
     force: bool = False
     """Overwrite an existing dataset in `out`."""
+    bank_check: bool = True
+    """After the import, read the bank's train phrasings leave-one-out with the pretrained language model (`langpref
+    bank check`), print its one-line summary and warn on weak meanings (a few seconds)."""
     frames: FrameOptions = field(default_factory=FrameOptions)
     """Camera frames (--images, --frame-size, --frame-stride), decoded from every episode's video or images."""
 

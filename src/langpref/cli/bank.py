@@ -1,0 +1,275 @@
+"""`langpref bank check | bank augment | lang-models`: a task's bank before a study, and the language models to read it
+with."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from langpref.cli.common import JSON
+from langpref.cli_config import command, emit, opt, path, record
+from langpref.errors import LangprefError
+
+WHERE = opt(
+    "where",
+    metavar="DATASET_OR_TASK",
+    help="a task name (metaworld, robosuite, a plugin's), a dataset directory, or a task file (.toml) before import",
+)
+SEED = opt(
+    "--seed", type=int, default=0, help="seed of an unsplit bank's split, as `langpref import --seed` (default 0)"
+)
+
+
+def _embedder(args: argparse.Namespace, task: str):
+    """(texts -> embeddings, what reads them): a checkpoint's language encoder (psi) with --model, else the
+    pretrained sentence encoder --lang-model."""
+    if args.model is None:
+        from langpref.language.models import canonical_name
+        from langpref.language.transformer import sentence_embedder
+
+        return sentence_embedder(args.lang_model), f"pretrained {canonical_name(args.lang_model)}"
+    from langpref.model.checkpoint import load_model
+
+    model = load_model(args.model, lang_model=args.lang_model if args.lang_model_given else None)
+    if model.info.env != task:
+        raise LangprefError(f"model {args.model} was trained on task {model.info.env!r}, the bank is task {task!r}")
+    return (lambda texts: model.encode_texts(list(texts)).double().cpu().numpy()), f"model {args.model}"
+
+
+@command(
+    "bank check",
+    "how well each meaning of a bank is read from its own held-back phrasings, before a study",
+    [
+        WHERE,
+        path(
+            "--model", default=None, help="read with this checkpoint's language encoder (default: the pretrained one)"
+        ),
+        opt(
+            "--lang-model",
+            default=None,
+            metavar="NAME_OR_PATH",
+            help="pretrained sentence encoder without --model (default minilm); with --model, the model must name it",
+        ),
+        path(
+            "--utterances",
+            default=None,
+            help="read this file's phrasings (DESIGN.md schema) against the bank's instead of leaving one out",
+        ),
+        opt(
+            "--split",
+            default="train",
+            choices=("train", "val", "test"),
+            help="bank split to check (default train; with --model, val or test holds phrasings the model never saw)",
+        ),
+        opt("--threshold", type=float, default=None, help="flag a meaning read right less often (default 0.8)"),
+        SEED,
+        JSON,
+    ],
+    "Leave-one-out over the bank's train split: each phrasing is read as the meaning (feature, direction) whose "
+    "prototype, the mean of that meaning's other phrasings' embeddings, is nearest in cosine. Per meaning: accuracy, "
+    "the meanings it is taken for, and advice for weak ones. With --utterances, the file's phrasings are read against "
+    "the prototypes of the whole split. Reads with the pretrained sentence encoder, or a checkpoint's (--model).",
+)
+def cmd_bank_check(args: argparse.Namespace) -> None:
+    from langpref.language.banksource import open_bank
+    from langpref.language.check import WEAK_BELOW, leave_one_out, read_against
+
+    threshold = WEAK_BELOW if args.threshold is None else args.threshold
+    if not 0 <= threshold <= 1:
+        raise LangprefError(f"--threshold must be within 0..1, got {threshold}")
+    source = open_bank(args.where, seed=args.seed)
+    phrasings = source.split(args.split)
+    queries = None
+    if args.utterances is not None:
+        from langpref.language.bank import load_user_utterances
+
+        mapping = load_user_utterances(args.utterances, source.task, source.features)
+        queries = {f: {d: list(t) for d, t in by.items()} for f, by in mapping.items()}
+    args.lang_model_given = args.lang_model is not None
+    args.lang_model = args.lang_model or "minilm"
+    embed, encoder = _embedder(args, source.task)
+    if queries is None:
+        result = leave_one_out(
+            phrasings, source.features, embed, task=source.task, encoder=encoder, threshold=threshold
+        )
+    else:
+        result = read_against(
+            phrasings,
+            queries,
+            source.features,
+            embed,
+            task=source.task,
+            encoder=encoder,
+            method=f"{args.utterances} against the {args.split} split",
+            threshold=threshold,
+        )
+    emit(result.to_dict(), args.json, lambda _: _human(result))
+
+
+def _human(result) -> str:
+    lines = [result.summary()]
+    for name, m in result.meanings.items():
+        acc = "  n/a" if m.accuracy is None else f"{m.accuracy:5.2f}"
+        confused = ", ".join(f"{k} x{v}" for k, v in m.confused_with.items())
+        lines.append(f"  {name:<32} {acc} of {m.count:<3}" + (f" read as {confused}" if confused else ""))
+        if m.advice:
+            lines.append(f"    -> {m.advice}")
+    for rep in result.repeated:
+        lines.append(f"  repeated under {', '.join(rep['meanings'])}: {rep['text']!r}")
+    return "\n".join(lines)
+
+
+@command(
+    "bank augment",
+    "proposed extra phrasings per meaning, written for the lab to review (never into a bank)",
+    [
+        WHERE,
+        path("--out", required=True, help="JSON file to write (DESIGN.md schema, keyed by task name)"),
+        opt("--per-meaning", type=int, default=24, help="most proposals per meaning (default 24)"),
+        opt("--force", action="store_true", help="overwrite --out if it exists (never the bank or task file)"),
+        SEED,
+        JSON,
+    ],
+    "Negations of the opposite direction (Don't be so slow.), intensifiers (Move much faster.) and indirect forms "
+    "(It should be faster.), built from templates over the words of the bank's train phrasings. The file is a "
+    "proposal: read it, delete what is wrong, and add what is right to the bank by hand.",
+)
+def cmd_bank_augment(args: argparse.Namespace) -> None:
+    from langpref.language.augment import propose
+    from langpref.language.banksource import open_bank
+
+    if args.per_meaning < 1:
+        raise LangprefError(f"--per-meaning must be >= 1, got {args.per_meaning}")
+    source = open_bank(args.where, seed=args.seed)
+    out = Path(args.out)
+    target = out.resolve()
+    if target in source.protected:
+        raise LangprefError(f"--out {out} is the bank or task file itself; augment never writes into a bank")
+    if out.is_dir():
+        raise LangprefError(f"--out {out} is a directory; give a JSON file name")
+    if out.exists() and not args.force:
+        raise LangprefError(f"--out {out} already exists; pass --force to overwrite it or choose another file")
+    existing = [t for split in source.splits.values() for by in split.values() for ts in by.values() for t in ts]
+    proposed = propose(source.split("train"), source.features, existing, per_meaning=args.per_meaning)
+    doc = {
+        "_comment": (
+            f"Proposed phrasings for task {source.task} (from {source.origin}) by `langpref bank augment`, for review: "
+            "NOT a bank and never merged by itself. Delete what is wrong or unnatural, then add the rest to the "
+            "bank's file by hand. Check it with `langpref bank check ... --utterances THIS_FILE`."
+        ),
+        source.task: proposed,
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    tmp.write_text(json.dumps(doc, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    tmp.replace(out)
+    counts = {f"{f}/{d}": len(ts) for f, by in proposed.items() for d, ts in by.items()}
+    record(args, out.with_suffix(".config.json"))
+    emit(
+        {"out": str(out), "task": source.task, "proposed": counts},
+        args.json,
+        lambda o: f"wrote {sum(counts.values())} proposed phrasings for {o['task']} to {o['out']} (for review)",
+    )
+
+
+@command(
+    "lang-models",
+    "the registered language models (--lang-model NAME); with --measure, their size, speed and reading of banks",
+    [
+        opt("--measure", action="store_true", help="load each installed model and measure it (about a minute)"),
+        opt(
+            "--bank",
+            action="append",
+            default=None,
+            metavar="DATASET_OR_TASK",
+            help="a bank to read (repeatable; default metaworld and robosuite); a task file or dataset works too",
+        ),
+        opt("--repeats", type=int, default=200, help="one-sentence embeddings timed per model (default 200)"),
+        opt("--threads", type=int, default=1, help="torch CPU threads while measuring (default 1)"),
+        JSON,
+    ],
+    "Lists every registered language model with its packages and whether they are installed. With --measure, for each "
+    "installed one: install size (its packages, and what it unpacks into the cache), p50/p95 time to embed one "
+    "sentence on this CPU, and how well the frozen pretrained model alone reads each bank's val and test phrasings "
+    "by the nearest prototype of the train phrasings.",
+)
+def cmd_lang_models(args: argparse.Namespace) -> None:
+    import datetime
+    import time
+
+    from langpref.language.models import REGISTRY
+
+    if args.repeats < 1:
+        raise LangprefError(f"--repeats must be >= 1, got {args.repeats}")
+    out: dict = {"models": {}}
+    sources = []
+    if args.measure:
+        import torch
+
+        from langpref.language.banksource import open_bank
+
+        if args.threads < 1:
+            raise LangprefError(f"--threads must be >= 1, got {args.threads}")
+        torch.set_num_threads(args.threads)
+        sources = [open_bank(w) for w in (args.bank or ["metaworld", "robosuite"])]
+        out["measured"] = {
+            "date": datetime.date.today().isoformat(),
+            "torch_threads": torch.get_num_threads(),
+            "cpu_count": os.cpu_count(),
+            "load_average_before": [round(x, 2) for x in os.getloadavg()],
+            "banks": [s.origin for s in sources],
+        }
+    for name, spec in REGISTRY.items():
+        row = {
+            "title": spec.title,
+            "installed": spec.installed(),
+            "extra": spec.extra,
+            "install": spec.install_hint(),
+            "packages": spec.versions(),
+        }
+        if args.measure and row["installed"]:
+            row.update(_measure(spec, sources, args.repeats, time))
+        out["models"][name] = row
+    if args.measure:
+        out["measured"]["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
+    emit(out, args.json, _human_models)
+
+
+def _measure(spec, sources, repeats: int, time) -> dict:
+    from langpref.language.measure import bank_accuracy, latency_ms, package_bytes, unpacked_bytes
+    from langpref.language.models import resolve
+    from langpref.language.transformer import sentence_embedder
+
+    start = time.perf_counter()
+    local = resolve(spec.name)
+    embed = sentence_embedder(spec.name)
+    load_s = time.perf_counter() - start
+    sentences = [t for s in sources for by in s.split("test").values() for ts in by.values() for t in ts]
+    return {
+        "package_mb": round(package_bytes(spec) / 2**20, 1),
+        "unpacked_mb": round(unpacked_bytes(spec, local) / 2**20, 1),
+        "load_s": round(load_s, 1),
+        "latency_ms": latency_ms(embed, sentences or ["Move faster."], repeats),
+        "accuracy": {s.task: bank_accuracy(embed, s) for s in sources},
+    }
+
+
+def _human_models(out: dict) -> str:
+    lines = []
+    for name, m in out["models"].items():
+        state = "installed" if m["installed"] else f"not installed ({m['install']})"
+        lines.append(f"{name:<8} {m['title']}: {state}")
+        if "latency_ms" in m:
+            lat = m["latency_ms"]
+            lines.append(
+                f"         {m['package_mb']:.0f} MB packages + {m['unpacked_mb']:.0f} MB unpacked; one sentence "
+                f"p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms"
+            )
+            for task, acc in m["accuracy"].items():
+                lines.append(
+                    f"         {task}: val {acc['val']:.3f} ({acc['val_phrasings']}), "
+                    f"test {acc['test']:.3f} ({acc['test_phrasings']})"
+                )
+    return "\n".join(lines)

