@@ -222,10 +222,26 @@ class AnswerModelLearner:
 
     # ---- learning ----------------------------------------------------------------------------------------------
 
-    def observe(self, kind: str, answer: Any) -> None:
-        """Record an answer of `kind` (`language` or `comparison`); `fit` folds it into the belief."""
+    def reading(self, text: str) -> np.ndarray:
+        """P(m | text) over the 2F meanings (meaning 2k + d: feature `features[k]`, d = 0 increase)."""
+        return np.exp(self.reader.log_probabilities(self.space.psi_of(text)))
+
+    def meaning_index(self, feature: int, direction: int) -> int:
+        """The answer model's index of (dataset feature index, direction 0 increase / 1 decrease)."""
+        position = np.flatnonzero(self.features == int(feature))
+        if len(position) == 0:
+            raise LangprefError(f"feature {feature} has no phrasings in the bank, so no meaning of the answer model")
+        return 2 * int(position[0]) + int(direction)
+
+    def observe(self, kind: str, answer: Any, meaning: int | None = None) -> None:
+        """Record an answer of `kind` (`language` or `comparison`); `fit` folds it into the belief. For language,
+        `meaning` (`meaning_index`), when the person confirmed what they meant, replaces the model's reading."""
         if kind == "language":
-            reading = np.exp(self.reader.log_probabilities(self.space.psi_of(answer.text)))
+            if meaning is None:
+                reading = self.reading(answer.text)
+            else:
+                reading = np.zeros(2 * self.num_features)
+                reading[int(meaning)] = 1.0
             self._pending.append(("language", int(answer.query.shown), reading))
         elif kind == "comparison":
             q = answer.query
