@@ -35,9 +35,10 @@ resampled and moved by a few Metropolis steps on the full posterior (resample-mo
 as answers arrive. The learned reward is the posterior mean of v. Everything random draws from the learner's seed.
 
 Active selection (`AnswerModelInfoGain`, `--query-selection infogain`) scores the mutual information between v and
-the person's answer under this same model, from draws of the belief: over the 2F meanings for a language query (a
-trajectory whose answer is already certain, such as the belief's own optimum, scores 0 whatever was shown before),
-over the binary choice for a comparison, and, for `--feedback mixed`, both in nats per modelled second.
+the person's answer under this same model, from draws of the belief: for a language query, over the meaning the
+model will read, through its confusion of meanings on the bank's held-out phrasings (a trajectory whose answer is
+already certain, such as the belief's own optimum, scores 0 whatever was shown before; a meaning often misread is
+worth less); for a comparison, over the binary choice; for `--feedback mixed`, both in nats per modelled second.
 """
 
 from __future__ import annotations
@@ -122,14 +123,16 @@ class AnswerReader:
         self.prototypes = np.stack(protos)
         self.space = space
         self.temperature = self.fit_temperature(space, features) if temperature is None else float(temperature)
+        self.confusion = self.fit_confusion(space, features)
 
     def log_probabilities(self, psi: np.ndarray) -> np.ndarray:
         """(..., 2F) log P(m | l) of embeddings psi (..., D)."""
         return _log_softmax((_unit(psi) @ self.prototypes.T) / self.temperature)
 
-    def fit_temperature(self, space: LatentSpace, features: np.ndarray) -> float:
-        """The T_read of `READING_TEMPERATURES` under which the bank's val phrasings are likeliest as their own
-        meanings (the train split's when there are no val phrasings)."""
+    @staticmethod
+    def held_out(space: LatentSpace, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(psi (n, D), meaning (n,)) of the bank's val phrasings (the train split's when there are none) of the
+        answer model's features: phrasings whose meaning the bank knows, to fit how sentences are read."""
         table = None
         for split in ("val", "train"):
             try:
@@ -140,10 +143,29 @@ class AnswerReader:
                 break
         position = {int(f): k for k, f in enumerate(features)}
         keep = np.array([int(f) in position for f in table.feature], dtype=bool)
-        if not keep.any():
+        target = np.array(
+            [2 * position[int(f)] + int(d) for f, d in zip(table.feature[keep], table.direction[keep])], dtype=np.int64
+        )
+        return table.psi[keep], target
+
+    def fit_confusion(self, space: LatentSpace, features: np.ndarray) -> np.ndarray:
+        """(2F, 2F) P(read as r | meant m): how often the held-out phrasings of each meaning are read (argmax) as
+        each meaning, with one pseudo-count on the diagonal and a tenth on every cell. Active selection scores the
+        information in what is *read*, so a meaning often misread is worth less to ask about."""
+        psi, target = self.held_out(space, features)
+        m = len(self.prototypes)
+        counts = np.eye(m) + 0.1
+        if len(target):
+            np.add.at(counts, (target, self.log_probabilities(psi).argmax(axis=1)), 1.0)
+        return counts / counts.sum(axis=1, keepdims=True)
+
+    def fit_temperature(self, space: LatentSpace, features: np.ndarray) -> float:
+        """The T_read of `READING_TEMPERATURES` under which the bank's val phrasings are likeliest as their own
+        meanings (the train split's when there are no val phrasings)."""
+        psi, target = self.held_out(space, features)
+        if not len(target):
             return 0.1
-        target = np.array([2 * position[int(f)] + int(d) for f, d in zip(table.feature[keep], table.direction[keep])])
-        cos = _unit(table.psi[keep]) @ self.prototypes.T
+        cos = _unit(psi) @ self.prototypes.T
         scores = [_log_softmax(cos / t)[np.arange(len(target)), target].mean() for t in READING_TEMPERATURES]
         return float(READING_TEMPERATURES[int(np.argmax(scores))])
 
@@ -315,8 +337,9 @@ class AnswerModelLearner:
         return self.v[idx], self.best[idx]
 
     def language_gains(self, v: np.ndarray, best: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """I(v; meaning | tau) in nats for each of `rows`, from draws (v, best)."""
-        return mutual_information(self.meaning_probabilities(v, best, rows))
+        """I(v; reading | tau) in nats for each of `rows`, from draws (v, best): the information in the meaning the
+        model will read, through the reader's confusion of meanings (`AnswerReader.fit_confusion`)."""
+        return mutual_information(self.meaning_probabilities(v, best, rows) @ self.reader.confusion)
 
     def comparison_gains(self, v: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(i, j, I(v; choice) in nats) over the pairs i < j of `rows` (positions in rows), from draws v."""
