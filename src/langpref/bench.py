@@ -486,7 +486,36 @@ def selection_timings(
                 start = time.perf_counter()
                 selector.select(learner, np.random.default_rng(trial))
                 times[key].append(1e3 * (time.perf_counter() - start))
+        times[f"{kind_name} infogain, answer-model learner: update + selection"] = answer_model_timings(
+            space, pool, kind_name, history, human, rng, trials
+        )
     return {k: (float(np.median(v)), float(np.percentile(v, 95))) for k, v in times.items()}
+
+
+def answer_model_timings(space, pool, kind_name: str, history: list, human, rng, trials: int) -> list[float]:
+    """Milliseconds per trial of the answer-model learner taking one more answer after `history` (`observe` +
+    `fit`, including a resample-move when its belief needs one) and choosing the next query of `kind_name`."""
+    import copy
+
+    from langpref.feedback import random_query
+    from langpref.feedback.kind import get_kind
+    from langpref.reward.answer_model import AnswerModelInfoGain, AnswerModelLearner
+
+    learner = AnswerModelLearner(space, pool, seed=0)
+    for answer in history:
+        learner.observe(kind_name, answer)
+        learner.fit()
+    selector = AnswerModelInfoGain(space, pool, (kind_name,))
+    out = []
+    for trial in range(trials):
+        trial_learner = copy.deepcopy(learner)
+        answer = human.answer(random_query(get_kind(kind_name), pool, rng))
+        start = time.perf_counter()
+        trial_learner.observe(kind_name, answer)
+        trial_learner.fit()
+        selector.select(trial_learner, np.random.default_rng(trial))
+        out.append(1e3 * (time.perf_counter() - start))
+    return out
 
 
 def selection_table(envs: list[str], today: str, answers: int = 40, candidates: int = 300) -> str:
