@@ -35,20 +35,26 @@ from langpref.experiments.reward import _run_methods, _save, _table, paired_diff
 from langpref.extras import pyplot
 from langpref.reward.cost import elapsed, on_time_grid, time_average
 
+CONFIRM_MARGIN = 0.5
+"""The `am-...-confirm` method's margin: people confirm a sentence whose top two readings are closer than this.
+Chosen on the val protocol of the drawer recording (margins 0.2, 0.3, 0.5, 0.7, 1.0: 0.5 is the smallest with the
+best AUC; docs/results.md)."""
+
 METHODS = {
-    "language-random": ("language", None, "paper"),
-    "language-lal-infogain": ("language", "lal-infogain", "paper"),
-    "language-infogain": ("language", "infogain", "paper"),
-    "comparison-random": ("comparison", None, "paper"),
-    "comparison-infogain": ("comparison", "infogain", "paper"),
-    "comparison-volume-removal": ("comparison", "volume-removal", "paper"),
-    "mixed-infogain": ("mixed", "infogain", "paper"),
-    "am-language-random": ("language", None, "answer-model"),
-    "am-language-infogain": ("language", "infogain", "answer-model"),
-    "am-comparison-infogain": ("comparison", "infogain", "answer-model"),
-    "am-mixed-infogain": ("mixed", "infogain", "answer-model"),
+    "language-random": ("language", None, "paper", None),
+    "language-lal-infogain": ("language", "lal-infogain", "paper", None),
+    "language-infogain": ("language", "infogain", "paper", None),
+    "comparison-random": ("comparison", None, "paper", None),
+    "comparison-infogain": ("comparison", "infogain", "paper", None),
+    "comparison-volume-removal": ("comparison", "volume-removal", "paper", None),
+    "mixed-infogain": ("mixed", "infogain", "paper", None),
+    "am-language-random": ("language", None, "answer-model", None),
+    "am-language-infogain": ("language", "infogain", "answer-model", None),
+    "am-language-infogain-confirm": ("language", "infogain", "answer-model", CONFIRM_MARGIN),
+    "am-comparison-infogain": ("comparison", "infogain", "answer-model", None),
+    "am-mixed-infogain": ("mixed", "infogain", "answer-model", None),
 }
-"""Method name -> (feedback, query selection, learner); None is random."""
+"""Method name -> (feedback, query selection, learner, confirm margin); None is random, and never asking."""
 OURS, LAL, LANG_RANDOM = "language-infogain", "language-lal-infogain", "language-random"
 COMP, MIXED = "comparison-infogain", "mixed-infogain"
 AM_LANG, AM_RANDOM, AM_COMP, AM_MIXED = (
@@ -73,6 +79,9 @@ CONTRASTS = (
     (AM_LANG, LANG_RANDOM),
     (AM_MIXED, AM_LANG),
     (AM_MIXED, AM_COMP),
+    (f"{AM_LANG}-confirm", AM_LANG),
+    (f"{AM_LANG}-confirm", COMP),
+    (f"{AM_LANG}-confirm", AM_COMP),
 )
 """Paired differences reported (first minus second)."""
 METRICS = {"true_reward_of_best": "auc_true_reward", "cross_entropy": "auc_cross_entropy"}
@@ -150,8 +159,8 @@ def run_active_experiment(
     base = config or LearnRewardConfig(humans=10, seeds=3)
     base = replace(base, humans=base.humans if humans is None else humans, seeds=base.seeds if seeds is None else seeds)
     methods = {
-        name: replace(base, feedback=fb, query_selection=sel, learner=learner)
-        for name, (fb, sel, learner) in METHODS.items()
+        name: replace(base, feedback=fb, query_selection=sel, learner=learner, confirm_margin=margin)
+        for name, (fb, sel, learner, margin) in METHODS.items()
     }
     results, runs, space, data, model, out = _run_methods(
         "active", env, methods, data, model, out, perfect, force, progress, sweep

@@ -170,6 +170,27 @@ class AnswerReader:
         return float(READING_TEMPERATURES[int(np.argmax(scores))])
 
 
+CONFIRM_OPTIONS = 3
+"""How many of the model's top readings a person confirming a sentence chooses among (or "none of these")."""
+
+
+def confirm(learner: AnswerModelLearner, answer: Any, margin: float) -> tuple[bool, int | None]:
+    """Ask when unsure: (asked, meaning). When the top two of the model's reading of `answer` are closer than
+    `margin`, the person is shown the `CONFIRM_OPTIONS` top readings and clicks the one they meant (a synthetic human
+    clicks the meaning it spoke, if shown), or "none of these" (meaning None: the answer is not learned from). When
+    sure, (False, the top reading)."""
+    reading = learner.reading(answer.text)
+    order = np.argsort(-reading)
+    if reading[order[0]] - reading[order[1]] >= margin:
+        return False, int(order[0])
+    if answer.feature is None or answer.direction is None:
+        raise LangprefError("a confirmation needs the person's meaning (a synthetic human's feature and direction)")
+    from langpref.language.bank import DIRECTIONS
+
+    meant = learner.meaning_index(learner.space.feature_names.index(answer.feature), DIRECTIONS.index(answer.direction))
+    return True, meant if meant in order[:CONFIRM_OPTIONS] else None
+
+
 class AnswerModelLearner:
     """The belief over v (module docstring): `observe` answers of either kind, `fit` folds them in, `predict` the
     posterior-mean reward of latent points phi, `draw` samples of the belief for active selection."""

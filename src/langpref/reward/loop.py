@@ -32,7 +32,7 @@ from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.kind import KINDS, MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_of, random_query
 from langpref.feedback.space import LatentSpace
-from langpref.reward.answer_model import LEARNERS, AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner
+from langpref.reward.answer_model import LEARNERS, AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner, confirm
 from langpref.reward.cost import query_costs
 from langpref.reward.learner import RewardConfig, RewardLearner
 from langpref.reward.metrics import cross_entropy, reward_of_best
@@ -56,6 +56,8 @@ class Curves:
     """The kind of feedback asked at queries 1..Q."""
     seconds: list[float] = field(default_factory=list)
     """Modelled seconds of the person's time after 0, 1, ..., Q queries (`langpref.reward.cost`)."""
+    confirmed: list[int] = field(default_factory=list)
+    """With `confirm_margin`, per language answer: -1 not asked, -2 "none of these", else the meaning clicked."""
 
     def record(
         self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray, rationality: float
@@ -95,6 +97,13 @@ class LearnRewardConfig:
     `answer-model`: a belief over the reward whose likelihood of a sentence depends on the trajectory it was said
     about, with comparisons in the same belief (`langpref.reward.answer_model`; `random` or `infogain` queries)."""
     answer_model: AnswerModelConfig = field(default_factory=AnswerModelConfig)
+    confirm_margin: float | None = None
+    """Ask when unsure (answer-model learner, language): when the top two of the model's reading of a sentence are
+    closer than this in probability, the person confirms what they meant with one click among the model's top 3
+    readings or "none of these" (then the answer is not learned from). None: never ask (the paper's protocol)."""
+    confirm_seconds: float = 0.3
+    """Modelled time of one confirmation click, in the unit of `comparison_seconds` (an assumption: one click
+    among four labelled buttons, against watching two videos and choosing)."""
     query_selection: str | None = None
     """How each query is chosen (`langpref.reward.selection`): None or `random` (uniform, the paper's); `infogain`
     (language and comparisons: information about the reward, Laplace posterior); `lal-infogain` (language: the
@@ -146,6 +155,10 @@ class LearnRewardConfig:
                 )
             if self.feedback not in (*MIXED_KINDS, MIXED):
                 raise LangprefError(f"the answer-model learner takes language and comparisons, not {self.feedback!r}")
+        if self.confirm_margin is not None and (self.learner != "answer-model" or not 0 <= self.confirm_margin <= 1):
+            raise LangprefError("--confirm-margin takes a value in [0, 1] and needs --learner answer-model")
+        if self.confirm_seconds < 0:
+            raise LangprefError(f"confirm_seconds must be >= 0, got {self.confirm_seconds}")
         check_strategy(self.selection, self.feedback)
         if self.query_batch is not None and self.query_batch < 1:
             raise LangprefError(f"query_batch must be >= 1, got {self.query_batch}")
@@ -172,6 +185,8 @@ def config_record(cfg: LearnRewardConfig) -> dict:
     record = asdict(cfg)
     if cfg.learner == "paper":
         del record["learner"], record["answer_model"]
+    if cfg.confirm_margin is None:
+        del record["confirm_margin"], record["confirm_seconds"]
     for name, default in NEWER_HUMAN_FIELDS.items():
         if record["human"][name] == default:
             del record["human"][name]
@@ -237,14 +252,21 @@ def run_reward_learning(
                 selector.observe(space, answer)
             if record is not None:
                 record.append((chosen, answer))
+            seconds = costs.get(kind.name, 1.0)
             if cfg.learner == "answer-model":
-                learner.observe(kind.name, answer)
+                asked, meaning = False, None
+                if cfg.confirm_margin is not None and kind.name == "language":
+                    asked, meaning = confirm(learner, answer, cfg.confirm_margin)
+                    curves.confirmed.append(-1 if not asked else (meaning if meaning is not None else -2))
+                    seconds += cfg.confirm_seconds if asked else 0.0
+                if not (asked and meaning is None):  # "none of these": stored, not learned from
+                    learner.observe(kind.name, answer, meaning if asked else None)
             else:
                 learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
             if n == len(batch):
                 learner.fit()
             curves.kinds.append(kind.name)
-            curves.seconds.append(curves.seconds[-1] + costs.get(kind.name, 1.0))
+            curves.seconds.append(curves.seconds[-1] + seconds)
             curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
     if generation is not None:
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
@@ -307,7 +329,19 @@ def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
         "num_runs": len(runs),
         **kinds_summary(runs),
         **optimized_summary(runs),
+        **confirm_summary(runs),
     }
+
+
+def confirm_summary(runs: list[Curves]) -> dict:
+    """Of runs that asked people to confirm their sentences: the share of language answers confirmed, and of those
+    the share answered "none of these". Empty when no run could ask."""
+    marks = [m for c in runs for m in c.confirmed]
+    if not marks:
+        return {}
+    marks = np.array(marks)
+    asked = marks != -1
+    return {"confirm_asked": float(asked.mean()), "confirm_none": float((marks == -2).sum() / max(int(asked.sum()), 1))}
 
 
 def kinds_summary(runs: list[Curves]) -> dict:
