@@ -41,6 +41,7 @@ from langpref.cli_config import command, config, emit, from_args, record
             {
                 "study.split": {"choices": (*SPLITS, "all")},
                 "study.improve_candidates": {"choices": ("split", "generated")},
+                "study.learner": {"choices": ("paper", "answer-model")},
             },
             prefix="study.",
             unset=True,

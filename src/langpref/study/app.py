@@ -417,11 +417,16 @@ class StudyApp:
         return {"participant_id": pid, "excluded": data["excluded"]}
 
     def admin_export(self) -> dict[str, Any]:
-        from langpref.study.export import analyse, read_tables
+        from langpref.study.export import analyse, learned_rewards, read_tables
 
         conn = self.connect()
         tables = read_tables(conn)
-        return {"meta": sdb.read_meta(conn), "tables": tables, "analysis": analyse(tables)}
+        return {
+            "meta": sdb.read_meta(conn),
+            "tables": tables,
+            "analysis": analyse(tables),
+            "learned_rewards": learned_rewards(tables),
+        }
 
     # ---- pages ----
 

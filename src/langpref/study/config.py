@@ -47,6 +47,10 @@ class StudyConfig:
     query_candidates: int = 60
     """Study 2, active query selection: score at most this many trajectories of the study set per query (drawn for
     each query; comparisons score every pair of them), which bounds the time an answer waits for the next query."""
+    learner: str = "paper"
+    """Study 2's reward learner, for both methods: `paper` (Eq. 5-9's Bradley-Terry pairs, the paper's) or
+    `answer-model` (a belief over the reward that reads a sentence given the trajectory it was said about, with
+    comparisons in the same belief; `langpref.reward.answer_model`; random or infogain queries)."""
 
     def validate(self) -> None:
         if self.split not in ("train", "val", "test", "all"):
@@ -62,7 +66,18 @@ class StudyConfig:
                 raise LangprefError(f"{name} must be an integer >= 1, got {value!r}")
         if not isinstance(self.query_candidates, int) or self.query_candidates < 2:
             raise LangprefError(f"--query-candidates must be an integer >= 2, got {self.query_candidates!r}")
-        self.selections()
+        from langpref.reward.answer_model import LEARNERS
+
+        if self.learner not in LEARNERS:
+            raise LangprefError(f"--learner must be {' or '.join(LEARNERS)}, got {self.learner!r}")
+        selections = self.selections()
+        if self.learner == "answer-model":
+            other = sorted({s for s in selections.values() if s not in ("random", "infogain")})
+            if other:
+                raise LangprefError(
+                    f"--learner answer-model asks with random or infogain queries, not {', '.join(other)}; "
+                    "pass --query-selection infogain (or random)"
+                )
 
     def selections(self) -> dict[str, str]:
         """The query selection strategy of each Study-2 method, checked (one line naming the choices otherwise)."""

@@ -27,6 +27,12 @@ adds `generated`: the trajectories Study 1 made in the simulator (`--improve-can
 it improves (`shown`), where the search started (`start`, `start_score`: Eq. 4's objective), its own `score`, its
 index in the generated dataset, the step's wall time, its controller parameters and phi (JSON).
 
+Schema 4 adds the table `rewards`: the reward a participant's Study-2 learner has learned after each answer (the
+query `number` of `method`, the `learner`), as JSON: `latent_weights` xi (r = xi . phi), `feature_weights` (the
+answer-model learner's weights over the bank's feature axes, by feature name; empty for the paper's learner) and
+`ranking` (the study set's dataset indices, best first). A database of an earlier schema has none for the answers it
+took before.
+
 The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
 killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
 against a killed process (a power cut may lose the last commits, never corrupt the file).
@@ -45,7 +51,7 @@ from typing import Any
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 _V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -187,8 +193,23 @@ CREATE TABLE generated (
 );
 """
 
+_V4 = """
+CREATE TABLE rewards (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    learner TEXT NOT NULL,
+    latent_weights TEXT NOT NULL,
+    feature_weights TEXT,
+    ranking TEXT NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+"""
+
 # schema version -> SQL taking the database from the previous version to it
-MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3}
+MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3, 4: _V4}
 RESUME_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
 """Resume codes: no 0/O, 1/I/L, so that a code read aloud or copied by hand is typed right."""
 TABLES = (
@@ -203,6 +224,7 @@ TABLES = (
     "ratings",
     "queries",
     "generated",
+    "rewards",
 )
 
 

@@ -3,6 +3,7 @@ report with PNG figures (Sec. 5.2, Fig. 7-9, Table 1 and Appendix E's time-per-q
 
     DIR/tables/*.csv     one per database table (token hashes left out)
     DIR/summary.json     the numbers of the report
+    DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`learned_rewards`)
     DIR/report.html      tables and figures, self-contained apart from the PNGs beside it
     DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time
 
@@ -283,6 +284,42 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
     return _clean(out)
 
 
+def learned_rewards(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int] = ()) -> dict[str, Any]:
+    """Every participant's learned reward per Study-2 method, as their learner held it after their last answer of it
+    (table `rewards`), for analyses outside langpref: `latent_weights` xi (the reward of a trajectory is xi . phi,
+    plus a constant, phi from the study's model), `feature_weights` (the answer-model learner's weights over the
+    bank's feature axes; None for the paper's learner), `ranking` (the study set's dataset indices, best first).
+    Participants left out of the analyses are listed with `excluded` true."""
+    excluded = resolve_exclusions(tables["participants"], exclude)
+    numbers = {p["id"]: p["number"] for p in tables["participants"]}
+    latest: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in tables.get("rewards", []):
+        key = (r["participant_id"], r["method"])
+        if key not in latest or r["number"] > latest[key]["number"]:
+            latest[key] = r
+    rewards = [
+        {
+            "participant_id": pid,
+            "number": numbers.get(pid),
+            "excluded": pid in excluded,
+            "method": method,
+            "learner": r["learner"],
+            "after_answers": r["number"],
+            "latent_weights": json.loads(r["latent_weights"]),
+            "feature_weights": json.loads(r["feature_weights"]) if r["feature_weights"] else None,
+            "ranking": json.loads(r["ranking"]),
+        }
+        for (pid, method), r in sorted(latest.items(), key=lambda kv: (numbers.get(kv[0][0]) or 0, kv[0][1]))
+    ]
+    meta = {r["key"]: json.loads(r["value"]) for r in tables.get("meta", [])}
+    return {
+        "learner": (meta.get("study") or {}).get("learner", "paper"),
+        "model": meta.get("model"),
+        "data": meta.get("data"),
+        "rewards": rewards,
+    }
+
+
 def _trapezoid(ys: list[float], xs: list[int]) -> float:
     """Area under the piecewise-linear curve through (xs, ys); one point: its value."""
     if len(ys) == 1:
@@ -537,6 +574,8 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
             and r["participant_id"] not in excluded
         ]
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        rewards = learned_rewards(tables, exclude)
+        (out / "learned_rewards.json").write_text(json.dumps(rewards) + "\n", encoding="utf-8")
         (out / "report.html").write_text(report_html(summary, figs, texts), encoding="utf-8", errors="replace")
     except OSError as exc:
         raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
@@ -544,6 +583,7 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
         "out": str(out),
         "report": str(out / "report.html"),
         "summary": str(out / "summary.json"),
+        "learned_rewards": str(out / "learned_rewards.json"),
         "tables": sorted(f"tables/{t}.csv" for t in tables),
         "figures": sorted(figs.values()),
         "participants": summary["participants"],

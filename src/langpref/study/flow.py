@@ -171,6 +171,9 @@ class Robot(Protocol):
 
     def best(self, p: Participant, method: str) -> int: ...
 
+    def reward(self, p: Participant, method: str) -> dict[str, Any]:
+        """The reward learned so far: `learner`, `latent_weights`, `feature_weights` (or None), `ranking`."""
+
 
 def first_step() -> Step:
     return Step(0, "pre_survey", "survey", survey="pre")
@@ -349,12 +352,24 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
     if understood is not None:  # language: its reading is stored (the feedback table, Study 1's too, says the phase)
         row.update(phase=step.phase, improved=None, **_understood_columns(understood))
         extra = {"understood": {**understood, "text": feedback.text}}
-    records = [(kind.table, row)]
+    records = [(kind.table, row), ("rewards", reward_row(robot, p, method, q))]
     if q in cfg.rating_points():
         nxt = Step(seq, step.phase, "rating", (robot.best(p, method),), number=q, extra=extra)
     else:
         nxt = replace(_query(p, robot, seq, method, q + 1), extra=extra)
     return Transition(nxt, records)
+
+
+def reward_row(robot: Robot, p: Participant, method: str, number: int) -> dict[str, Any]:
+    """The `rewards` row of the reward learned after answer `number` of `method` (JSON columns)."""
+    learned = robot.reward(p, method)
+    return {
+        "method": method,
+        "number": number,
+        "learner": learned["learner"],
+        **{k: None if learned[k] is None else json.dumps(learned[k]) for k in ("latent_weights", "feature_weights")},
+        "ranking": json.dumps(learned["ranking"]),
+    }
 
 
 def _understood_columns(understood: dict[str, Any]) -> dict[str, Any]:
