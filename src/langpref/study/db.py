@@ -33,6 +33,11 @@ answer-model learner's weights over the bank's feature axes, by feature name; em
 `ranking` (the study set's dataset indices, best first). A database of an earlier schema has none for the answers it
 took before.
 
+Schema 5 adds the table `confirmations` (`--confirm-margin`): a participant's answer to a confirm step, for the
+language answer `number` (`shown`, `text`): the reading's `margin`, the `options` offered (JSON: meaning, words,
+feature, direction, probability, likeliest first), and what was chosen (`meaning`, `feature`, `direction`, `rank`
+among the options; all empty for "none of these").
+
 The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
 killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
 against a killed process (a power cut may lose the last commits, never corrupt the file).
@@ -51,7 +56,7 @@ from typing import Any
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 _V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -208,8 +213,27 @@ CREATE TABLE rewards (
 );
 """
 
+_V5 = """
+CREATE TABLE confirmations (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    shown INTEGER NOT NULL,
+    text TEXT NOT NULL,
+    margin REAL NOT NULL,
+    options TEXT NOT NULL,
+    meaning INTEGER,
+    feature TEXT,
+    direction TEXT,
+    rank INTEGER,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+"""
+
 # schema version -> SQL taking the database from the previous version to it
-MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3, 4: _V4}
+MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3, 4: _V4, 5: _V5}
 RESUME_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
 """Resume codes: no 0/O, 1/I/L, so that a code read aloud or copied by hand is typed right."""
 TABLES = (
@@ -225,6 +249,7 @@ TABLES = (
     "queries",
     "generated",
     "rewards",
+    "confirmations",
 )
 
 
@@ -405,3 +430,11 @@ def stored_answers(conn: sqlite3.Connection, participant_id: str, method: str) -
     kind = get_kind(method)
     found = rows(conn, f"SELECT * FROM {kind.table} WHERE participant_id=? ORDER BY number", (participant_id,))
     return [kind.from_record(r) for r in method_rows(found, method)]
+
+
+def confirmed_meanings(conn: sqlite3.Connection, participant_id: str, method: str) -> dict[int, int | None]:
+    """{query number: the meaning a participant confirmed their answer meant (None: none of these)} of `method`."""
+    found = rows(
+        conn, "SELECT number, meaning FROM confirmations WHERE participant_id=? AND method=?", (participant_id, method)
+    )
+    return {int(r["number"]): r["meaning"] for r in found}

@@ -35,8 +35,8 @@ from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
 from langpref.study.config import METHODS, StudyConfig
-from langpref.study.flow import Participant
-from langpref.study.learners import Confirmed, Meanings, learned_reward
+from langpref.study.flow import Confirmed, Participant
+from langpref.study.learners import Meanings, learned_reward
 from langpref.study.queries import Chosen, QueryChooser
 
 if TYPE_CHECKING:
@@ -47,6 +47,8 @@ History = Callable[[str, str], list[Any]]
 Confirmations = Callable[[str, str], dict[int, Confirmed]]
 """(participant id, method) -> {query number: what the participant confirmed its answer meant}."""
 Learner = RewardLearner | AnswerModelLearner
+CONFIRM_OPTIONS = 3
+"""Readings offered on a confirm step (besides "none of these")."""
 
 
 class _TextCache:
@@ -294,6 +296,29 @@ class StudyRobot:
         learner.fit()
         self._keep(p, method, learner, [*past, answer])
         return self.engine.understand(answer.text) if isinstance(answer, LanguageAnswer) else None
+
+    def confirm(self, p: Participant, method: str, answer: Any) -> dict[str, Any] | None:
+        """What to ask about a language answer whose reading is uncertain (`flow.Robot.confirm`): None unless the
+        margin between its top two meanings is below `confirm_margin` (1: always)."""
+        limit = self.cfg.confirm_margin
+        if limit is None or not isinstance(answer, LanguageAnswer):
+            return None
+        meanings = self.engine.meanings
+        reading = meanings.reading(self.engine.psi(answer.text))
+        margin = meanings.margin(reading)
+        if margin >= limit and limit < 1:
+            return None
+        options = [
+            {
+                "meaning": m,
+                "text": meanings.label(m),
+                "feature": meanings.feature(m),
+                "direction": meanings.direction(m),
+                "p": round(float(reading[m]), 4),
+            }
+            for m in meanings.top(reading, CONFIRM_OPTIONS)
+        ]
+        return {"options": options, "margin": round(margin, 4), "understood": self.engine.understand(answer.text)}
 
     def _current(self, p: Participant, method: str) -> Learner:
         with self._lock:

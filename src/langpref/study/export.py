@@ -281,7 +281,66 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
         [aucs["language"][p] for p in paired], [aucs["comparison"][p] for p in paired]
     )
     out["study2_ratings"] = rating_out
+    out["study2_confirmations"] = _confirmations(tables, study)
     return _clean(out)
+
+
+def _confirmations(tables: dict[str, list[dict[str, Any]]], study: dict[str, Any]) -> dict[str, Any]:
+    """How often participants were asked what they meant (`--confirm-margin`) and what they chose: the rank of the
+    chosen reading among the options (1: the model's top reading), "none of these", the meanings chosen."""
+    rows = tables.get("confirmations", [])
+    asked: dict[str, int] = {}
+    for r in tables["steps"]:
+        if r["kind"] == "confirm":
+            asked[r["participant_id"]] = asked.get(r["participant_id"], 0) + 1
+    answers = len(sdb.method_rows(tables["feedback"], "language"))
+    ranks = [r["rank"] for r in rows]
+    per: dict[str, dict[str, int]] = {pid: {"asked": n, "answered": 0, "none_of_these": 0} for pid, n in asked.items()}
+    meanings: dict[str, int] = {}
+    for r in rows:
+        entry = per.setdefault(r["participant_id"], {"asked": 0, "answered": 0, "none_of_these": 0})
+        entry["answered"] += 1
+        entry["none_of_these"] += r["meaning"] is None
+        if r["meaning"] is not None:
+            key = f"{r['feature']}/{r['direction']}"
+            meanings[key] = meanings.get(key, 0) + 1
+    total = sum(asked.values())
+    return {
+        "margin": study.get("confirm_margin"),
+        "language_answers": answers,
+        "asked": total,
+        "asked_share": total / answers if answers else None,
+        "answered": len(rows),
+        "chosen_rank": {str(k): ranks.count(k) for k in sorted({k for k in ranks if k is not None})},
+        "none_of_these": ranks.count(None),
+        "chosen_meanings": dict(sorted(meanings.items())),
+        # not in the time per language query (the typed answer's own): the server's time to each confirm click
+        "time_s": _stats([r["server_ms"] / 1000.0 for r in tables["answers"] if r["kind"] == "confirm"]),
+        "per_participant": per,
+    }
+
+
+def bank_additions(
+    tables: dict[str, list[dict[str, Any]]], env: str, exclude: Sequence[str | int] = ()
+) -> tuple[dict[str, Any], int]:
+    """The phrasings participants confirmed (text -> the meaning they chose) as a bank file for `env` (DESIGN.md
+    schema, `{TASK: {feature: {increase: [...], decrease: [...]}}}`) for the lab to review before adding any to its
+    bank; "none of these" and excluded participants are left out. (the file, the number of phrasings)."""
+    excluded = resolve_exclusions(tables["participants"], exclude)
+    section: dict[str, dict[str, list[str]]] = {}
+    for r in sorted(tables.get("confirmations", []), key=lambda r: (r["feature"] or "", r["answered_at"])):
+        if r["meaning"] is None or r["participant_id"] in excluded:
+            continue
+        text = " ".join(_writable(r["text"]).split())
+        texts = section.setdefault(r["feature"], {}).setdefault(r["direction"], [])
+        if text not in texts:
+            texts.append(text)
+    count = sum(len(t) for d in section.values() for t in d.values())
+    note = (
+        "Phrasings study participants typed and then confirmed the meaning of (langpref study export "
+        "--bank-additions). Review them before adding any to the task's bank; nothing here is used by itself."
+    )
+    return {"_comment": note, env: section}, count
 
 
 def learned_rewards(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int] = ()) -> dict[str, Any]:
@@ -517,6 +576,7 @@ Study-2 orders: {html.escape(json.dumps(s["method_order"]))}.</p>
 {t["source"]["language"]["client_ms"] + t["source"]["comparison"]["client_ms"]} answers, the server's for
 {t["source"]["language"]["server_ms"] + t["source"]["comparison"]["server_ms"]} (where the page's was inconsistent
 with it or missing).</p>
+{_confirm_html(s["study2_confirmations"])}
 <h3>Ratings of the best trajectory under the learned reward</h3>
 <table><tr><th>queries</th><th>language</th><th>comparison</th></tr>{rating_rows}</table>
 <p>Area under the rating curve: language {_ms(r["language"]["auc"])}, comparison {_ms(r["comparison"]["auc"])};
@@ -527,6 +587,16 @@ paired t-test p = {_fmt(test["t_p_value"], 4)}, Wilcoxon p = {_fmt(test["wilcoxo
 <table><tr><th>participant</th><th>question</th><th>answer</th></tr>{text_rows}</table>
 </body></html>
 """
+
+
+def _confirm_html(c: dict[str, Any]) -> str:
+    if not c["asked"]:
+        return ""
+    ranks = ", ".join(f"reading {k}: {n}" for k, n in c["chosen_rank"].items())
+    return (
+        f"<h3>Asked what they meant</h3><p>{c['asked']} of {c['language_answers']} language answers "
+        f"(margin {_fmt(c['margin'])}); chosen: {html.escape(ranks or '-')}; none of these: {c['none_of_these']}.</p>"
+    )
 
 
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
@@ -540,9 +610,15 @@ def csv_cell(value: Any) -> Any:
     return value
 
 
-def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = ()) -> dict[str, Any]:
-    """Write the CSVs, summary.json, the figures and report.html of the study in `db_path` into `out`; the analyses
-    leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids)."""
+def export(
+    db_path: str | Path,
+    out: str | Path,
+    exclude: Sequence[str | int] = (),
+    bank_additions_file: str | Path | None = None,
+) -> dict[str, Any]:
+    """Write the CSVs, summary.json, learned_rewards.json, the figures and report.html of the study in `db_path` into
+    `out`; the analyses leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids).
+    With `bank_additions_file`, also the confirmed phrasings as a bank file there (`bank_additions`)."""
     from langpref.study.surveys import SURVEYS
 
     out = Path(out)
@@ -555,6 +631,8 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
     finally:
         conn.close()
     summary = analyse(tables, exclude)  # first: a bad --exclude writes nothing
+    if bank_additions_file is not None and Path(bank_additions_file).is_dir():
+        raise LangprefError(f"--bank-additions {bank_additions_file} is a directory; pass a JSON file to write")
     try:
         (out / "tables").mkdir(parents=True, exist_ok=True)
         for name, rows_ in tables.items():
@@ -576,6 +654,11 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
         rewards = learned_rewards(tables, exclude)
         (out / "learned_rewards.json").write_text(json.dumps(rewards) + "\n", encoding="utf-8")
+        added = None
+        if bank_additions_file is not None:
+            bank, added = bank_additions(tables, summary.get("env") or "", exclude)
+            Path(bank_additions_file).parent.mkdir(parents=True, exist_ok=True)
+            Path(bank_additions_file).write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
         (out / "report.html").write_text(report_html(summary, figs, texts), encoding="utf-8", errors="replace")
     except OSError as exc:
         raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
@@ -589,4 +672,9 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
         "participants": summary["participants"],
         "finished": summary["finished"],
         "excluded": len(summary["excluded"]),
+        **(
+            {"bank_additions": str(bank_additions_file), "bank_additions_phrasings": added}
+            if bank_additions_file is not None
+            else {}
+        ),
     }

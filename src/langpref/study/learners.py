@@ -19,7 +19,6 @@ the answer-model learner also its weights v over the bank's feature axes, and it
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,14 +28,6 @@ from langpref.feedback.space import LatentSpace
 from langpref.language.bank import DIRECTIONS
 from langpref.reward.answer_model import AnswerReader
 from langpref.reward.selection import feature_axes
-
-
-@dataclass(frozen=True)
-class Confirmed:
-    """What a participant confirmed a language answer meant: `meaning` (a `Meanings` index), or None for "none of
-    these" (the answer is stored and not learned from)."""
-
-    meaning: int | None
 
 
 class Meanings:
@@ -98,11 +89,22 @@ class Meanings:
         return [int(m) for m in np.argsort(-np.asarray(reading), kind="stable")[:n]]
 
 
+INDIRECT = frozenset({"too", "not", "no", "never", "stop", "quit", "dont"})
+"""Words of a phrasing that says its meaning indirectly (a complaint, a negation): not used to name a meaning."""
+
+
 def _typical(table, rows: np.ndarray, mean: np.ndarray) -> str:
-    """The phrasing among `rows` nearest the meaning's mean psi, as words: lower-case start, no final stop."""
+    """The meaning in a few words: its shortest plain phrasing among `rows` (two words or more, preferably no
+    complaint or negation such as "too slow" or "don't stop", which read the other way round out of context; ties:
+    the one nearest the meaning's mean psi), with a lower-case start and no final stop ("move faster")."""
     psi = table.psi[rows]
     cos = psi @ mean / np.maximum(np.linalg.norm(psi, axis=1) * max(float(np.linalg.norm(mean)), 1e-12), 1e-12)
-    text = table.texts[int(rows[int(np.argmax(cos))])].strip().rstrip(".!")
+    keys = []
+    for r, c in zip(rows, cos):
+        words = table.texts[int(r)].lower().replace("n't", " not").split()
+        indirect = bool(set(words) & INDIRECT)
+        keys.append((indirect, len(words) < 2, len(table.texts[int(r)]), -float(c), int(r)))
+    text = table.texts[min(keys)[-1]].strip().rstrip(".!")
     return text[:1].lower() + text[1:] if text[1:2].islower() or len(text) < 2 else text
 
 
