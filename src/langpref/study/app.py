@@ -424,7 +424,8 @@ class StudyApp:
         return {"participant_id": pid, "excluded": data["excluded"]}
 
     def admin_export(self) -> dict[str, Any]:
-        from langpref.study.export import analyse, learned_rewards, read_tables
+        from langpref.study.export import analyse, read_tables, resolve_exclusions
+        from langpref.study.learned import learned_rewards
 
         conn = self.connect()
         tables = read_tables(conn)
@@ -432,7 +433,7 @@ class StudyApp:
             "meta": sdb.read_meta(conn),
             "tables": tables,
             "analysis": analyse(tables),
-            "learned_rewards": learned_rewards(tables),
+            "learned_rewards": learned_rewards(tables, resolve_exclusions(tables["participants"])),
         }
 
     # ---- pages ----

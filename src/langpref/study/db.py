@@ -386,8 +386,13 @@ def normalise_resume_code(text: str) -> str | None:
 
 
 def read_meta(conn: sqlite3.Connection) -> dict[str, Any]:
+    return decode_meta(conn.execute("SELECT key, value FROM meta"))
+
+
+def decode_meta(rows) -> dict[str, Any]:
+    """key -> value of `meta` rows, each value decoded from JSON (kept as text when it is none)."""
     out = {}
-    for row in conn.execute("SELECT key, value FROM meta"):
+    for row in rows:
         try:
             out[row["key"]] = json.loads(row["value"])
         except json.JSONDecodeError:

@@ -3,7 +3,7 @@ report with PNG figures (Sec. 5.2, Fig. 7-9, Table 1 and Appendix E's time-per-q
 
     DIR/tables/*.csv     one per database table (token hashes left out)
     DIR/summary.json     the numbers of the report
-    DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`learned_rewards`)
+    DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`langpref.study.learned`)
     DIR/report.html      tables and figures, self-contained apart from the PNGs beside it
     DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time
 
@@ -30,6 +30,7 @@ from langpref.feedback.kind import get_kind
 from langpref.study import db as sdb
 from langpref.study.config import METHODS
 from langpref.study.flow import SURROGATES
+from langpref.study.learned import bank_additions, confirmations, confirmations_html, learned_rewards
 from langpref.study.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM, PREF_LIKERT
 
 FIGURES = ("study1_attributes", "study1_iterations", "study2_attributes", "study2_ratings", "study2_time")
@@ -281,102 +282,8 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
         [aucs["language"][p] for p in paired], [aucs["comparison"][p] for p in paired]
     )
     out["study2_ratings"] = rating_out
-    out["study2_confirmations"] = _confirmations(tables, study)
+    out["study2_confirmations"] = confirmations(tables, study)
     return _clean(out)
-
-
-def _confirmations(tables: dict[str, list[dict[str, Any]]], study: dict[str, Any]) -> dict[str, Any]:
-    """How often participants were asked what they meant (`--confirm-margin`) and what they chose: the rank of the
-    chosen reading among the options (1: the model's top reading), "none of these", the meanings chosen."""
-    rows = tables.get("confirmations", [])
-    asked: dict[str, int] = {}
-    for r in tables["steps"]:
-        if r["kind"] == "confirm":
-            asked[r["participant_id"]] = asked.get(r["participant_id"], 0) + 1
-    answers = len(sdb.method_rows(tables["feedback"], "language"))
-    ranks = [r["rank"] for r in rows]
-    per: dict[str, dict[str, int]] = {pid: {"asked": n, "answered": 0, "none_of_these": 0} for pid, n in asked.items()}
-    meanings: dict[str, int] = {}
-    for r in rows:
-        entry = per.setdefault(r["participant_id"], {"asked": 0, "answered": 0, "none_of_these": 0})
-        entry["answered"] += 1
-        entry["none_of_these"] += r["meaning"] is None
-        if r["meaning"] is not None:
-            key = f"{r['feature']}/{r['direction']}"
-            meanings[key] = meanings.get(key, 0) + 1
-    total = sum(asked.values())
-    return {
-        "margin": study.get("confirm_margin"),
-        "language_answers": answers,
-        "asked": total,
-        "asked_share": total / answers if answers else None,
-        "answered": len(rows),
-        "chosen_rank": {str(k): ranks.count(k) for k in sorted({k for k in ranks if k is not None})},
-        "none_of_these": ranks.count(None),
-        "chosen_meanings": dict(sorted(meanings.items())),
-        # not in the time per language query (the typed answer's own): the server's time to each confirm click
-        "time_s": _stats([r["server_ms"] / 1000.0 for r in tables["answers"] if r["kind"] == "confirm"]),
-        "per_participant": per,
-    }
-
-
-def bank_additions(
-    tables: dict[str, list[dict[str, Any]]], env: str, exclude: Sequence[str | int] = ()
-) -> tuple[dict[str, Any], int]:
-    """The phrasings participants confirmed (text -> the meaning they chose) as a bank file for `env` (DESIGN.md
-    schema, `{TASK: {feature: {increase: [...], decrease: [...]}}}`) for the lab to review before adding any to its
-    bank; "none of these" and excluded participants are left out. (the file, the number of phrasings)."""
-    excluded = resolve_exclusions(tables["participants"], exclude)
-    section: dict[str, dict[str, list[str]]] = {}
-    for r in sorted(tables.get("confirmations", []), key=lambda r: (r["feature"] or "", r["answered_at"])):
-        if r["meaning"] is None or r["participant_id"] in excluded:
-            continue
-        text = " ".join(_writable(r["text"]).split())
-        texts = section.setdefault(r["feature"], {}).setdefault(r["direction"], [])
-        if text not in texts:
-            texts.append(text)
-    count = sum(len(t) for d in section.values() for t in d.values())
-    note = (
-        "Phrasings study participants typed and then confirmed the meaning of (langpref study export "
-        "--bank-additions). Review them before adding any to the task's bank; nothing here is used by itself."
-    )
-    return {"_comment": note, env: section}, count
-
-
-def learned_rewards(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int] = ()) -> dict[str, Any]:
-    """Every participant's learned reward per Study-2 method, as their learner held it after their last answer of it
-    (table `rewards`), for analyses outside langpref: `latent_weights` xi (the reward of a trajectory is xi . phi,
-    plus a constant, phi from the study's model), `feature_weights` (the answer-model learner's weights over the
-    bank's feature axes; None for the paper's learner), `ranking` (the study set's dataset indices, best first).
-    Participants left out of the analyses are listed with `excluded` true."""
-    excluded = resolve_exclusions(tables["participants"], exclude)
-    numbers = {p["id"]: p["number"] for p in tables["participants"]}
-    latest: dict[tuple[str, str], dict[str, Any]] = {}
-    for r in tables.get("rewards", []):
-        key = (r["participant_id"], r["method"])
-        if key not in latest or r["number"] > latest[key]["number"]:
-            latest[key] = r
-    rewards = [
-        {
-            "participant_id": pid,
-            "number": numbers.get(pid),
-            "excluded": pid in excluded,
-            "method": method,
-            "learner": r["learner"],
-            "after_answers": r["number"],
-            "latent_weights": json.loads(r["latent_weights"]),
-            "feature_weights": json.loads(r["feature_weights"]) if r["feature_weights"] else None,
-            "ranking": json.loads(r["ranking"]),
-        }
-        for (pid, method), r in sorted(latest.items(), key=lambda kv: (numbers.get(kv[0][0]) or 0, kv[0][1]))
-    ]
-    meta = {r["key"]: json.loads(r["value"]) for r in tables.get("meta", [])}
-    return {
-        "learner": (meta.get("study") or {}).get("learner", "paper"),
-        "model": meta.get("model"),
-        "data": meta.get("data"),
-        "rewards": rewards,
-    }
 
 
 def _trapezoid(ys: list[float], xs: list[int]) -> float:
@@ -576,7 +483,7 @@ Study-2 orders: {html.escape(json.dumps(s["method_order"]))}.</p>
 {t["source"]["language"]["client_ms"] + t["source"]["comparison"]["client_ms"]} answers, the server's for
 {t["source"]["language"]["server_ms"] + t["source"]["comparison"]["server_ms"]} (where the page's was inconsistent
 with it or missing).</p>
-{_confirm_html(s["study2_confirmations"])}
+{confirmations_html(s["study2_confirmations"], _fmt)}
 <h3>Ratings of the best trajectory under the learned reward</h3>
 <table><tr><th>queries</th><th>language</th><th>comparison</th></tr>{rating_rows}</table>
 <p>Area under the rating curve: language {_ms(r["language"]["auc"])}, comparison {_ms(r["comparison"]["auc"])};
@@ -587,16 +494,6 @@ paired t-test p = {_fmt(test["t_p_value"], 4)}, Wilcoxon p = {_fmt(test["wilcoxo
 <table><tr><th>participant</th><th>question</th><th>answer</th></tr>{text_rows}</table>
 </body></html>
 """
-
-
-def _confirm_html(c: dict[str, Any]) -> str:
-    if not c["asked"]:
-        return ""
-    ranks = ", ".join(f"reading {k}: {n}" for k, n in c["chosen_rank"].items())
-    return (
-        f"<h3>Asked what they meant</h3><p>{c['asked']} of {c['language_answers']} language answers "
-        f"(margin {_fmt(c['margin'])}); chosen: {html.escape(ranks or '-')}; none of these: {c['none_of_these']}.</p>"
-    )
 
 
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
@@ -652,11 +549,12 @@ def export(
             and r["participant_id"] not in excluded
         ]
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-        rewards = learned_rewards(tables, exclude)
+        excluded_ids = resolve_exclusions(tables["participants"], exclude)
+        rewards = learned_rewards(tables, excluded_ids)
         (out / "learned_rewards.json").write_text(json.dumps(rewards) + "\n", encoding="utf-8")
         added = None
         if bank_additions_file is not None:
-            bank, added = bank_additions(tables, summary.get("env") or "", exclude)
+            bank, added = bank_additions(tables, summary.get("env") or "", excluded_ids)
             Path(bank_additions_file).parent.mkdir(parents=True, exist_ok=True)
             Path(bank_additions_file).write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
         (out / "report.html").write_text(report_html(summary, figs, texts), encoding="utf-8", errors="replace")
