@@ -163,9 +163,11 @@ def test_a_database_made_before_the_learner_option_continues_with_the_papers(eng
     build_state(h.serve_config(db), engine=engine, progress=False).videos.close()
     conn = sdb.connect(db)
     study = json.loads(conn.execute("SELECT value FROM meta WHERE key='study'").fetchone()[0])
-    study.pop("learner")
+    study.pop("learner"), study.pop("confirm_margin")
     conn.execute("UPDATE meta SET value=? WHERE key='study'", (json.dumps(study),))
     conn.close()
-    assert resolve_study_config(db, {"learner": None}).learner == "paper"
+    cfg = resolve_study_config(db, {"learner": None, "confirm_margin": None})
+    assert cfg.learner == "paper" and cfg.confirm_margin is None
+    build_state(h.serve_config(db), engine=engine, progress=False).videos.close()  # it continues
     with pytest.raises(LangprefError, match="--learner paper, not answer-model"):
         resolve_study_config(db, {"learner": "answer-model"})

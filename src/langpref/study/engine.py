@@ -22,6 +22,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -118,7 +119,6 @@ class StudyEngine:
         self.failed = self.study[~success] if (~success).any() else self.study
         self._understanding = _CachedModel(model, self.cache)
         self.gate = FeedbackGate(self.env)
-        self.meanings = Meanings(self.space, self.reward_cfg.negative_split)
         self.understand("Move faster.")  # fail at start, not with the first participant, if prototypes are missing
 
     @classmethod
@@ -128,6 +128,12 @@ class StudyEngine:
 
         dataset = load_dataset(data_dir)
         return cls(load_model(model_dir, device="cpu", dataset=dataset), dataset, cfg)
+
+    @cached_property
+    def meanings(self) -> Meanings:
+        """The model's reading of a sentence over the bank's meanings (made when first needed: the answer-model
+        learner, `--confirm-margin`)."""
+        return Meanings(self.space, self.reward_cfg.negative_split)
 
     @property
     def env(self) -> str:
