@@ -44,6 +44,8 @@ ANSWER_KEYS = {
 }
 """The field of an answer body that says its kind of step (the feedback kinds' own fields in the middle)."""
 MAX_CLIENT_MS = 24 * 3600 * 1000
+NONE_OF_THESE = "none of these"
+"""The last option of a confirm step (its `meaning` is null): the answer is stored and not learned from."""
 
 
 class AnswerError(LangprefError):
@@ -398,9 +400,6 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
         return Transition(nxt, [(kind.table, row)])
     records = [(kind.table, row), ("rewards", reward_row(robot, p, method, q))]
     return Transition(_after_answer(cfg, p, robot, seq, step.phase, method, q, extra), records)
-
-
-NONE_OF_THESE = "none of these"
 
 
 def _after_answer(
