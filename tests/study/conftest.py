@@ -119,6 +119,8 @@ def answer_for(step: dict, feedback: str = "Move faster.") -> dict:
 
 def _answer_for(step: dict, feedback: str) -> dict:
     kind = step["kind"]
+    if kind == "confirm":  # asked what a language answer meant: the robot's top reading
+        return {"meaning": step["options"][0]["meaning"]}
     if kind == "survey":
         answers = {}
         for q in step["questions"]:

@@ -351,3 +351,45 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
         "phone_guidelines",
         "phone_comparison",
     }
+
+
+def test_the_participant_confirms_what_they_meant_with_one_click(browser, engine, h, tmp_path):
+    """With --confirm-margin, the page shows the robot's top readings and "none of these" as buttons; one click
+    answers, and the study goes on to the next query."""
+    import httpx
+
+    from langpref.study.serve import BackgroundServer, build_state
+
+    db = tmp_path / "confirm.sqlite"
+    state = build_state(h.serve_config(db, confirm_margin=1.0), engine=engine, progress=False)
+    state.videos.start(prerender=False)
+    errors: list[str] = []
+    try:
+        with BackgroundServer(state) as url, httpx.Client(base_url=url, headers={"Origin": url}) as client:
+            me = client.post("/api/participants", json={}).json()
+            headers = {"X-Participant-Token": me["token"]}
+            path = f"/api/participants/{me['participant_id']}"
+            step = client.get(f"{path}/step", headers=headers).json()
+            while step["kind"] != "confirm":
+                r = client.post(f"{path}/answer", json=h.answer_for(step), headers=headers)
+                assert r.status_code == 200, r.text
+                step = r.json()
+            page = browser.new_context(viewport={"width": 1280, "height": 800}).new_page()
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(url + "/")
+            page.evaluate(f"localStorage.setItem('langpref-participant', {json.dumps(json.dumps(me))})")
+            page.goto(url + "/study")
+            wait_kind(page, "confirm", "pref_language")
+            assert "Move faster." in page.inner_text("main") and "Which did you mean?" in page.inner_text("h1")
+            buttons = page.query_selector_all(".choices.confirm button")
+            assert [b.inner_text() for b in buttons] == [o["text"] for o in step["options"]]
+            Shots(tmp_path / "screenshots")(page, "confirm")
+            second = step["options"][1]["meaning"]
+            click_and_wait(page, f".choices.confirm button[data-meaning='{second}']")
+            wait_kind(page, "language", "pref_language")
+    finally:
+        state.videos.close()
+    assert not errors
+    conn = sqlite3.connect(db)
+    assert conn.execute("SELECT meaning, rank FROM confirmations").fetchall() == [(second, 2)]
+    conn.close()

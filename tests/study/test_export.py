@@ -33,7 +33,8 @@ def test_export_writes_tables_report_and_figures(simulated_db, tmp_path):
     for table in sdb.TABLES:
         with open(tmp_path / "out" / "tables" / f"{table}.csv") as fh:
             rows = list(csv.DictReader(fh))
-        assert rows or table in ("meta", "generated")  # generated: Study 1 with --improve-candidates generated
+        # generated: Study 1 with --improve-candidates generated; confirmations: Study 2 with --confirm-margin
+        assert rows or table in ("meta", "generated", "confirmations")
         assert "token_sha256" not in (rows[0] if rows else {})
     with open(tmp_path / "out" / "tables" / "answers.csv") as fh:
         answers = list(csv.DictReader(fh))

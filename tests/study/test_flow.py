@@ -47,6 +47,9 @@ class ScriptedRobot:
     def best(self, p, method):
         return 7
 
+    def reward(self, p, method):
+        return {"learner": "paper", "latent_weights": [0.5], "feature_weights": None, "ranking": [7, 3]}
+
 
 def value_for(q, likert=3, text="x", multi=1):
     if q["type"] == "likert":

@@ -41,6 +41,7 @@ from langpref.cli_config import command, config, emit, from_args, record
             {
                 "study.split": {"choices": (*SPLITS, "all")},
                 "study.improve_candidates": {"choices": ("split", "generated")},
+                "study.learner": {"choices": ("paper", "answer-model")},
             },
             prefix="study.",
             unset=True,
@@ -106,14 +107,14 @@ def cmd_study_simulate(args: argparse.Namespace) -> None:
     "study export",
     "CSV tables, analyses and figures of a study (HTML report + JSON)",
     [config("langpref.study.config:ExportConfig"), JSON],
-    "Writes the tables, summary.json, the figures and report.html into --out.",
+    "Writes the tables, summary.json, learned_rewards.json, the figures and report.html into --out.",
 )
 def cmd_study_export(args: argparse.Namespace) -> None:
     from langpref.study.config import ExportConfig
     from langpref.study.export import export
 
     cfg = from_args(ExportConfig, args)
-    out = export(cfg.db, cfg.out, exclude=cfg.exclude)
+    out = export(cfg.db, cfg.out, exclude=cfg.exclude, bank_additions_file=cfg.bank_additions)
     record(args, Path(cfg.out) / "export.config.json", cfg)
     emit(
         out,

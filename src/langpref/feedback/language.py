@@ -171,11 +171,16 @@ def read_meaning(space: LatentSpace, psi: np.ndarray, split: str = "train") -> i
 
 
 def language_pairs(
-    space: LatentSpace, answer: LanguageAnswer, cfg: RewardConfig, rng: np.random.Generator
+    space: LatentSpace,
+    answer: LanguageAnswer,
+    cfg: RewardConfig,
+    rng: np.random.Generator,
+    psi: np.ndarray | None = None,
 ) -> PairBatch:
-    """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read)."""
+    """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read); `psi`, when
+    given, stands for the sentence's embedding (a study participant's confirmed meaning)."""
     phi = space.phi[answer.query.shown]
-    psi = space.psi_of(answer.text)
+    psi = space.psi_of(answer.text) if psi is None else np.asarray(psi)
     hat = phi + psi
     winners, losers, weights = [], [], []
     if cfg.loss in ("both", "explicit"):

@@ -35,6 +35,7 @@ from langpref.study.config import METHODS, StudyConfig
 from langpref.study.engine import StudyEngine, StudyRobot
 from langpref.study.flow import (
     AnswerError,
+    Confirmed,
     Participant,
     Step,
     advance,
@@ -103,7 +104,9 @@ class StudyApp:
         self.admin_token = admin_token
         self.hook = hook
         self.generated = generated
-        self.robot = StudyRobot(engine, self._history, cfg=self.cfg, generated=generated)
+        self.robot = StudyRobot(
+            engine, self._history, cfg=self.cfg, generated=generated, confirmations=self._confirmations
+        )
         # answers of one participant run one at a time; a fixed set of locks (by hash of the id, taken only after
         # the token is checked) keeps memory bounded whatever ids unauthenticated requests send
         self._locks = [threading.Lock() for _ in range(LOCK_STRIPES)]
@@ -127,6 +130,10 @@ class StudyApp:
     def _history(self, pid: str, method: str) -> list[Any]:
         """The participant's stored Study-2 answers of `method`, in order, as its feedback kind's answers."""
         return sdb.stored_answers(self.connect(), pid, method)
+
+    def _confirmations(self, pid: str, method: str) -> dict[int, Confirmed]:
+        """What the participant confirmed their Study-2 answers of `method` meant, by query number."""
+        return {n: Confirmed(m) for n, m in sdb.confirmed_meanings(self.connect(), pid, method).items()}
 
     def _lock(self, pid: str) -> threading.Lock:
         return self._locks[int(_sha256(pid)[:8], 16) % LOCK_STRIPES]
@@ -417,11 +424,17 @@ class StudyApp:
         return {"participant_id": pid, "excluded": data["excluded"]}
 
     def admin_export(self) -> dict[str, Any]:
-        from langpref.study.export import analyse, read_tables
+        from langpref.study.export import analyse, read_tables, resolve_exclusions
+        from langpref.study.learned import learned_rewards
 
         conn = self.connect()
         tables = read_tables(conn)
-        return {"meta": sdb.read_meta(conn), "tables": tables, "analysis": analyse(tables)}
+        return {
+            "meta": sdb.read_meta(conn),
+            "tables": tables,
+            "analysis": analyse(tables),
+            "learned_rewards": learned_rewards(tables, resolve_exclusions(tables["participants"])),
+        }
 
     # ---- pages ----
 

@@ -47,6 +47,15 @@ class StudyConfig:
     query_candidates: int = 60
     """Study 2, active query selection: score at most this many trajectories of the study set per query (drawn for
     each query; comparisons score every pair of them), which bounds the time an answer waits for the next query."""
+    learner: str = "paper"
+    """Study 2's reward learner, for both methods: `paper` (Eq. 5-9's Bradley-Terry pairs, the paper's) or
+    `answer-model` (a belief over the reward that reads a sentence given the trajectory it was said about, with
+    comparisons in the same belief; `langpref.reward.answer_model`; random or infogain queries)."""
+    confirm_margin: float | None = None
+    """Study 2, ask when unsure: when the model's reading of a typed language answer is uncertain (P of its top
+    meaning minus P of the second below this margin), the participant confirms the meaning with one click among its
+    top 3 readings or "none of these" (then the answer is stored and not learned from). None: never, the paper's
+    protocol; 1: always."""
 
     def validate(self) -> None:
         if self.split not in ("train", "val", "test", "all"):
@@ -62,7 +71,23 @@ class StudyConfig:
                 raise LangprefError(f"{name} must be an integer >= 1, got {value!r}")
         if not isinstance(self.query_candidates, int) or self.query_candidates < 2:
             raise LangprefError(f"--query-candidates must be an integer >= 2, got {self.query_candidates!r}")
-        self.selections()
+        margin = self.confirm_margin
+        if margin is not None and (
+            isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 <= margin <= 1
+        ):
+            raise LangprefError(f"--confirm-margin must be a number from 0 to 1 (or unset: never ask), got {margin!r}")
+        from langpref.reward.answer_model import LEARNERS
+
+        if self.learner not in LEARNERS:
+            raise LangprefError(f"--learner must be {' or '.join(LEARNERS)}, got {self.learner!r}")
+        selections = self.selections()
+        if self.learner == "answer-model":
+            other = sorted({s for s in selections.values() if s not in ("random", "infogain")})
+            if other:
+                raise LangprefError(
+                    f"--learner answer-model asks with random or infogain queries, not {', '.join(other)}; "
+                    "pass --query-selection infogain (or random)"
+                )
 
     def selections(self) -> dict[str, str]:
         """The query selection strategy of each Study-2 method, checked (one line naming the choices otherwise)."""
@@ -238,6 +263,10 @@ class ExportConfig:
     exclude: tuple[str, ...] = ()
     """Participants to leave out of the analyses (`--exclude 3,7`: arrival numbers, or ids as the dashboard shows them),
     besides those marked excluded on the dashboard; the tables keep every row."""
+    bank_additions: str | None = None
+    """Also write the phrasings participants confirmed the meaning of (`--confirm-margin`) to this JSON file, in the
+    bank's schema ({TASK: {feature: {increase: [...], decrease: [...]}}}), for the lab to review before adding any to
+    its bank."""
 
 
 @dataclass

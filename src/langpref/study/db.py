@@ -27,6 +27,17 @@ adds `generated`: the trajectories Study 1 made in the simulator (`--improve-can
 it improves (`shown`), where the search started (`start`, `start_score`: Eq. 4's objective), its own `score`, its
 index in the generated dataset, the step's wall time, its controller parameters and phi (JSON).
 
+Schema 4 adds the table `rewards`: the reward a participant's Study-2 learner has learned after each answer (the
+query `number` of `method`, the `learner`), as JSON: `latent_weights` xi (r = xi . phi), `feature_weights` (the
+answer-model learner's weights over the bank's feature axes, by feature name; empty for the paper's learner) and
+`ranking` (the study set's dataset indices, best first). A database of an earlier schema has none for the answers it
+took before.
+
+Schema 5 adds the table `confirmations` (`--confirm-margin`): a participant's answer to a confirm step, for the
+language answer `number` (`shown`, `text`): the reading's `margin`, the `options` offered (JSON: meaning, words,
+feature, direction, probability, likeliest first), and what was chosen (`meaning`, `feature`, `direction`, `rank`
+among the options; all empty for "none of these").
+
 The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
 killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
 against a killed process (a power cut may lose the last commits, never corrupt the file).
@@ -45,7 +56,7 @@ from typing import Any
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 5
 
 _V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -187,8 +198,42 @@ CREATE TABLE generated (
 );
 """
 
+_V4 = """
+CREATE TABLE rewards (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    learner TEXT NOT NULL,
+    latent_weights TEXT NOT NULL,
+    feature_weights TEXT,
+    ranking TEXT NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+"""
+
+_V5 = """
+CREATE TABLE confirmations (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    shown INTEGER NOT NULL,
+    text TEXT NOT NULL,
+    margin REAL NOT NULL,
+    options TEXT NOT NULL,
+    meaning INTEGER,
+    feature TEXT,
+    direction TEXT,
+    rank INTEGER,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+);
+"""
+
 # schema version -> SQL taking the database from the previous version to it
-MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3}
+MIGRATIONS: dict[int, str] = {1: _V1, 2: _V2, 3: _V3, 4: _V4, 5: _V5}
 RESUME_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
 """Resume codes: no 0/O, 1/I/L, so that a code read aloud or copied by hand is typed right."""
 TABLES = (
@@ -203,6 +248,8 @@ TABLES = (
     "ratings",
     "queries",
     "generated",
+    "rewards",
+    "confirmations",
 )
 
 
@@ -339,8 +386,13 @@ def normalise_resume_code(text: str) -> str | None:
 
 
 def read_meta(conn: sqlite3.Connection) -> dict[str, Any]:
+    return decode_meta(conn.execute("SELECT key, value FROM meta"))
+
+
+def decode_meta(rows) -> dict[str, Any]:
+    """key -> value of `meta` rows, each value decoded from JSON (kept as text when it is none)."""
     out = {}
-    for row in conn.execute("SELECT key, value FROM meta"):
+    for row in rows:
         try:
             out[row["key"]] = json.loads(row["value"])
         except json.JSONDecodeError:
@@ -383,3 +435,11 @@ def stored_answers(conn: sqlite3.Connection, participant_id: str, method: str) -
     kind = get_kind(method)
     found = rows(conn, f"SELECT * FROM {kind.table} WHERE participant_id=? ORDER BY number", (participant_id,))
     return [kind.from_record(r) for r in method_rows(found, method)]
+
+
+def confirmed_meanings(conn: sqlite3.Connection, participant_id: str, method: str) -> dict[int, int | None]:
+    """{query number: the meaning a participant confirmed their answer meant (None: none of these)} of `method`."""
+    found = rows(
+        conn, "SELECT number, meaning FROM confirmations WHERE participant_id=? AND method=?", (participant_id, method)
+    )
+    return {int(r["number"]): r["meaning"] for r in found}

@@ -5,9 +5,10 @@
   feedback on the robot's motion is refused first (`langpref.language.relevance.FeedbackGate`);
 - the improvement step of Study 1 (paper Eq. 4, its cosine reading: `langpref.improve.improvement_step`) over the
   study set;
-- one reward learner per participant and method (`langpref.reward.RewardLearner`), fed by the method's feedback kind
-  (`langpref.feedback.kind`: its `pairs`, explicit + implicit losses for language, Bradley-Terry for comparisons),
-  refit after every answer;
+- one reward learner per participant and method (`StudyConfig.learner`, `langpref.study.learners`): the paper's
+  (`langpref.reward.RewardLearner`, fed by the method's feedback kind: its `pairs`, explicit + implicit losses for
+  language, Bradley-Terry for comparisons) or the answer-model learner, refit after every answer; a language answer
+  whose meaning the participant confirmed (`--confirm-margin`) teaches that meaning;
 - which trajectories each query shows (`langpref.study.queries`: random, as in the paper, or an active strategy of
   `langpref.reward.selection` over the participant's learner; fixed by the study and participant seeds).
 
@@ -21,6 +22,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,8 +34,10 @@ from langpref.feedback.language import LanguageAnswer
 from langpref.improve import improvement_step
 from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
+from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
 from langpref.study.config import METHODS, StudyConfig
-from langpref.study.flow import Participant
+from langpref.study.flow import Confirmed, Participant
+from langpref.study.learners import Meanings, learned_reward
 from langpref.study.queries import Chosen, QueryChooser
 
 if TYPE_CHECKING:
@@ -41,6 +45,11 @@ if TYPE_CHECKING:
 
 History = Callable[[str, str], list[Any]]
 """(participant id, method) -> the participant's stored answers of that method, in order, as the kind's answers."""
+Confirmations = Callable[[str, str], dict[int, Confirmed]]
+"""(participant id, method) -> {query number: what the participant confirmed its answer meant}."""
+Learner = RewardLearner | AnswerModelLearner
+CONFIRM_OPTIONS = 3
+"""Readings offered on a confirm step (besides "none of these")."""
 
 
 class _TextCache:
@@ -120,6 +129,12 @@ class StudyEngine:
         dataset = load_dataset(data_dir)
         return cls(load_model(model_dir, device="cpu", dataset=dataset), dataset, cfg)
 
+    @cached_property
+    def meanings(self) -> Meanings:
+        """The model's reading of a sentence over the bank's meanings (made when first needed: the answer-model
+        learner, `--confirm-margin`)."""
+        return Meanings(self.space, self.reward_cfg.negative_split)
+
     @property
     def env(self) -> str:
         return self.dataset.env
@@ -156,8 +171,9 @@ class StudyEngine:
 
 class StudyRobot:
     """The `flow.Robot` of a running study: per-participant reward learners over a shared `StudyEngine`. `cfg` is the
-    study's protocol (default the engine's): its seed and query selection; `generated`, Study 1's generated
-    candidates (`--improve-candidates generated`)."""
+    study's protocol (default the engine's): its seed, query selection and learner; `generated`, Study 1's generated
+    candidates (`--improve-candidates generated`); `confirmations`, what participants confirmed their language
+    answers meant (none by default)."""
 
     def __init__(
         self,
@@ -166,14 +182,16 @@ class StudyRobot:
         max_cached: int = 512,
         cfg: StudyConfig | None = None,
         generated: Generator | None = None,
+        confirmations: Confirmations | None = None,
     ):
         self.engine = engine
         self.generated = generated
         self.cfg = cfg or engine.cfg
         self.history = history
+        self.confirmations = confirmations or (lambda pid, method: {})
         self.max_cached = max_cached
         # (participant, method) -> (learner, answers it has seen, those answers)
-        self._learners: OrderedDict[tuple[str, str], tuple[RewardLearner, int, tuple]] = OrderedDict()
+        self._learners: OrderedDict[tuple[str, str], tuple[Learner, int, tuple]] = OrderedDict()
         self._lock = threading.Lock()
         self.chooser = QueryChooser(engine.space, engine.study, self.cfg, engine.reward_cfg)
 
@@ -209,22 +227,37 @@ class StudyRobot:
 
     # ---- Study 2: reward learning ----
 
-    def _fresh(self, p: Participant, method: str) -> RewardLearner:
-        return RewardLearner(
-            self.engine.space.dim,
-            self.engine.reward_cfg,
-            seed=int(self._rng(p, 3, METHODS.index(method)).integers(2**31)),
-        )
+    def _fresh(self, p: Participant, method: str) -> Learner:
+        seed = int(self._rng(p, 3, METHODS.index(method)).integers(2**31))
+        engine = self.engine
+        if self.cfg.learner == "answer-model":
+            # T_read as the engine fitted it once (the same fit the learner would make)
+            cfg = AnswerModelConfig(reading_temperature=engine.meanings.temperature)
+            return AnswerModelLearner(engine.space, engine.study, cfg, engine.reward_cfg.negative_split, seed=seed)
+        return RewardLearner(engine.space.dim, engine.reward_cfg, seed=seed)
 
-    def _add(self, learner: RewardLearner, p: Participant, method: str, number: int, answer: Any) -> None:
-        """Answer `number` of `method` as its kind's pairs; language read with its whitespace collapsed, as the text
-        cache keys it."""
+    def _add(
+        self, learner: Learner, p: Participant, method: str, number: int, answer: Any, confirmed: Confirmed | None
+    ) -> None:
+        """Answer `number` of `method` into the learner; language read with its whitespace collapsed, as the text cache
+        keys it, or as the meaning the participant `confirmed` ("none of these": not learned from). The answer-model
+        learner folds each answer in at once (its resampling depends on when it fits); the paper's is fit by the
+        caller, once after a replay (its loss is convex: the same minimum)."""
+        if confirmed is not None and confirmed.meaning is None:
+            return
+        meaning = None if confirmed is None else confirmed.meaning
         if isinstance(answer, LanguageAnswer):
             answer = replace(answer, text=self.engine.normalise(answer.text))
-        pairs = get_kind(method).pairs(self.engine.space, answer, self.engine.reward_cfg, self._rng(p, 4, number))
-        learner.add(pairs)
+        if isinstance(learner, AnswerModelLearner):
+            learner.observe(method, answer, meaning=meaning)
+            learner.fit()
+        else:
+            psi = None if meaning is None else self.engine.meanings.psi[meaning]
+            kind = get_kind(method)
+            extra = {} if psi is None else {"psi": psi}
+            learner.add(kind.pairs(self.engine.space, answer, self.engine.reward_cfg, self._rng(p, 4, number), **extra))
 
-    def _learner(self, p: Participant, method: str, answered: int) -> RewardLearner:
+    def _learner(self, p: Participant, method: str, answered: int) -> Learner:
         """The learner of (participant, method) that has seen the first `answered` stored answers (kept)."""
         key = (p.id, method)
         with self._lock:
@@ -235,8 +268,9 @@ class StudyRobot:
         past = self.history(p.id, method)[:answered]
         if len(past) != answered:
             raise LangprefError(f"participant {p.id} has {len(past)} stored {method} answers, expected {answered}")
+        confirmed = self.confirmations(p.id, method) if past else {}
         for i, answer in enumerate(past, start=1):
-            self._add(learner, p, method, i, answer)
+            self._add(learner, p, method, i, answer, confirmed.get(i))
         learner.fit()
         self._keep(p, method, learner, past)
         return learner
@@ -250,30 +284,61 @@ class StudyRobot:
             return list(hit[2])
         return self.history(p.id, method)[:answered]
 
-    def _keep(self, p: Participant, method: str, learner: RewardLearner, past: list[Any]) -> None:
+    def _keep(self, p: Participant, method: str, learner: Learner, past: list[Any]) -> None:
         with self._lock:
             self._learners[(p.id, method)] = (learner, len(past), tuple(past))
             self._learners.move_to_end((p.id, method))
             while len(self._learners) > self.max_cached:
                 self._learners.popitem(last=False)
 
-    def learn(self, p: Participant, method: str, number: int, answer: Any) -> dict[str, Any] | None:
-        """Refit the learner of `method` with answer `number`; how the model read it, for language (else None)."""
+    def learn(
+        self, p: Participant, method: str, number: int, answer: Any, confirmed: Confirmed | None = None
+    ) -> dict[str, Any] | None:
+        """Refit the learner of `method` with answer `number` (read as the meaning the participant `confirmed`, when
+        they were asked); how the model read it, for language (else None)."""
         learner = self._learner(p, method, number - 1)
         past = self._answers(p, method, number - 1)
-        self._add(learner, p, method, number, answer)
+        self._add(learner, p, method, number, answer, confirmed)
         learner.fit()
         self._keep(p, method, learner, [*past, answer])
         return self.engine.understand(answer.text) if isinstance(answer, LanguageAnswer) else None
 
+    def confirm(self, p: Participant, method: str, answer: Any) -> dict[str, Any] | None:
+        """What to ask about a language answer whose reading is uncertain (`flow.Robot.confirm`): None unless the
+        margin between its top two meanings is below `confirm_margin` (1: always)."""
+        limit = self.cfg.confirm_margin
+        if limit is None or not isinstance(answer, LanguageAnswer):
+            return None
+        meanings = self.engine.meanings
+        reading = meanings.reading(self.engine.psi(answer.text))
+        margin = meanings.margin(reading)
+        if margin >= limit and limit < 1:
+            return None
+        options = [
+            {
+                "meaning": m,
+                "text": meanings.label(m),
+                "feature": meanings.feature(m),
+                "direction": meanings.direction(m),
+                "p": round(float(reading[m]), 4),
+            }
+            for m in meanings.top(reading, CONFIRM_OPTIONS)
+        ]
+        return {"options": options, "margin": round(margin, 4), "understood": self.engine.understand(answer.text)}
+
+    def _current(self, p: Participant, method: str) -> Learner:
+        with self._lock:
+            hit = self._learners.get((p.id, method))
+        return hit[0] if hit is not None else self._learner(p, method, len(self.history(p.id, method)))
+
     def best(self, p: Participant, method: str) -> int:
         """argmax of the reward learned so far over the study set."""
-        key = (p.id, method)
-        with self._lock:
-            hit = self._learners.get(key)
-        learner = hit[0] if hit is not None else self._learner(p, method, len(self.history(p.id, method)))
-        reward = learner.predict(self.engine.space.phi[self.engine.study])
+        reward = self._current(p, method).predict(self.engine.space.phi[self.engine.study])
         return int(self.engine.study[int(np.argmax(reward))])
+
+    def reward(self, p: Participant, method: str) -> dict[str, Any]:
+        """The reward learned so far (`langpref.study.learners.learned_reward`), as stored after every answer."""
+        return learned_reward(self._current(p, method), self.engine.space, self.engine.study, self.cfg.learner)
 
     def forget(self, participant_id: str) -> None:
         """Drop cached learners (after an answer that was not stored): the next use replays the database."""

@@ -3,6 +3,7 @@ report with PNG figures (Sec. 5.2, Fig. 7-9, Table 1 and Appendix E's time-per-q
 
     DIR/tables/*.csv     one per database table (token hashes left out)
     DIR/summary.json     the numbers of the report
+    DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`langpref.study.learned`)
     DIR/report.html      tables and figures, self-contained apart from the PNGs beside it
     DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time
 
@@ -29,6 +30,7 @@ from langpref.feedback.kind import get_kind
 from langpref.study import db as sdb
 from langpref.study.config import METHODS
 from langpref.study.flow import SURROGATES
+from langpref.study.learned import bank_additions, confirmations, confirmations_html, learned_rewards
 from langpref.study.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM, PREF_LIKERT
 
 FIGURES = ("study1_attributes", "study1_iterations", "study2_attributes", "study2_ratings", "study2_time")
@@ -280,6 +282,7 @@ def analyse(tables: dict[str, list[dict[str, Any]]], exclude: Sequence[str | int
         [aucs["language"][p] for p in paired], [aucs["comparison"][p] for p in paired]
     )
     out["study2_ratings"] = rating_out
+    out["study2_confirmations"] = confirmations(tables, study)
     return _clean(out)
 
 
@@ -480,6 +483,7 @@ Study-2 orders: {html.escape(json.dumps(s["method_order"]))}.</p>
 {t["source"]["language"]["client_ms"] + t["source"]["comparison"]["client_ms"]} answers, the server's for
 {t["source"]["language"]["server_ms"] + t["source"]["comparison"]["server_ms"]} (where the page's was inconsistent
 with it or missing).</p>
+{confirmations_html(s["study2_confirmations"], _fmt)}
 <h3>Ratings of the best trajectory under the learned reward</h3>
 <table><tr><th>queries</th><th>language</th><th>comparison</th></tr>{rating_rows}</table>
 <p>Area under the rating curve: language {_ms(r["language"]["auc"])}, comparison {_ms(r["comparison"]["auc"])};
@@ -503,9 +507,15 @@ def csv_cell(value: Any) -> Any:
     return value
 
 
-def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = ()) -> dict[str, Any]:
-    """Write the CSVs, summary.json, the figures and report.html of the study in `db_path` into `out`; the analyses
-    leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids)."""
+def export(
+    db_path: str | Path,
+    out: str | Path,
+    exclude: Sequence[str | int] = (),
+    bank_additions_file: str | Path | None = None,
+) -> dict[str, Any]:
+    """Write the CSVs, summary.json, learned_rewards.json, the figures and report.html of the study in `db_path` into
+    `out`; the analyses leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids).
+    With `bank_additions_file`, also the confirmed phrasings as a bank file there (`bank_additions`)."""
     from langpref.study.surveys import SURVEYS
 
     out = Path(out)
@@ -518,6 +528,8 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
     finally:
         conn.close()
     summary = analyse(tables, exclude)  # first: a bad --exclude writes nothing
+    if bank_additions_file is not None and Path(bank_additions_file).is_dir():
+        raise LangprefError(f"--bank-additions {bank_additions_file} is a directory; pass a JSON file to write")
     try:
         (out / "tables").mkdir(parents=True, exist_ok=True)
         for name, rows_ in tables.items():
@@ -537,6 +549,14 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
             and r["participant_id"] not in excluded
         ]
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        excluded_ids = resolve_exclusions(tables["participants"], exclude)
+        rewards = learned_rewards(tables, excluded_ids)
+        (out / "learned_rewards.json").write_text(json.dumps(rewards) + "\n", encoding="utf-8")
+        added = None
+        if bank_additions_file is not None:
+            bank, added = bank_additions(tables, summary.get("env") or "", excluded_ids)
+            Path(bank_additions_file).parent.mkdir(parents=True, exist_ok=True)
+            Path(bank_additions_file).write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
         (out / "report.html").write_text(report_html(summary, figs, texts), encoding="utf-8", errors="replace")
     except OSError as exc:
         raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
@@ -544,9 +564,15 @@ def export(db_path: str | Path, out: str | Path, exclude: Sequence[str | int] = 
         "out": str(out),
         "report": str(out / "report.html"),
         "summary": str(out / "summary.json"),
+        "learned_rewards": str(out / "learned_rewards.json"),
         "tables": sorted(f"tables/{t}.csv" for t in tables),
         "figures": sorted(figs.values()),
         "participants": summary["participants"],
         "finished": summary["finished"],
         "excluded": len(summary["excluded"]),
+        **(
+            {"bank_additions": str(bank_additions_file), "bank_additions_phrasings": added}
+            if bank_additions_file is not None
+            else {}
+        ),
     }

@@ -4,6 +4,9 @@
       --> pref_<first method>: query 1..Q, a rating of the best trajectory after every `rating_every` queries
       --> pref_<second method>: the same --> pref_survey --> done
 
+With `--confirm-margin`, a Study-2 language answer whose reading is uncertain is followed by a confirm step (the
+model's top readings and "none of these", one click) before the robot learns from it.
+
 Nothing here touches the database or the model: `advance` gets the current `Step`, a parsed `Answer` and a `Robot`
 (the learning side, `langpref.study.engine`), and returns the next `Step` with the rows to store. The app writes both
 in one transaction. Every step fixes what it shows when it is made, so showing it again (a reload, a restart)
@@ -31,15 +34,18 @@ if TYPE_CHECKING:
     from langpref.study.queries import Chosen
 
 PHASES = ("pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey", "done")
-KINDS = ("survey", "language", "comparison", "satisfaction", "rating", "done")
+KINDS = ("survey", "language", "comparison", "confirm", "satisfaction", "rating", "done")
 ANSWER_KEYS = {
     "answers": "survey",
     **{get_kind(m).answer_key: m for m in METHODS},
+    "meaning": "confirm",
     "satisfied": "satisfaction",
     "rating": "rating",
 }
 """The field of an answer body that says its kind of step (the feedback kinds' own fields in the middle)."""
 MAX_CLIENT_MS = 24 * 3600 * 1000
+NONE_OF_THESE = "none of these"
+"""The last option of a confirm step (its `meaning` is null): the answer is stored and not learned from."""
 
 
 class AnswerError(LangprefError):
@@ -61,10 +67,19 @@ class Participant:
 
 
 @dataclass(frozen=True)
+class Confirmed:
+    """What a participant confirmed a language answer meant: `meaning` (an index of the engine's meanings,
+    `langpref.study.learners.Meanings`), or None for "none of these" (the answer is stored and not learned from)."""
+
+    meaning: int | None
+
+
+@dataclass(frozen=True)
 class Step:
     """One screen. `number`: Study 1 rounds of feedback given so far; Study 2 the query number (1-based), or for a
     rating the queries it follows. `extra` is shown as is (e.g. how the last feedback was understood); `selection`
-    (Study-2 queries: strategy, score, candidates scored) is stored, never shown."""
+    (Study-2 queries: strategy, score, candidates scored) is stored, never shown; so is `confirm` (a confirm step:
+    the answer it asks about, `shown` and `text`, and the reading's `margin` and options with their probabilities)."""
 
     seq: int
     phase: str
@@ -74,11 +89,14 @@ class Step:
     number: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
     selection: dict[str, Any] | None = None
+    confirm: dict[str, Any] | None = None
 
     def payload(self) -> str:
         out = {"shown": list(self.shown), "survey": self.survey, "number": self.number, "extra": self.extra}
         if self.selection is not None:
             out["selection"] = self.selection
+        if self.confirm is not None:
+            out["confirm"] = self.confirm
         return json.dumps(out)
 
     @classmethod
@@ -93,6 +111,7 @@ class Step:
             int(p["number"]),
             p.get("extra") or {},
             p.get("selection"),
+            p.get("confirm"),
         )
 
     @property
@@ -166,10 +185,21 @@ class Robot(Protocol):
         """What query `number` (1-based) of a Study-2 method shows, and why; asked before answer `number - 1` is
         stored, right after `learn` has taken it."""
 
-    def learn(self, p: Participant, method: str, number: int, answer: Any) -> dict[str, Any] | None:
-        """Learn from answer `number` of `method`; how the robot read it (language), or None."""
+    def learn(
+        self, p: Participant, method: str, number: int, answer: Any, confirmed: Confirmed | None = None
+    ) -> dict[str, Any] | None:
+        """Learn from answer `number` of `method` (as the meaning the participant `confirmed`, when asked); how the
+        robot read it (language), or None."""
+
+    def confirm(self, p: Participant, method: str, answer: Any) -> dict[str, Any] | None:
+        """None when the robot reads `answer` surely enough (or never asks); else what to ask: `options` (each
+        `{"meaning", "text", "feature", "direction", "p"}`, likeliest first), the reading's `margin`, and
+        `understood` (as `learn` returns it)."""
 
     def best(self, p: Participant, method: str) -> int: ...
+
+    def reward(self, p: Participant, method: str) -> dict[str, Any]:
+        """The reward learned so far: `learner`, `latent_weights`, `feature_weights` (or None), `ranking`."""
 
 
 def first_step() -> Step:
@@ -238,6 +268,11 @@ def parse_answer(body: Any, step: Step) -> Answer:
             value: Any = feedback.parse(body[feedback.answer_key], feedback.query(*step.shown))
         elif kind == "survey":
             value = validate_answers(step.survey or "", body["answers"])
+        elif kind == "confirm":
+            value = body["meaning"]
+            offered = [o["meaning"] for o in step.extra.get("options", ())]
+            if isinstance(value, bool) or not (value is None or isinstance(value, int)) or value not in offered:
+                raise AnswerError("'meaning' must be the meaning of one of the options, or null for none of these")
         elif kind == "satisfaction":
             value = body["satisfied"]
             if not isinstance(value, bool):
@@ -342,19 +377,72 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
         return Transition(_query(p, robot, seq, method, step.number + 1), [("ratings", row)])
 
     q = step.number
+    if step.kind == "confirm":
+        return _confirmed(cfg, p, step, answer, robot, method)
     kind, feedback = get_kind(method), answer.value
-    understood = robot.learn(p, method, q, feedback)
+    ask = robot.confirm(p, method, feedback) if cfg.confirm_margin is not None else None
+    understood = ask["understood"] if ask is not None else robot.learn(p, method, q, feedback)
     row = {**kind.to_record(feedback), "number": q, **timing}
     extra: dict[str, Any] = {}
     if understood is not None:  # language: its reading is stored (the feedback table, Study 1's too, says the phase)
         row.update(phase=step.phase, improved=None, **_understood_columns(understood))
         extra = {"understood": {**understood, "text": feedback.text}}
-    records = [(kind.table, row)]
+    if ask is not None:  # the robot learns once the participant has said what they meant
+        options = [{"meaning": o["meaning"], "text": o["text"]} for o in ask["options"]]
+        nxt = Step(
+            seq,
+            step.phase,
+            "confirm",
+            number=q,
+            extra={"said": feedback.text, "options": [*options, {"meaning": None, "text": NONE_OF_THESE}]},
+            confirm={"shown": step.shown[0], "text": feedback.text, "margin": ask["margin"], "options": ask["options"]},
+        )
+        return Transition(nxt, [(kind.table, row)])
+    records = [(kind.table, row), ("rewards", reward_row(robot, p, method, q))]
+    return Transition(_after_answer(cfg, p, robot, seq, step.phase, method, q, extra), records)
+
+
+def _after_answer(
+    cfg: StudyConfig, p: Participant, robot: Robot, seq: int, phase: str, method: str, q: int, extra: dict[str, Any]
+) -> Step:
+    """After answer `q` of `method` is learned: a rating at a rating point, else the next query."""
     if q in cfg.rating_points():
-        nxt = Step(seq, step.phase, "rating", (robot.best(p, method),), number=q, extra=extra)
-    else:
-        nxt = replace(_query(p, robot, seq, method, q + 1), extra=extra)
-    return Transition(nxt, records)
+        return Step(seq, phase, "rating", (robot.best(p, method),), number=q, extra=extra)
+    return replace(_query(p, robot, seq, method, q + 1), extra=extra)
+
+
+def _confirmed(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot, method: str) -> Transition:
+    """The answer to a confirm step: the robot learns the language answer as the meaning chosen (none: not at all)."""
+    asked, meaning, q = step.confirm or {}, answer.value, step.number
+    feedback = get_kind(method).from_record({"shown": asked["shown"], "text": asked["text"]})
+    robot.learn(p, method, q, feedback, Confirmed(meaning))
+    chosen = next((o for o in asked["options"] if o["meaning"] == meaning), None)
+    row = {
+        "method": method,
+        "number": q,
+        "shown": asked["shown"],
+        "text": asked["text"],
+        "margin": asked["margin"],
+        "options": json.dumps(asked["options"]),
+        "meaning": meaning,
+        "feature": chosen and chosen["feature"],
+        "direction": chosen and chosen["direction"],
+        "rank": None if chosen is None else asked["options"].index(chosen) + 1,
+    }
+    records = [("confirmations", row), ("rewards", reward_row(robot, p, method, q))]
+    return Transition(_after_answer(cfg, p, robot, step.seq + 1, step.phase, method, q, {}), records)
+
+
+def reward_row(robot: Robot, p: Participant, method: str, number: int) -> dict[str, Any]:
+    """The `rewards` row of the reward learned after answer `number` of `method` (JSON columns)."""
+    learned = robot.reward(p, method)
+    return {
+        "method": method,
+        "number": number,
+        "learner": learned["learner"],
+        **{k: None if learned[k] is None else json.dumps(learned[k]) for k in ("latent_weights", "feature_weights")},
+        "ranking": json.dumps(learned["ranking"]),
+    }
 
 
 def _understood_columns(understood: dict[str, Any]) -> dict[str, Any]:

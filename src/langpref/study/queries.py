@@ -9,6 +9,10 @@
   `volume-removal`: its Laplace posterior) or from their answers themselves (`lal-infogain`). The highest score is
   shown.
 
+With the answer-model learner (`--learner answer-model`), `infogain` is that learner's own: the mutual information
+between its belief and the person's answer under its answer model (`language_gains`, `comparison_gains`), from draws
+of its belief made with the query's generator (never the learner's own stream, which its fits use).
+
 Study-specific choices (the reward loop of `langpref.reward` does not make them): a language query never shows a
 trajectory the participant already gave feedback on in this method while unseen ones remain (as random's pass over
 the set does); the two videos of a comparison are put left and right at random (the scores are symmetric).
@@ -30,11 +34,13 @@ import numpy as np
 from langpref.feedback.kind import get_kind
 from langpref.feedback.language import LanguageAnswer
 from langpref.feedback.space import LatentSpace
-from langpref.reward import RewardConfig, RewardLearner
+from langpref.reward import RewardConfig
 from langpref.reward.posterior import laplace_posterior
 from langpref.reward.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain, candidate_rows
 from langpref.study.config import METHODS, StudyConfig
 
+ANSWER_MODEL_SAMPLES = 64
+"""Draws of the answer-model learner's belief per active query (as `AnswerModelInfoGain` in `langpref.reward`)."""
 Rng = Callable[..., np.random.Generator]
 """(*keys) -> a generator seeded by the study seed, the participant's seed and `keys`."""
 
@@ -62,14 +68,16 @@ class QueryChooser:
         self.study = np.asarray(study, dtype=np.int64)
         self.cfg = cfg
         self.strategies = cfg.selections()
+        self.answer_model = cfg.learner == "answer-model"
         # the stateless scorers, built once (the language one embeds the bank's feature axes); lal-infogain keeps a
-        # record of the answers, so it is made per query
-        self._info = LanguageInfoGain(space, self.study, reward) if self.strategies["language"] == "infogain" else None
-        comparison = self.strategies["comparison"]
-        self._pairs = ComparisonActive(space, self.study, comparison) if comparison != "random" else None
+        # record of the answers, so it is made per query; the answer-model learner scores with its own model
+        language, comparison = self.strategies["language"], self.strategies["comparison"]
+        paper = not self.answer_model
+        self._info = LanguageInfoGain(space, self.study, reward) if paper and language == "infogain" else None
+        self._pairs = ComparisonActive(space, self.study, comparison) if paper and comparison != "random" else None
 
     def choose(
-        self, method: str, number: int, rng: Rng, learner: Callable[[], RewardLearner], history: Callable[[], list]
+        self, method: str, number: int, rng: Rng, learner: Callable[[], Any], history: Callable[[], list]
     ) -> Chosen:
         """Query `number` (1-based) of `method`. `learner` gives the participant's learner fit on the first
         `number - 1` answers and `history` those answers; either is asked for only when the strategy needs it."""
@@ -84,14 +92,20 @@ class QueryChooser:
             rows = candidate_rows(fresh if len(fresh) else self.study, self.cfg.query_candidates, gen)
             if strategy == "lal-infogain":
                 scores = self._lal_scores(past, rows, gen)
+            elif self.answer_model:
+                model = learner()
+                scores = model.language_gains(*model.draw(ANSWER_MODEL_SAMPLES, gen), rows)
             else:
                 xi = laplace_posterior(learner()).sample(DEFAULT_SAMPLES, gen)
                 scores = self._info.scores(xi, rows)
             best = int(np.argmax(scores))
             return Chosen((int(rows[best]),), strategy, float(scores[best]), len(rows))
         rows = candidate_rows(self.study, self.cfg.query_candidates, gen)
-        xi = laplace_posterior(learner()).sample(DEFAULT_SAMPLES, gen)
-        i, j, scores = self._pairs.scores(xi, rows)
+        if self.answer_model:
+            model = learner()
+            i, j, scores = model.comparison_gains(model.draw(ANSWER_MODEL_SAMPLES, gen)[0], rows)
+        else:
+            i, j, scores = self._pairs.scores(laplace_posterior(learner()).sample(DEFAULT_SAMPLES, gen), rows)
         best = int(np.argmax(scores))
         pair = (int(rows[i[best]]), int(rows[j[best]]))
         if gen.random() < 0.5:

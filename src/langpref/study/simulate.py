@@ -245,6 +245,8 @@ class SimParticipant:
         if kind == "comparison":
             choice = self.comp.answer(ComparisonQuery(*shown)).choice if world else int(rng.integers(2))
             return {"choice": int(choice), "client_ms": round(client_ms, 1), "seq": step["seq"]}
+        if kind == "confirm":  # asked what it meant: the robot's top reading
+            return {"meaning": step["options"][0]["meaning"]}
         if kind == "satisfaction":
             satisfied = self.norm[shown[0]] >= self.cfg.satisfied_at if world else rng.random() < 0.3
             return {"satisfied": bool(satisfied)}

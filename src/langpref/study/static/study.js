@@ -77,7 +77,7 @@ function setHeader(step) {
   let text = "";
   if (step.phase === "improve") {
     text = step.kind === "language" ? `Round ${p.done + 1} of ${p.total}` : `Round ${p.done} of ${p.total}`;
-  } else if (step.kind === "language" || step.kind === "comparison") {
+  } else if (step.kind === "language" || step.kind === "comparison" || step.kind === "confirm") {
     text = `Query ${p.done + 1} of ${p.total}`;
   } else if (step.kind === "rating") {
     text = `After ${p.done} of ${p.total} queries`;
@@ -307,6 +307,17 @@ function renderComparison(main, step) {
   };
 }
 
+// Asked when the robot is unsure how to read a typed answer: one click among its top readings, or none of them.
+function renderConfirm(main, step) {
+  main.append(el("h1", {text: "Which did you mean?"}));
+  main.append(el("p", {text: `You said: \u201c${step.said}\u201d. The robot is not sure how to read it.`}));
+  const buttons = step.options.map((o) => el("button", {type: "button", class: o.meaning === null ? "secondary" : null,
+                                                       text: o.text, "data-meaning": o.meaning === null ? "none" : o.meaning}));
+  buttons.forEach((b, i) => b.addEventListener("click", () => submit({meaning: step.options[i].meaning}, buttons)));
+  main.append(el("div", {class: "choices confirm", role: "group", "aria-label": "what you meant"}, ...buttons),
+              errorLine(), el("p", {id: "status", class: "thinking", hidden: true}));
+}
+
 function renderSatisfaction(main, step) {
   main.append(el("h1", {text: "Here is the improved trajectory"}));
   const notice = understoodNotice(step);
@@ -419,8 +430,8 @@ function render(step) {
   main.dataset.kind = step.kind;
   main.dataset.phase = step.phase;
   showStale(main);
-  ({survey: renderSurvey, language: renderLanguage, comparison: renderComparison, satisfaction: renderSatisfaction,
-    rating: renderRating, done: renderDone})[step.kind](main, step);
+  ({survey: renderSurvey, language: renderLanguage, comparison: renderComparison, confirm: renderConfirm,
+    satisfaction: renderSatisfaction, rating: renderRating, done: renderDone})[step.kind](main, step);
   if (step.kind !== "language") main.focus({preventScroll: true});
   window.scrollTo(0, 0);
   if (!step.videos.length) shownAt = renderedAt;

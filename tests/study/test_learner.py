@@ -1,0 +1,173 @@
+"""Study 2 with either reward learner (`--learner paper|answer-model`): the answer-model learner takes language and
+comparisons over HTTP and chooses its infogain queries under its own model, a learner rebuilt from the database
+chooses the next query as the running one would, and the export holds every participant's learned reward."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from langpref.errors import LangprefError
+from langpref.reward.answer_model import AnswerModelLearner
+from langpref.study import db as sdb
+from langpref.study.app import create_app
+from langpref.study.config import StudyConfig
+from langpref.study.engine import StudyRobot
+from langpref.study.serve import build_state
+
+FEEDBACK = ["Move faster.", "Go up more.", "Stay away from the button.", "Slow down.", "Get closer to the button."]
+
+
+def _answer(client, h, pid, headers, step):
+    body = h.answer_for(step, FEEDBACK[step["seq"] % len(FEEDBACK)])
+    r = client.post(f"/api/participants/{pid}/answer", json=body, headers=headers)
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def _walk(client, h, pid, headers, stop=None):
+    step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
+    while step["kind"] != "done" and not (stop and stop(step)):
+        step = _answer(client, h, pid, headers, step)
+    return step
+
+
+def _participant(state, pid):
+    row = state.connect().execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone()
+    return state._participant(row)
+
+
+def test_the_answer_model_learner_answers_language_and_comparisons_with_its_own_infogain(engine, h, tmp_path):
+    db = tmp_path / "am.sqlite"
+    state = build_state(
+        h.serve_config(db, learner="answer-model", query_selection="infogain"), engine=engine, progress=False
+    )
+    try:
+        with TestClient(create_app(state)) as client:
+            pid, headers = h.join(client)
+            assert _walk(client, h, pid, headers)["kind"] == "done"
+            learners = {m: state.robot._learners[(pid, m)][0] for m in ("language", "comparison")}
+    finally:
+        state.videos.close()
+    assert all(isinstance(x, AnswerModelLearner) and len(x.answers) == 4 for x in learners.values())
+    conn = sdb.connect(db)
+    queries = sdb.rows(conn, "SELECT method, number, a, b, strategy, score FROM queries ORDER BY seq")
+    rewards = sdb.rows(conn, "SELECT * FROM rewards ORDER BY seq")
+    conn.close()
+    assert [(q["method"], q["number"]) for q in queries] == [
+        (m, n) for m in ("language", "comparison") for n in (1, 2, 3, 4)
+    ]
+    assert all(q["strategy"] == "infogain" and q["score"] >= 0 for q in queries)
+    assert len({q["a"] for q in queries if q["method"] == "language"}) == 4  # never the same trajectory twice
+    # the scores are the learner's own: mutual information under its answer model, at most log(2F) / log(2) nats
+    assert max(q["score"] for q in queries if q["method"] == "language") <= np.log(len(engine.meanings)) + 1e-9
+    assert max(q["score"] for q in queries if q["method"] == "comparison") <= np.log(2) + 1e-9
+    assert [(r["method"], r["number"], r["learner"]) for r in rewards] == [
+        (m, n, "answer-model") for m in ("language", "comparison") for n in (1, 2, 3, 4)
+    ]
+    last = json.loads(rewards[3]["feature_weights"])
+    assert set(last) <= set(engine.space.feature_names) and len(last) == len(learners["language"].features)
+    np.testing.assert_allclose(list(last.values()), learners["language"].mean())
+
+
+def test_a_rebuilt_answer_model_learner_chooses_the_same_next_query(engine, h, tmp_path):
+    db = tmp_path / "restart.sqlite"
+    state = build_state(
+        h.serve_config(db, learner="answer-model", query_selection="infogain"), engine=engine, progress=False
+    )
+    try:
+        with TestClient(create_app(state)) as client:
+            pid, headers = h.join(client)
+            for method in ("language", "comparison"):
+                step = _walk(client, h, pid, headers, lambda s, m=method: s["kind"] == m and s["number"] == 4)
+                assert step["kind"] == method
+                p = _participant(state, pid)
+                kept = state.robot._learners[(pid, method)][0]
+                # a new server process on the same database: no learner in memory
+                restarted = StudyRobot(state.engine, state._history, cfg=state.cfg)
+                shown, _ = state._current(state.connect(), pid)
+                chosen = restarted.query(p, method, 4)
+                assert chosen.shown == shown.shown and chosen.record() == shown.selection
+                rebuilt = restarted._learners[(pid, method)][0]
+                assert rebuilt is not kept and len(rebuilt.answers) == len(kept.answers) == 3
+                np.testing.assert_array_equal(rebuilt.v, kept.v)
+                np.testing.assert_array_equal(rebuilt.log_weights, kept.log_weights)
+                assert restarted.best(p, method) == state.robot.best(p, method)
+                _answer(client, h, pid, headers, step)
+    finally:
+        state.videos.close()
+
+
+@pytest.mark.parametrize("learner", ["paper", "answer-model"])
+def test_the_export_holds_every_participants_learned_reward(engine, h, tmp_path, learner):
+    from langpref.study.export import export
+
+    db = tmp_path / f"{learner}.sqlite"
+    state = build_state(h.serve_config(db, learner=learner), engine=engine, progress=False)
+    try:
+        with TestClient(create_app(state)) as client:
+            pids = []
+            for _ in range(2):
+                pid, headers = h.join(client)
+                assert _walk(client, h, pid, headers)["kind"] == "done"
+                pids.append(pid)
+            admin = client.get("/api/admin/export", headers=h.admin).json()["learned_rewards"]
+            best = {
+                (pid, m): state.robot.best(_participant(state, pid), m)
+                for pid in pids
+                for m in ("language", "comparison")
+            }
+    finally:
+        state.videos.close()
+    out = export(db, tmp_path / "out")
+    saved = json.loads((tmp_path / "out" / "learned_rewards.json").read_text())
+    assert out["learned_rewards"].endswith("learned_rewards.json") and saved == admin
+    assert saved["learner"] == learner and len(saved["rewards"]) == 4
+    study = sorted(int(i) for i in engine.study)
+    phi = engine.space.phi
+    for r in saved["rewards"]:
+        assert r["learner"] == learner and r["after_answers"] == 4 and not r["excluded"]
+        assert sorted(r["ranking"]) == study and r["ranking"][0] == best[(r["participant_id"], r["method"])]
+        xi = np.asarray(r["latent_weights"])
+        assert xi.shape == (engine.space.dim,) and np.abs(xi).max() > 0
+        scores = phi[r["ranking"]] @ xi  # an outside analysis scores the study set with xi . phi
+        assert np.all(np.diff(scores) <= 1e-6 * max(1.0, np.abs(scores).max()))
+        if learner == "answer-model":
+            assert set(r["feature_weights"]) <= set(engine.space.feature_names) and r["feature_weights"]
+        else:
+            assert r["feature_weights"] is None
+
+
+@pytest.mark.parametrize(
+    "study, says",
+    [
+        ({"learner": "bayes"}, "--learner must be paper or answer-model"),
+        ({"learner": "answer-model", "query_selection": "language=lal-infogain"}, "not lal-infogain"),
+        ({"learner": "answer-model", "query_selection": "comparison=volume-removal"}, "not volume-removal"),
+    ],
+)
+def test_a_learner_it_does_not_know_or_cannot_ask_with_is_one_line(study, says):
+    with pytest.raises(LangprefError, match=says) as err:
+        StudyConfig(**study).validate()
+    assert "\n" not in str(err.value)
+    StudyConfig(learner="answer-model", query_selection="infogain").validate()
+
+
+def test_a_database_made_before_the_learner_option_continues_with_the_papers(engine, h, tmp_path):
+    from langpref.study.serve import resolve_study_config
+
+    db = tmp_path / "older.sqlite"
+    build_state(h.serve_config(db), engine=engine, progress=False).videos.close()
+    conn = sdb.connect(db)
+    study = json.loads(conn.execute("SELECT value FROM meta WHERE key='study'").fetchone()[0])
+    study.pop("learner"), study.pop("confirm_margin")
+    conn.execute("UPDATE meta SET value=? WHERE key='study'", (json.dumps(study),))
+    conn.close()
+    cfg = resolve_study_config(db, {"learner": None, "confirm_margin": None})
+    assert cfg.learner == "paper" and cfg.confirm_margin is None
+    build_state(h.serve_config(db), engine=engine, progress=False).videos.close()  # it continues
+    with pytest.raises(LangprefError, match="--learner paper, not answer-model"):
+        resolve_study_config(db, {"learner": "answer-model"})
