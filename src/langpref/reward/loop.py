@@ -56,6 +56,9 @@ class Curves:
     """The kind of feedback asked at queries 1..Q."""
     seconds: list[float] = field(default_factory=list)
     """Modelled seconds of the person's time after 0, 1, ..., Q queries (`langpref.reward.cost`)."""
+    credible: bool | None = None
+    """Answer-model learner: whether the true weights' direction lies in the belief's 90% credible region of
+    directions after the last query (a calibration check; read by the metrics only)."""
     confirmed: list[int] = field(default_factory=list)
     """With `confirm_margin`, per language answer: -1 not asked, -2 "none of these", else the meaning clicked."""
 
@@ -268,6 +271,8 @@ def run_reward_learning(
             curves.kinds.append(kind.name)
             curves.seconds.append(curves.seconds[-1] + seconds)
             curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+    if cfg.learner == "answer-model":
+        curves.credible = learner.credible(np.asarray(w)[learner.features])  # the experimenter's check
     if generation is not None:
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
         raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
@@ -334,14 +339,19 @@ def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
 
 
 def confirm_summary(runs: list[Curves]) -> dict:
-    """Of runs that asked people to confirm their sentences: the share of language answers confirmed, and of those
-    the share answered "none of these". Empty when no run could ask."""
-    marks = [m for c in runs for m in c.confirmed]
-    if not marks:
-        return {}
-    marks = np.array(marks)
-    asked = marks != -1
-    return {"confirm_asked": float(asked.mean()), "confirm_none": float((marks == -2).sum() / max(int(asked.sum()), 1))}
+    """Of answer-model runs, `credible_90`: the share whose true direction lies in the belief's 90% credible region
+    (calibrated: about 0.9). Of runs that asked people to confirm their sentences: the share of language answers
+    confirmed, and of those the share answered "none of these". Empty for the paper's learner."""
+    out = {}
+    credible = [c.credible for c in runs if c.credible is not None]
+    if credible:
+        out["credible_90"] = float(np.mean(credible))
+    marks = np.array([m for c in runs for m in c.confirmed])
+    if len(marks):
+        asked = marks != -1
+        out["confirm_asked"] = float(asked.mean())
+        out["confirm_none"] = float((marks == -2).sum() / max(int(asked.sum()), 1))
+    return out
 
 
 def kinds_summary(runs: list[Curves]) -> dict:
