@@ -375,7 +375,8 @@ class AnswerModelLearner:
         centre = _unit(self.weights() @ u)
         cos = u @ centre
         order = np.argsort(-cos)
-        cutoff = cos[order][np.searchsorted(np.cumsum(self.weights()[order]), level)]
+        at = min(int(np.searchsorted(np.cumsum(self.weights()[order]), level)), len(order) - 1)
+        cutoff = cos[order][at]
         return bool(_unit(np.asarray(v_true, dtype=np.float64)) @ centre >= cutoff)
 
 
