@@ -84,3 +84,20 @@ def test_training_with_windows_runs_and_is_deterministic_for_a_seed(tiny_data, p
     assert not torch.equal(other.model.traj.out.weight, a.model.traj.out.weight)
     with pytest.raises(LangprefError, match="windows"):
         train(tiny_config(tiny_data, tmp_path / "bad", windows=-1), progress=False)
+
+
+def test_a_model_that_sees_images_encodes_windows_with_their_own_frames(image_data, phrasings, tmp_path):
+    cfg = tiny_config(image_data, tmp_path / "img", windows=2, frame_pretrain_steps=0)
+    trainer = Trainer(cfg, *phrasings, progress=False)
+    trainer._resample_windows()
+    segs = trainer.train.segments
+    item = len(trainer.dataset.split("train")) + 3  # a window
+    trainer.cfg.image_time_samples = 0  # every step of the window
+    trainer.model.traj.eval()
+    with torch.no_grad():
+        phi = trainer._phi_segments(trainer.train, np.array([item]))
+        r, s, n = int(segs.row[item]), int(segs.start[item]), int(segs.length[item])
+        rows = torch.tensor([r])
+        t = torch.arange(s, s + n).unsqueeze(0)
+        alone = trainer.model.traj(trainer.train.steps[rows.unsqueeze(1), t], **trainer.train.frame_args(rows, t))
+    assert torch.allclose(phi, alone, atol=1e-5)
