@@ -23,6 +23,10 @@ is still equally likely in every step, and a step costs a fraction of one over a
 and beside the language loss in both stages, the CNN also learns to tell episodes apart from their frames
 (`frame_contrastive`, `frame_pretrain_steps`): a few hundred episodes' comparisons alone do not teach it where an
 object stands.
+
+With `windows` (`langpref.model.windows`), each epoch also draws random windows of the train episodes, trajectories
+whose features are the time mean of the window's per-step features, and the epoch's pairs are built among episodes
+and windows; validation and every later use see whole episodes.
 """
 
 from __future__ import annotations
@@ -125,6 +129,7 @@ class _Split:
         # with windows (train split only): what this epoch trains on, the pairs' indices being rows of it
         self.segments: Segments | None = None
         self.step_features: list[np.ndarray] | None = None
+        self.episodes: Segments | None = None
 
     def add_windows(self, dataset, name: str) -> None:
         """Keep the per-step features of this split's episodes, which windows are cut from."""
@@ -134,7 +139,7 @@ class _Split:
 
     def resample_windows(self, per_episode: int, min_fraction: float, rng: np.random.Generator) -> None:
         """This epoch's segments (every whole episode, then `per_episode` fresh windows of each) and their pairs."""
-        if self.step_features is None:
+        if self.step_features is None or self.episodes is None:
             raise LangprefError("windows were asked for on a split without per-step features")
         self.segments = self.episodes + sample_windows(self.step_features, per_episode, min_fraction, rng)
         self.pairs = build_pairs(self.segments.features, self.thresholds)
