@@ -88,6 +88,14 @@ def cmd_train(args: argparse.Namespace) -> None:
             help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split",
         ),
         opt("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="default %(default)s"),
+        opt(
+            "--oracle",
+            default=None,
+            choices=("trajectory", "language"),
+            help="a diagnostic: replace one side by an oracle (trajectory: phi = standardised features, psi = the "
+            "model's reading of each phrasing; language: psi = the prototype of each phrasing's true meaning, phi "
+            "the model's), to see which side fails",
+        ),
         JSON,
     ],
     "Over every ordered pair of the split's trajectories, every feature that differs (beyond the model's tie "
@@ -111,14 +119,19 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
 
         phrasing_split = args.phrasing_split or args.split
         phrasings = phrasings_from_bank(load_bank(dataset.env), phrasing_split, dataset.feature_names)
-    out = evaluate_split(model, dataset, args.split, phrasings)
+    if args.oracle:
+        from langpref.model.sides import evaluate_with_oracle
+
+        out = evaluate_with_oracle(model, dataset, args.split, phrasings, args.oracle)
+    else:
+        out = evaluate_split(model, dataset, args.split, phrasings)
     out["utterances"] = str(args.utterances) if args.utterances else f"bank:{phrasing_split}"
     emit(
         out,
         args.json,
         lambda o: (
             f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
-            f"{o['utterances']}); "
+            f"{o['utterances']}{', oracle ' + o['oracle'] + ' side' if o.get('oracle') else ''}); "
             + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items())
             + (
                 f"\nread as their own meaning by `langpref embed`: {o['reading_accuracy']:.3f} of "

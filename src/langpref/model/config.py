@@ -115,6 +115,14 @@ class TrainConfig:
     """Steps of that auxiliary loss alone, on 64 trajectories each, before stage 1 of a model that sees images (the
     CNN then starts the language loss telling the scenes apart; about a minute on one CPU core). Default: 1500 for
     images+state, 0 for images alone."""
+    windows: int = 0
+    """Extra random windows of every train episode per epoch, each trained on as a trajectory of its own with its
+    features the time mean of its per-step features (a task's features are time means): many more pairs from a
+    small recording. Drawn afresh each epoch, from train episodes only (validation and evaluation see whole
+    episodes); an epoch then holds every pair among the episodes and their windows. 0 = none (the paper's)."""
+    window_min_fraction: float = 0.25
+    """Shortest window, as a share of its episode's length (at least 2 steps); lengths are drawn uniformly from
+    there to the whole episode."""
     tie_fraction: float = 0.05
     """A feature differs between two trajectories when |delta| > tie_fraction * its std on the train split."""
     norm_a: float = 1e-2
@@ -173,6 +181,7 @@ class TrainConfig:
             "image_time_samples",
             "image_step_trajectories",
             "frame_pretrain_steps",
+            "windows",
         ):
             if (getattr(self, name) or 0) < 0:  # None: automatic
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")
@@ -184,6 +193,8 @@ class TrainConfig:
                 raise LangprefError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.norm_a < 0 or self.norm_b < 0 or self.tie_fraction < 0 or (self.frame_contrastive or 0) < 0:
             raise LangprefError("norm_a, norm_b, tie_fraction and frame_contrastive must be >= 0")
+        if not 0 < self.window_min_fraction <= 1:
+            raise LangprefError(f"window_min_fraction must be in (0, 1], got {self.window_min_fraction}")
         if self.extend_bank and not self.utterances:
             raise LangprefError("--extend-bank needs --utterances FILE")
         out = Path(self.out)

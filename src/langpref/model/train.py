@@ -23,6 +23,10 @@ is still equally likely in every step, and a step costs a fraction of one over a
 and beside the language loss in both stages, the CNN also learns to tell episodes apart from their frames
 (`frame_contrastive`, `frame_pretrain_steps`): a few hundred episodes' comparisons alone do not teach it where an
 object stands.
+
+With `windows` (`langpref.model.windows`), each epoch also draws random windows of the train episodes, trajectories
+whose features are the time mean of the window's per-step features, and the epoch's pairs are built among episodes
+and windows; validation and every later use see whole episodes.
 """
 
 from __future__ import annotations
@@ -60,6 +64,7 @@ from langpref.model.evaluate import alignment_counts
 from langpref.model.inputs import dataset_input, resolve_observations, sees_images
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import episode_contrastive_loss, latent_loss
+from langpref.model.windows import Segments, sample_windows, segment_steps, whole_episodes
 from langpref.tasks.taskfile import stored_task_files
 
 
@@ -117,9 +122,36 @@ class _Split:
         self.frames = None if inp.frames is None else torch.from_numpy(inp.frames).to(device)
         self.frame_index = None if inp.frame_index is None else torch.from_numpy(inp.frame_index).to(device)
         self.features = dataset.features[idx]
+        self.thresholds = thresholds
         self.pairs: Pairs = build_pairs(self.features, thresholds)
         if len(self.pairs) == 0:
             raise LangprefError(f"split {name!r} has no pair of trajectories whose features differ")
+        # with windows (train split only): what this epoch trains on, the pairs' indices being rows of it
+        self.segments: Segments | None = None
+        self.step_features: list[np.ndarray] | None = None
+        self.episodes: Segments | None = None
+
+    def add_windows(self, dataset, name: str) -> None:
+        """Keep the per-step features of this split's episodes, which windows are cut from."""
+        idx = dataset.split(name)
+        self.step_features = [dataset.load(i).step_features for i in idx]
+        self.episodes = whole_episodes([len(s) for s in self.step_features], self.features)
+
+    def resample_windows(self, per_episode: int, min_fraction: float, rng: np.random.Generator) -> None:
+        """This epoch's segments (every whole episode, then `per_episode` fresh windows of each) and their pairs."""
+        if self.step_features is None or self.episodes is None:
+            raise LangprefError("windows were asked for on a split without per-step features")
+        self.segments = self.episodes + sample_windows(self.step_features, per_episode, min_fraction, rng)
+        self.pairs = build_pairs(self.segments.features, self.thresholds)
+
+    @property
+    def num_items(self) -> int:
+        """Trajectories the pairs index: episodes, or episodes and windows."""
+        return len(self.features) if self.segments is None else len(self.segments)
+
+    def episode_rows(self, items: np.ndarray) -> np.ndarray:
+        """The episodes (rows of this split) that items of the pairs come from."""
+        return items if self.segments is None else np.unique(self.segments.row[items])
 
     def frame_args(self, rows: torch.Tensor | None = None, t: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """The encoder's frame arguments for trajectories `rows` (all when None), at time steps `t` (n, k) when
@@ -181,6 +213,8 @@ class Trainer:
         thresholds = tie_thresholds(self.dataset.features[train_idx], cfg.tie_fraction)
         self.train = _Split(self.dataset, "train", thresholds, self.device, cfg.model)
         self.val = _Split(self.dataset, "val", thresholds, self.device, cfg.model)
+        if cfg.windows:
+            self.train.add_windows(self.dataset, "train")  # never val or test: those are seen whole only
         mean, std = normalisation_stats(self.train.steps.cpu().numpy(), self.train.lengths)
         info = DataInfo(
             env=meta.env,
@@ -236,18 +270,36 @@ class Trainer:
         t = np.floor(frac * lengths[:, None]).astype(np.int64)
         return torch.as_tensor(np.minimum(t, lengths[:, None] - 1), device=self.device)
 
+    def _resample_windows(self) -> None:
+        """A new epoch's windows of the train episodes (nothing without `windows`)."""
+        if self.cfg.windows:
+            self.train.resample_windows(self.cfg.windows, self.cfg.window_min_fraction, self.rng)
+
+    def _phi_segments(self, split: _Split, items: np.ndarray) -> torch.Tensor:
+        """phi of segments `items` (whole episodes and windows): the sampled steps of each, or all of its steps."""
+        assert split.segments is not None
+        t = self._time_index(len(items), split.steps.shape[1], split.segments.length[items])
+        rows, steps, lens = segment_steps(split.segments, items, None if t is None else t.cpu().numpy())
+        r = torch.as_tensor(rows, device=self.device)
+        t_all = torch.as_tensor(steps, device=self.device)
+        lens_t = None if lens is None else torch.as_tensor(lens, device=self.device)
+        return self.model.traj(split.steps[r.unsqueeze(1), t_all], lens_t, **split.frame_args(r, t_all))
+
     def _phi(self, split: _Split, a: np.ndarray, b: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
-        """phi_A, phi_B of a batch, computing phi once per distinct trajectory."""
+        """phi_A, phi_B of a batch, computing phi once per distinct trajectory (or segment, with windows)."""
         both = np.concatenate([a, b])
         uniq, inv = np.unique(both, return_inverse=True)
-        rows = torch.as_tensor(uniq, device=self.device)
-        lengths = None if split.lengths is None else split.lengths[uniq]
-        t = self._time_index(len(uniq), split.steps.shape[1], lengths)
-        if t is None:
-            lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
-            phi = self.model.traj(split.steps[rows], lens, **split.frame_args(rows))
+        if split.segments is not None:
+            phi = self._phi_segments(split, uniq)
         else:
-            phi = self.model.traj(split.steps[rows.unsqueeze(1), t], **split.frame_args(rows, t))
+            rows = torch.as_tensor(uniq, device=self.device)
+            lengths = None if split.lengths is None else split.lengths[uniq]
+            t = self._time_index(len(uniq), split.steps.shape[1], lengths)
+            if t is None:
+                lens = None if lengths is None else torch.as_tensor(lengths, device=self.device)
+                phi = self.model.traj(split.steps[rows], lens, **split.frame_args(rows))
+            else:
+                phi = self.model.traj(split.steps[rows.unsqueeze(1), t], **split.frame_args(rows, t))
         inv_t = torch.as_tensor(inv, device=self.device)
         return phi[inv_t[: len(a)]], phi[inv_t[len(a) :]]
 
@@ -266,7 +318,7 @@ class Trainer:
     def step_trajectories(self, batch_size: int) -> int:
         """Distinct train trajectories a step draws its pairs among (`image_step_trajectories`): all for a state
         model; for an image model, by default the fewest that hold twice the batch's pairs on average."""
-        n, chosen = len(self.train.features), self.cfg.image_step_trajectories
+        n, chosen = self.train.num_items, self.cfg.image_step_trajectories
         if not sees_images(self.cfg.model.observations or "state") or chosen == 0:
             return n
         if chosen is None:  # a random m of n trajectories hold about (m / n)^2 of the pairs
@@ -276,7 +328,7 @@ class Trainer:
     def _epoch_batches(self, batch_size: int, steps: int):
         """The pair rows of each step of an epoch: a permutation of all pairs cut into batches or, when a step
         draws among fewer trajectories than there are, up to `batch_size` pairs among a fresh random subset."""
-        pairs, n = self.train.pairs, len(self.train.features)
+        pairs, n = self.train.pairs, self.train.num_items
         m = self.step_trajectories(batch_size)
         if m >= n:
             order = self.rng.permutation(len(pairs))
@@ -315,13 +367,17 @@ class Trainer:
         with_transformer: bool,
     ) -> tuple[float, dict]:
         """Epoch loop with validation, best-state tracking and early stopping; returns (best val acc, best state)."""
+        self._resample_windows()
         steps_per_epoch = math.ceil(len(self.train.pairs) / batch_size)
         best_acc, best_state = init_best if init_best else (-1.0, _snapshot(self.model, with_transformer))
         stale = 0
-        bar = self._bar(stage, epochs * steps_per_epoch)
+        bar = self._bar(stage, epochs * steps_per_epoch)  # with windows an estimate: each epoch draws its own
         try:
             for epoch in range(1, epochs + 1):
                 t0 = time.perf_counter()
+                if epoch > 1:
+                    self._resample_windows()
+                    steps_per_epoch = math.ceil(len(self.train.pairs) / batch_size)
                 sums = np.zeros(4)  # loss, align, norm, correct
                 n = 0
                 for rows in self._epoch_batches(batch_size, steps_per_epoch):
@@ -385,7 +441,7 @@ class Trainer:
         phi_a, phi_b = self._phi(self.train, batch.a, batch.b)
         loss, la, ln = latent_loss(phi_a, phi_b, psi, self.cfg.norm_a, self.cfg.norm_b)
         if self.frame_head is not None and self.cfg.frame_contrastive:
-            rows = np.unique(np.concatenate([batch.a, batch.b]))
+            rows = self.train.episode_rows(np.unique(np.concatenate([batch.a, batch.b])))
             loss = loss + self.cfg.frame_contrastive * self._episode_contrastive(rows)
         with torch.no_grad():
             correct = int(((psi * (phi_b - phi_a)).sum(-1) > 0).sum())
@@ -603,7 +659,8 @@ def _train(
         return {
             "best_val_accuracy": best,
             "stages": stage,
-            "train_pairs": len(trainer.train.pairs),
+            "train_pairs": len(trainer.train.pairs),  # with windows: of the last epoch
+            "train_windows": trainer.cfg.windows * len(trainer.train.features),  # per epoch
             "train_phrasings": len(trainer.train_phr.texts),
             "val_phrasings": len(trainer.val_phr.texts),
             "setup_s": setup_s,
