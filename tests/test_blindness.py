@@ -19,6 +19,7 @@ from langpref.feedback import KINDS, toy_latent_space
 from langpref.feedback.humans import HumanConfig
 from langpref.improve import ImproveConfig, run_improvement
 from langpref.reward import LearnRewardConfig, human_weights, run_reward_learning
+from langpref.reward.answer_model import AnswerModelConfig
 
 
 class Replay:
@@ -85,6 +86,33 @@ def test_reward_learning_is_blind_to_the_truth(feedback, selection, snapshots, m
     for a, b in zip(first, snapshots):
         for x, y in zip(a, b):
             np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("feedback, selection", [("language", "infogain"), ("mixed", "infogain")])
+def test_the_answer_model_learner_is_blind_to_the_truth(feedback, selection, monkeypatch):
+    """What it asks and learns is the same, bit for bit, when the truth is scrambled and the answers replayed."""
+    space = toy_latent_space("metaworld", n=30, dim=8, seed=1)
+    cfg = LearnRewardConfig(
+        feedback=feedback,
+        queries=6,
+        query_selection=selection,
+        candidates=8,
+        posterior_samples=16,
+        learner="answer-model",
+        answer_model=AnswerModelConfig(particles=256),
+    )
+    w = human_weights(len(space.feature_names), 0, 0)
+    record, learners = [], []
+    run_reward_learning(space, w, cfg, (0, 0, 0), record=record, learners=learners)
+    other, w_other = scrambled(space, w)
+    answers = [a for _, a in record]
+    for name in ("language", "comparison"):
+        mine = [a for a in answers if type(a.query) is KINDS[name].query]
+        monkeypatch.setitem(KINDS, name, replace(KINDS[name], make_human=lambda *a, _m=mine, **k: Replay(_m)))
+    again, learners_again = [], []
+    run_reward_learning(other, w_other, cfg, (0, 0, 0), record=again, learners=learners_again)
+    assert [s.query for s, _ in again] == [s.query for s, _ in record]
+    np.testing.assert_array_equal(learners[0].v, learners_again[0].v)
 
 
 @pytest.mark.parametrize("strategy", ["paper", "history"])
