@@ -122,6 +122,7 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
         "   langpref train --data data/metaworld --out models/metaworld  # the full two-stage training\n"
         '   langpref embed --model models/metaworld "stay further from the button" --json\n'
         "   langpref experiment reward --env metaworld --model models/metaworld\n"
+        "   langpref experiment active --env metaworld --model models/metaworld  # both learners, active queries\n"
         "   make reproduce                                               # every experiment, both envs (hours)\n"
         "   langpref study serve --model models/metaworld --data data/metaworld   # a user study in the browser\n"
         "   langpref import REC --task task.toml --out data/mine         # your own robot: README, 'Your own robot'"
