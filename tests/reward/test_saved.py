@@ -138,3 +138,27 @@ def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp
     obs, _ = env.reset(seed=0)
     action, _ = model.predict(obs, deterministic=True)
     assert env.action_space.contains(np.asarray(action, dtype=np.float32))
+
+
+def test_the_answer_model_learner_saves_its_reward_as_the_linear_reward_it_is(checkpoint, tmp_path):
+    """Saved, the answer-model learner's posterior-mean reward is xi . phi, equal to its own prediction up to one
+    constant for every trajectory."""
+    import json
+
+    from langpref.feedback import toy_latent_space
+    from langpref.feedback.language import LanguageAnswer, LanguageQuery
+    from langpref.reward.answer_model import AnswerModelLearner
+    from langpref.reward.saved import save_learned_reward
+
+    space = toy_latent_space("metaworld", n=30, dim=8, seed=2)
+    pool = space.split("train")
+    learner = AnswerModelLearner(space, pool, seed=0)
+    table = space.table("train")
+    learner.observe("language", LanguageAnswer(LanguageQuery(int(pool[0])), table.texts[int(table.rows(1, 0)[0])]))
+    learner.fit()
+    path = save_learned_reward(learner, tmp_path, env="metaworld", model=checkpoint, name="am")
+    doc = json.loads(path.read_text())
+    assert doc["kind"] == "linear" and doc["reward_config"]["learner"] == "answer-model"
+    gap = space.phi @ np.array(doc["params"]["xi"]) - learner.predict(space.phi)
+    np.testing.assert_allclose(gap, gap[0], atol=1e-9)
+    assert np.ptp(learner.predict(space.phi)) > 0

@@ -23,6 +23,7 @@ T r_xi(tau), not a Markov reward of the step.
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -58,18 +59,27 @@ def check_saveable(model: str | Path | None) -> dict:
 def save_learned_reward(
     learner, out: str | Path, *, env: str, model: str | Path | None, name: str = "reward", default: bool = False
 ) -> Path:
-    """Write a `RewardLearner`'s r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`)."""
+    """Write a learner's r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`): the paper learner's
+    parameters, or the answer-model learner's posterior-mean reward as the linear r = xi . phi it is (up to a
+    constant, which shifts every trajectory alike)."""
     from langpref.model.checkpoint import WEIGHTS
 
     cfg = check_saveable(model)
     model = Path(model).resolve()
-    params = [p.detach().cpu().numpy().astype(np.float64).tolist() for p in learner.params]
+    if hasattr(learner, "latent_weights"):  # the answer-model learner: linear in phi, up to a constant
+        kind, params = "linear", {"xi": learner.latent_weights().tolist()}
+        reward_config = {"learner": "answer-model", **asdict(learner.cfg)}
+    else:
+        kind = learner.cfg.model
+        values = [p.detach().cpu().numpy().astype(np.float64).tolist() for p in learner.params]
+        params = dict(zip(("xi",) if kind == "linear" else ("w1", "b1", "w2"), values))
+        reward_config = dict(vars(learner.cfg))
     doc = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "task": env,
-        "kind": learner.cfg.model,
-        "params": dict(zip(("xi",) if learner.cfg.model == "linear" else ("w1", "b1", "w2"), params)),
+        "kind": kind,
+        "params": params,
         "model": {"path": str(model), "sha256": cfg["files"][WEIGHTS]["sha256"]},
         "normalisation": cfg.get("normalisation", {}),
         "observation_deltas": bool(cfg["model"].get("observation_deltas", False)),
@@ -77,7 +87,7 @@ def save_learned_reward(
         "action_dim": cfg["data"]["action_dim"],
         "dataset_horizon": cfg["data"]["horizon"],
         "queries": learner.num_queries,
-        "reward_config": {k: v for k, v in vars(learner.cfg).items()},
+        "reward_config": reward_config,
     }
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
