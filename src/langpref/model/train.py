@@ -555,35 +555,6 @@ class Trainer:
         return best
 
 
-def plot_history(history: list[dict[str, Any]], path: Path, title: str = "") -> Path:
-    """Training curve: loss and accuracy (train, validation) per epoch, stage 2 after the dashed line."""
-    from langpref.extras import pyplot
-
-    plt = pyplot("the training curve")
-
-    x = np.arange(1, len(history) + 1)
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
-    ax1.plot(x, [h["loss"] for h in history], label="loss")
-    ax1.plot(x, [h["align"] for h in history], label="L_align", alpha=0.7)
-    ax1.set_xlabel("epoch")
-    ax1.set_ylabel("train loss")
-    ax2.plot(x, [h["train_acc"] for h in history], label="train (sampled phrasings)")
-    ax2.plot(x, [h["val_acc"] for h in history], label="validation")
-    ax2.set_xlabel("epoch")
-    ax2.set_ylabel("alignment accuracy")
-    n1 = sum(1 for h in history if h["stage"] == 1)
-    for ax in (ax1, ax2):
-        if 0 < n1 < len(history):
-            ax.axvline(n1 + 0.5, color="grey", linestyle="--", linewidth=1)
-        ax.legend(fontsize=8)
-        ax.grid(alpha=0.3)
-    fig.suptitle(title or "latent-space training (stage 2 right of the dashed line)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
 def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, force: bool) -> Path:
     model, cfg = trainer.model, trainer.cfg
     model.set_prototypes(trainer.train_phr)
@@ -592,6 +563,8 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
         curve = {}  # without the plots extra the curve is only the history in config.json
         if not missing_modules("plots"):
             title = f"{model.info.env}: {'co-finetuned' if lang_finetuned else 'frozen language model'}"
+            from langpref.model.visualize import plot_history
+
             curve["training_curve.png"] = plot_history(history, Path(tmp) / "training_curve.png", title=title)
         return save_model(
             model,

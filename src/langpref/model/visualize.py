@@ -1,4 +1,4 @@
-"""`langpref visualize`: the latent space at a glance.
+"""Figures of a model: `langpref visualize` (the latent space at a glance) and the training curve.
 
 The trajectories' phi projected onto their first two principal components, one panel per feature, each point
 coloured by that feature's value; in every panel two arrows, the mean psi of the feature's `increase` and
@@ -10,6 +10,7 @@ arrow points from the low-valued points toward the high-valued ones.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -84,3 +85,32 @@ def visualize(model, dataset, out: str | Path, split: str | None = None) -> dict
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return {"out": str(out), "num_trajectories": len(idx), "explained_variance": [float(r) for r in ratio]}
+
+
+def plot_history(history: list[dict[str, Any]], path: Path, title: str = "") -> Path:
+    """Training curve: loss and accuracy (train, validation) per epoch, stage 2 after the dashed line."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the training curve")
+
+    x = np.arange(1, len(history) + 1)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax1.plot(x, [h["loss"] for h in history], label="loss")
+    ax1.plot(x, [h["align"] for h in history], label="L_align", alpha=0.7)
+    ax1.set_xlabel("epoch")
+    ax1.set_ylabel("train loss")
+    ax2.plot(x, [h["train_acc"] for h in history], label="train (sampled phrasings)")
+    ax2.plot(x, [h["val_acc"] for h in history], label="validation")
+    ax2.set_xlabel("epoch")
+    ax2.set_ylabel("alignment accuracy")
+    n1 = sum(1 for h in history if h["stage"] == 1)
+    for ax in (ax1, ax2):
+        if 0 < n1 < len(history):
+            ax.axvline(n1 + 0.5, color="grey", linestyle="--", linewidth=1)
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or "latent-space training (stage 2 right of the dashed line)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

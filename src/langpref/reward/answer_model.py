@@ -51,6 +51,7 @@ import numpy as np
 
 from langpref.errors import LangprefError
 from langpref.feedback.space import LatentSpace
+from langpref.language.bank import DIRECTIONS
 from langpref.reward.batch import Scored, comparison_candidates, join, language_candidates
 from langpref.reward.selection import (
     Selector,
@@ -133,14 +134,10 @@ class AnswerReader:
     def held_out(space: LatentSpace, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(psi (n, D), meaning (n,)) of the bank's val phrasings (the train split's when there are none) of the
         answer model's features: phrasings whose meaning the bank knows, to fit how sentences are read."""
-        table = None
-        for split in ("val", "train"):
-            try:
-                table = space.table(split)
-            except (KeyError, LangprefError):
-                continue
-            if len(table):
-                break
+        try:
+            table = space.table("val")
+        except (KeyError, LangprefError):
+            table = space.table("train")
         position = {int(f): k for k, f in enumerate(features)}
         keep = np.array([int(f) in position for f in table.feature], dtype=bool)
         target = np.array(
@@ -185,8 +182,6 @@ def confirm(learner: AnswerModelLearner, answer: Any, margin: float) -> tuple[bo
         return False, int(order[0])
     if answer.feature is None or answer.direction is None:
         raise LangprefError("a confirmation needs the person's meaning (a synthetic human's feature and direction)")
-    from langpref.language.bank import DIRECTIONS
-
     meant = learner.meaning_index(learner.space.feature_names.index(answer.feature), DIRECTIONS.index(answer.direction))
     return True, meant if meant in order[:CONFIRM_OPTIONS] else None
 
