@@ -77,3 +77,24 @@ def test_probe_phrasings_are_train_only_candidates(env: str) -> None:
         for t in texts
     }
     assert probe and not probe & shipped and not probe & heldout
+
+
+NEGATED = HELDOUT.parent / "negated" / "utterances.json"
+DRAWER_BANK = Path(__file__).resolve().parents[2] / "examples" / "own_robot" / "utterances.json"
+
+
+@pytest.mark.parametrize("env", (*ENV_NAMES, "drawer-open"))
+def test_negated_set_is_complete_and_shares_nothing_with_any_bank(env: str) -> None:
+    """heldout/negated/: 7-10 negated or indirect phrasings per meaning, none in the env's bank (nor the drawer's)."""
+    mapping = json.loads(NEGATED.read_text(encoding="utf-8"))[env]
+    if env == "drawer-open":
+        bank = json.loads(DRAWER_BANK.read_text(encoding="utf-8"))  # {feature: {direction: [texts]}}, unsplit
+        bank_texts = [t for f, by in bank.items() if not f.startswith("_") for ts in by.values() for t in ts]
+    else:
+        bank_texts = [t for by in load_bank(env).merged().values() for ts in by.values() for t in ts]
+    bank_keys = {normalise(t) for t in bank_texts}
+    for feature, by_direction in mapping.items():
+        assert set(by_direction) == set(DIRECTIONS)
+        for direction, texts in by_direction.items():
+            assert 7 <= len(texts) <= 10, f"{env}/{feature}/{direction}"
+            assert not {normalise(t) for t in texts} & bank_keys, f"{env}/{feature}/{direction} overlaps the bank"

@@ -157,6 +157,16 @@ class TrainConfig:
     finetune_embeddings: bool = False
     """Also fine-tune the transformer's token embeddings (off: the 30k-word table is most of MiniLM's weights, and
     updating only the words of the train phrasings hurts unseen paraphrases)."""
+    finetune_layers: int = 0
+    """Stage 2 fine-tunes only the transformer's top N layers (0 = all of them, the paper's): the lower layers keep
+    the pretrained model's reading of words a small bank never shows (`langpref.model.keep`)."""
+    lm_anchor: float = 0.0
+    """Weight of an L2 pull of the fine-tuned transformer weights toward their pretrained values in stage 2 (L2-SP;
+    0 = none, the paper's)."""
+    augment_phrasings: int = 0
+    """Extend the train phrasings, for training only, by up to N of `langpref bank augment`'s template proposals
+    per meaning (negations of the opposite direction, intensified and indirect forms); the bank and the
+    checkpoint's prototypes keep the bank's own phrasings. 0 = none (the paper's)."""
     patience: int = 3
     """Early stopping: epochs without a better validation accuracy before a stage ends."""
     weight_decay: float = 0.0
@@ -182,6 +192,8 @@ class TrainConfig:
             "image_step_trajectories",
             "frame_pretrain_steps",
             "windows",
+            "finetune_layers",
+            "augment_phrasings",
         ):
             if (getattr(self, name) or 0) < 0:  # None: automatic
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")
@@ -191,8 +203,8 @@ class TrainConfig:
         for name in ("stage1_lr", "stage1_head_lr", "stage2_lr", "stage2_lm_lr"):
             if not getattr(self, name) > 0:
                 raise LangprefError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.norm_a < 0 or self.norm_b < 0 or self.tie_fraction < 0 or (self.frame_contrastive or 0) < 0:
-            raise LangprefError("norm_a, norm_b, tie_fraction and frame_contrastive must be >= 0")
+        if min(self.norm_a, self.norm_b, self.tie_fraction, self.frame_contrastive or 0, self.lm_anchor) < 0:
+            raise LangprefError("norm_a, norm_b, tie_fraction, frame_contrastive and lm_anchor must be >= 0")
         if not 0 < self.window_min_fraction <= 1:
             raise LangprefError(f"window_min_fraction must be in (0, 1], got {self.window_min_fraction}")
         if self.extend_bank and not self.utterances:

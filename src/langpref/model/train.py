@@ -62,6 +62,7 @@ from langpref.model.config import ModelConfig, TrainConfig
 from langpref.model.encoders import freeze, normalisation_stats
 from langpref.model.evaluate import alignment_counts
 from langpref.model.inputs import dataset_input, resolve_observations, sees_images
+from langpref.model.keep import Anchor, augmented, trainable_lm_params
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import episode_contrastive_loss, latent_loss
 from langpref.model.windows import Segments, sample_windows, segment_steps, whole_episodes
@@ -202,7 +203,10 @@ class Trainer:
         for p in (train_phr, val_phr):
             if list(p.feature_names) != names:
                 raise LangprefError(f"phrasings cover {list(p.feature_names)}, the dataset has features {names}")
-        self.train_phr, self.val_phr = train_phr, val_phr
+        # what training sees (with `augment_phrasings`, the bank's and template proposals); the prototypes saved
+        # with the model are the means of the bank's own train phrasings
+        self.bank_train_phr = train_phr
+        self.train_phr, self.val_phr = augmented(train_phr, val_phr, cfg.augment_phrasings), val_phr
         self.rng = np.random.default_rng(cfg.seed)
         torch.manual_seed(cfg.seed)
         # what the encoder sees, resolved against the dataset; the checkpoint records it
@@ -509,12 +513,8 @@ class Trainer:
 
     def stage2(self, init_acc: float) -> float:
         cfg, lang = self.cfg, self.model.lang
-        freeze(lang.transformer, False)
-        if not cfg.finetune_embeddings:
-            emb = lang.transformer.get_input_embeddings()
-            if emb is not None:
-                freeze(emb)
-        lm_params = [p for p in lang.transformer.parameters() if p.requires_grad]
+        lm_params = trainable_lm_params(lang.transformer, cfg.finetune_layers, cfg.finetune_embeddings)
+        anchor = Anchor(lm_params, cfg.lm_anchor)
         optimizer = torch.optim.Adam(
             [
                 {"params": _own_params(self.model) + self._head_params(), "lr": cfg.stage2_lr},
@@ -539,7 +539,8 @@ class Trainer:
             uniq, inv = np.unique(phr, return_inverse=True)  # each distinct utterance once
             pooled = encode(tokens, torch.as_tensor(uniq, device=self.device))
             psi = lang.head(pooled)[torch.as_tensor(inv, device=self.device)]
-            return self._loss(batch, psi)
+            loss, *rest = self._loss(batch, psi)
+            return (loss + anchor.penalty(), *rest)
 
         @torch.no_grad()
         def val_fn() -> float:
@@ -557,7 +558,7 @@ class Trainer:
 
 def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, force: bool) -> Path:
     model, cfg = trainer.model, trainer.cfg
-    model.set_prototypes(trainer.train_phr)
+    model.set_prototypes(trainer.bank_train_phr)
     history = [h for h in trainer.history if lang_finetuned or h["stage"] == 1]
     with tempfile.TemporaryDirectory() as tmp:
         curve = {}  # without the plots extra the curve is only the history in config.json

@@ -1,0 +1,85 @@
+"""What co-finetuning keeps of the pretrained language model when the bank is small (issue 28).
+
+A lab's bank holds ten or twenty phrasings per meaning. Co-finetuning the whole transformer on them (the paper's
+stage 2) fits those phrasings and forgets part of what the pretrained model knew about the rest of the language, so
+phrasings written apart from the bank ("no rush", "don't crawl") are read worse than before training. Three ways to
+keep that knowledge, each a `TrainConfig` field and chosen on val (docs/results.md):
+
+- `finetune_layers`: only the top k transformer blocks learn in stage 2 (the lower ones keep their pretrained
+  weights exactly);
+- `lm_anchor`: an L2 pull of every fine-tuned weight toward its pretrained value (L2-SP, Li et al. 2018), added to the
+  loss of each stage-2 step;
+- `augment_phrasings`: the train split extended, for training only, by `langpref bank augment`'s template proposals
+  (negations of the opposite direction, intensified and indirect forms of the train phrasings): the direction of a
+  negated phrasing is what a small bank of plain imperatives never shows. The proposals never enter the bank nor the
+  checkpoint's prototypes, which stay the means of the bank's own train phrasings.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from langpref.errors import LangprefError
+from langpref.language.augment import propose
+from langpref.language.pairs import Phrasings, merge_phrasings, phrasings_from_mapping
+
+
+def layer_stack(transformer: nn.Module) -> nn.ModuleList:
+    """The transformer's stack of blocks, bottom first: its longest `ModuleList` (BERT's and MPNet's
+    `encoder.layer`, T5's `encoder.block`)."""
+    stacks = [m for m in transformer.modules() if isinstance(m, nn.ModuleList)]
+    if not stacks:
+        raise LangprefError(f"{type(transformer).__name__} has no stack of layers to fine-tune in part")
+    return max(stacks, key=len)
+
+
+def trainable_lm_params(transformer: nn.Module, top_layers: int, finetune_embeddings: bool) -> list[nn.Parameter]:
+    """Set which transformer weights stage 2 trains, and return them: the top `top_layers` blocks and what sits
+    above the stack (a final layer norm), or every weight when `top_layers` is 0; the token embedding table only with
+    `finetune_embeddings`."""
+    for p in transformer.parameters():
+        p.requires_grad_(True)
+    if top_layers:
+        stack = layer_stack(transformer)
+        if top_layers > len(stack):
+            raise LangprefError(f"--finetune-layers {top_layers}: the language model has {len(stack)} layers")
+        for block in stack[: len(stack) - top_layers]:
+            for p in block.parameters():
+                p.requires_grad_(False)
+        for module in transformer.modules():  # below the stack: embeddings (token, position, type) and their norm
+            if "embedding" in type(module).__name__.lower():
+                for p in module.parameters():
+                    p.requires_grad_(False)
+    if not finetune_embeddings:
+        emb = transformer.get_input_embeddings()
+        if emb is not None:
+            for p in emb.parameters():
+                p.requires_grad_(False)
+    return [p for p in transformer.parameters() if p.requires_grad]
+
+
+class Anchor:
+    """L2-SP: weight * sum over `params` of |theta - theta_pretrained|^2, theta_pretrained taken when made."""
+
+    def __init__(self, params: list[nn.Parameter], weight: float):
+        self.weight = weight
+        self.params = params
+        self.start = [p.detach().clone() for p in params] if weight else []
+
+    def penalty(self) -> torch.Tensor | float:
+        if not self.weight:
+            return 0.0
+        return self.weight * sum(((p - p0) ** 2).sum() for p, p0 in zip(self.params, self.start, strict=True))
+
+
+def augmented(train: Phrasings, val: Phrasings, per_meaning: int) -> Phrasings:
+    """The train phrasings plus up to `per_meaning` template proposals per meaning made from them; a proposal that
+    repeats a val phrasing is dropped, so validation never scores a sentence that training saw."""
+    if not per_meaning:
+        return train
+    extra = propose(train.as_mapping(), train.feature_names, existing=val.texts, per_meaning=per_meaning)
+    return merge_phrasings(train, phrasings_from_mapping(extra, train.feature_names, require_all=False))
+
+
+__all__ = ["Anchor", "augmented", "layer_stack", "trainable_lm_params"]
