@@ -11,6 +11,7 @@ from langpref.feedback import toy_latent_space
 from langpref.feedback.humans import true_reward
 from langpref.reward import LearnRewardConfig, human_weights, learn_reward, run_reward_learning
 from langpref.reward.metrics import epic_distance, kendall_tau, ranks, spearman, value_order_correlation
+from langpref.reward.steps import SuccessEpisodes
 
 
 def test_kendall_tau_on_hand_computed_cases_with_ties():
@@ -92,16 +93,20 @@ def test_value_order_is_scored_on_given_successful_episodes(space):
     run_reward_learning(space, w, cfg, (0, 0, 1), learners=learners)
     r = learners[0].predict(space.phi)
     walk = np.linspace(space.phi[np.argmin(r)], space.phi[np.argmax(r)], 12)
-    again = run_reward_learning(space, w, cfg, (0, 0, 1), episodes=[walk])
-    assert again.value_order == pytest.approx(1.0)
-    both = run_reward_learning(space, w, cfg, (0, 0, 1), episodes=[walk, walk[::-1]])
-    assert both.value_order == pytest.approx(0.0, abs=1e-12)
+    rising = np.linspace(-w, w, 12)  # theta_t moving along w: the true reward rises
+    again = run_reward_learning(space, w, cfg, (0, 0, 1), episodes=SuccessEpisodes([walk], [rising]))
+    assert again.value_order == pytest.approx(1.0) and again.value_order_true == pytest.approx(1.0)
+    both = SuccessEpisodes([walk, walk[::-1]], [rising, rising])
+    again = run_reward_learning(space, w, cfg, (0, 0, 1), episodes=both)
+    assert again.value_order == pytest.approx(0.0, abs=1e-12) and again.value_order_true == pytest.approx(1.0)
 
 
 def test_learn_reward_json_carries_the_metrics(space):
     cfg = LearnRewardConfig(feedback="language", queries=3, humans=2, seeds=1)
-    out = learn_reward(space, cfg, progress=False, episodes=[space.phi[:5]])
+    episodes = SuccessEpisodes([space.phi[:5]], [space.theta[:5]])
+    out = learn_reward(space, cfg, progress=False, episodes=episodes)
     for name in ("kendall_tau", "epic_distance"):
         assert len(out[name]) == len(out[f"{name}_std"]) == cfg.queries + 1
     assert len(out["value_order_correlation_runs"]) == 2
     assert out["value_order_correlation"] == pytest.approx(np.mean(out["value_order_correlation_runs"]))
+    assert -1 <= out["value_order_correlation_true_reward"] <= 1

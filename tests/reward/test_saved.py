@@ -245,3 +245,23 @@ def test_reward_files_are_versioned(checkpoint, tmp_path):
             load(path)
     with pytest.raises(LangprefError, match="no saved reward"):
         load(tmp_path / "absent.json")
+
+
+def test_success_prefixes_embed_each_successful_episode_step_by_step(checkpoint, tmp_path, make_synthetic_dataset):
+    """The last phi_t of an episode is the model's phi of the whole episode, and the last theta_t its standardised
+    features, as the space holds them: value-order reads the same reward the metrics score."""
+    from langpref.dataset.storage import load_dataset
+    from langpref.feedback.space import _normalised_theta
+    from langpref.model.checkpoint import load_model
+    from langpref.reward.steps import success_prefixes
+
+    data = make_synthetic_dataset(tmp_path / "ds", n=16, horizon=HORIZON)
+    dataset = load_dataset(data)
+    rows = [i for i in dataset.split("test") if dataset.success[i]]
+    episodes = success_prefixes(data, checkpoint, "test")
+    assert rows and len(episodes.phi) == len(episodes.theta) == len(rows)
+    obs, actions = dataset.arrays(None)
+    phi = load_model(checkpoint).encode_trajectories(obs[rows], actions[rows]).double().numpy()
+    np.testing.assert_allclose([p[-1] for p in episodes.phi], phi, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose([t[-1] for t in episodes.theta], _normalised_theta(dataset)[rows], atol=1e-6)
+    assert all(p.shape == (HORIZON, phi.shape[1]) for p in episodes.phi)

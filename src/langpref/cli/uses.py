@@ -177,7 +177,7 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
     if not args.perfect_latent:  # the value-order metric reads the model's steps on the eval split's successes
         from langpref.reward.steps import success_prefixes
 
-        episodes = success_prefixes(args.data, args.model, cfg.eval_split)
+        episodes = success_prefixes(args.data, args.model, cfg.eval_split, cfg.human.feature_scale)
     result = learn_reward(
         space,
         cfg,
@@ -206,7 +206,8 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
             + f"\nafter {len(r['kendall_tau']) - 1} queries: Kendall tau {r['kendall_tau'][-1]:.3f}, "
             + f"EPIC distance {r['epic_distance'][-1]:.3f}"
             + (
-                f", value-order correlation {r['value_order_correlation']:.3f}"
+                f", value-order correlation {r['value_order_correlation']:.3f} "
+                f"(the true reward's {r.get('value_order_correlation_true_reward', float('nan')):.3f})"
                 if "value_order_correlation" in r
                 else ""
             )

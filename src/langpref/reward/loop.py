@@ -40,6 +40,7 @@ from langpref.reward.answer_model import LEARNERS, AnswerModelConfig, AnswerMode
 from langpref.reward.cost import query_costs
 from langpref.reward.learner import RewardConfig, RewardLearner
 from langpref.reward.metrics import cross_entropy, epic_distance, kendall_tau, reward_of_best, value_order_correlation
+from langpref.reward.steps import SuccessEpisodes
 
 
 def feedback_choices() -> tuple[str, ...]:
@@ -71,8 +72,11 @@ class Curves:
     """EPIC distance between the true and the learned reward over every trajectory of the dataset, after 0..Q
     queries."""
     value_order: float | None = None
-    """With per-step embeddings of successful episodes: the value-order correlation of r_xi through them after the
-    last query."""
+    """With successful episodes step by step: the value-order correlation of r_xi through them after the last
+    query."""
+    value_order_true: float | None = None
+    """The same of the synthetic human's true reward: what a reward that matched it exactly would score (a reward
+    of preferences need not rise through a successful episode, as a reward of task progress does)."""
 
     def record(
         self,
@@ -229,7 +233,7 @@ def run_reward_learning(
     record: list | None = None,
     generation=None,
     learners: list | None = None,
-    episodes: list[np.ndarray] | None = None,
+    episodes: SuccessEpisodes | None = None,
 ) -> Curves:
     """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each. Queries
     are drawn uniformly (`random`, from their own stream) or chosen by `cfg.query_selection` (from another stream,
@@ -239,8 +243,8 @@ def run_reward_learning(
     `infogain` run, answer for answer. With `record`, appends each query's `langpref.reward.selection.Selection`
     (score None for random) and answer as a pair. With `generation` (`langpref.propose.Generation`), generates r_xi's
     optimum after the last query and scores it (`Curves.optimized_true_reward`); with `learners`, appends the final
-    reward model; with `episodes` (phi_t of every step of successful episodes, `langpref.reward.steps`), scores the
-    final r_xi's value-order correlation through them (`Curves.value_order`)."""
+    reward model; with `episodes` (successful episodes step by step, `langpref.reward.steps`), scores the final
+    r_xi's value-order correlation through them, and the true reward's (`Curves.value_order`, `value_order_true`)."""
     cfg.validate()
     pool = space.split(cfg.query_split)
     eval_rows = space.split(cfg.eval_split)
@@ -300,9 +304,10 @@ def run_reward_learning(
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
         raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
         curves.optimized_true_reward = float(normalised_reward(raw, R_eval)[0])
-    if episodes:
-        order = value_order_correlation([learner.predict(np.ascontiguousarray(p)) for p in episodes])
-        curves.value_order = None if np.isnan(order) else order
+    if episodes is not None:
+        order = value_order_correlation([learner.predict(np.ascontiguousarray(p)) for p in episodes.phi])
+        truth = value_order_correlation([true_reward(w, t) for t in episodes.theta])
+        curves.value_order, curves.value_order_true = (None if np.isnan(v) else v for v in (order, truth))
     if learners is not None:
         learners.append(learner)
     return curves
@@ -367,7 +372,8 @@ def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
 
 def standard_summary(runs: list[Curves]) -> dict:
     """Mean and std over runs, per query count, of `kendall_tau` and `epic_distance`, and of runs scored on
-    successful episodes the mean `value_order` correlation (with its std and the per-run values). Empty for runs
+    successful episodes the mean `value_order` correlation (with its std, the per-run values, and the mean of the
+    true reward's, `value_order_correlation_true_reward`). Empty for runs
     recorded before these were kept (an older experiment cache)."""
     out: dict = {}
     for name in ("kendall_tau", "epic_distance"):
@@ -381,6 +387,9 @@ def standard_summary(runs: list[Curves]) -> dict:
         out["value_order_correlation"] = float(np.mean(orders))
         out["value_order_correlation_std"] = float(np.std(orders))
         out["value_order_correlation_runs"] = [float(v) for v in orders]
+        truth = [c.value_order_true for c in runs]
+        if all(v is not None for v in truth):
+            out["value_order_correlation_true_reward"] = float(np.mean(truth))
     return out
 
 
@@ -438,14 +447,14 @@ def learn_reward(
     generation=None,
     save_reward: str | None = None,
     model: str | None = None,
-    episodes: list[np.ndarray] | None = None,
+    episodes: SuccessEpisodes | None = None,
 ) -> dict:
     """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config. With `generation`
     (`langpref.propose.Generation`), each run also generates r_xi's optimum (`optimized_true_reward`, one per run);
     with `save_reward` (a directory), each run's r_xi is written there for `langpref.reward.saved.LearnedReward`, beside
-    a reference to the checkpoint `model` whose trajectory encoder it reads. With `episodes` (phi_t of every step of
-    the evaluation split's successful episodes, `langpref.reward.steps.success_prefixes`), each run's final r_xi is
-    scored by its value-order correlation through them (`value_order_correlation`)."""
+    a reference to the checkpoint `model` whose trajectory encoder it reads. With `episodes` (the evaluation split's
+    successful episodes step by step, `langpref.reward.steps.success_prefixes`), each run's final r_xi is scored by
+    its value-order correlation through them, beside the true reward's (`value_order_correlation`)."""
     from tqdm import tqdm
 
     cfg.validate()

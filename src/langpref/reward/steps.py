@@ -98,12 +98,27 @@ def prefix_means(embeddings: np.ndarray) -> np.ndarray:
     return np.cumsum(e, axis=0) / np.arange(1, len(e) + 1)[:, None]
 
 
-def success_prefixes(data: str | Path, model: str | Path, split: str = "test") -> list[np.ndarray] | None:
-    """phi_t of every step of every successful episode of `split` of the dataset `data`, embedded by the state
-    model `model`: what `value_order_correlation` reads a learned reward on. None when the model sees camera
+@dataclass(frozen=True, eq=False)
+class SuccessEpisodes:
+    """The successful episodes of an evaluation split, step by step: what the value-order metric reads rewards on."""
+
+    phi: list[np.ndarray]
+    """Per episode, phi_t (T, D): the model's embedding of the episode up to each step."""
+    theta: list[np.ndarray]
+    """Per episode, theta_t (T, F): the synthetic humans' features of the episode up to each step, on the scale
+    of the space's theta (so that w . theta_t is the true reward of the episode so far)."""
+
+
+def success_prefixes(
+    data: str | Path, model: str | Path, split: str = "test", feature_scale: str = "standardised"
+) -> SuccessEpisodes | None:
+    """Every successful episode of `split` of the dataset `data`, step by step: phi_t embedded by the state model
+    `model`, and theta_t, the per-step features averaged up to step t and standardised as the space's theta
+    (`feature_scale` "standardised"), or summed up to t (the paper's scale). None when the model sees camera
     frames (its steps cannot be embedded one by one from the state), the recording has no success labels (an
     import without them) or none of the split succeeded."""
     from langpref.dataset.storage import load_dataset
+    from langpref.feedback.space import FeatureScale
     from langpref.model.checkpoint import read_config
 
     if (read_config(model)["model"].get("observations") or "state") != "state":
@@ -115,4 +130,9 @@ def success_prefixes(data: str | Path, model: str | Path, split: str = "test") -
     if not episodes:
         return None
     encoder = StepEncoder.from_checkpoint(model)
-    return [prefix_means(encoder.embeddings(t.observations, t.actions)) for t in episodes]
+    scale = FeatureScale.fit(np.asarray(dataset.features, dtype=np.float64)[dataset.split("train")])
+    if feature_scale == "standardised":
+        theta = [scale(prefix_means(t.step_features)) for t in episodes]
+    else:
+        theta = [np.cumsum(np.asarray(t.step_features, dtype=np.float64), axis=0) for t in episodes]
+    return SuccessEpisodes([prefix_means(encoder.embeddings(t.observations, t.actions)) for t in episodes], theta)
