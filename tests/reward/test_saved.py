@@ -265,3 +265,21 @@ def test_success_prefixes_embed_each_successful_episode_step_by_step(checkpoint,
     np.testing.assert_allclose([p[-1] for p in episodes.phi], phi, rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose([t[-1] for t in episodes.theta], _normalised_theta(dataset)[rows], atol=1e-6)
     assert all(p.shape == (HORIZON, phi.shape[1]) for p in episodes.phi)
+
+
+def test_learn_reward_reports_the_standard_metrics_with_a_model(checkpoint, tmp_path, make_synthetic_dataset, capsys):
+    """With a state model and a recording with success labels, learn-reward adds Kendall's tau, EPIC and the
+    value-order correlation (of the learned and of the true reward) to its JSON and its text."""
+    import json
+
+    from langpref.cli import main
+
+    data = make_synthetic_dataset(tmp_path / "ds", n=16, horizon=HORIZON)
+    args = ["learn-reward", "--model", str(checkpoint), "--data", str(data), "--feedback", "language", "--queries", "2"]
+    assert main([*args, "--humans", "1", "--seeds", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["kendall_tau"]) == len(out["epic_distance"]) == 3
+    assert len(out["value_order_correlation_runs"]) == 2 and "value_order_correlation_true_reward" in out
+    assert main([*args, "--humans", "1", "--seeds", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "Kendall tau" in text and "EPIC distance" in text and "value-order correlation" in text
