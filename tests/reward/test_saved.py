@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import torch
 
+from langpref.errors import LangprefError
+
 HORIZON = 40
 
 
@@ -72,6 +74,7 @@ def test_per_step_rewards_sum_to_T_r_xi_on_a_real_rollout(checkpoint, tmp_path, 
     import gymnasium as gym
 
     from langpref.model.checkpoint import load_model
+    from langpref.reward import load
     from langpref.reward.saved import LearnedReward, save_learned_reward
     from langpref.tasks.metaworld.controller import expert_unit, make_controller
 
@@ -94,6 +97,9 @@ def test_per_step_rewards_sum_to_T_r_xi_on_a_real_rollout(checkpoint, tmp_path, 
     r_xi = float(learner.predict(phi.double().numpy())[0])
     assert sum(rewards) == pytest.approx(HORIZON * r_xi, rel=1e-4, abs=1e-4)
     assert info["r_xi"] == pytest.approx(r_xi, rel=1e-4, abs=1e-5)
+    # the wrapper pays T times the API's per-step share, step by step
+    per_step = load(tmp_path).compute_reward(np.array(observations), np.array(actions))
+    np.testing.assert_allclose(rewards, HORIZON * per_step, rtol=1e-6, atol=1e-9)
 
 
 def test_a_reward_of_another_task_is_refused(checkpoint, tmp_path):
@@ -162,3 +168,118 @@ def test_the_answer_model_learner_saves_its_reward_as_the_linear_reward_it_is(ch
     gap = space.phi @ np.array(doc["params"]["xi"]) - learner.predict(space.phi)
     np.testing.assert_allclose(gap, gap[0], atol=1e-9)
     assert np.ptp(learner.predict(space.phi)) > 0
+
+
+def _trajectory(seed: int, T: int = 25) -> tuple[np.ndarray, np.ndarray]:
+    from langpref.tasks import get_task
+
+    task = get_task("metaworld")
+    rng = np.random.default_rng(seed)
+    obs = np.cumsum(rng.normal(scale=0.02, size=(T, task.obs_dim)), axis=0).astype(np.float32)
+    return obs, rng.uniform(-1, 1, size=(T, task.action_dim)).astype(np.float32)
+
+
+@pytest.mark.parametrize("kind", ["linear", "mlp"])
+def test_the_reward_api_per_step_rewards_sum_to_the_trajectory_reward(checkpoint, tmp_path, kind):
+    """`langpref.reward.load(PATH).compute_reward` splits r_xi(tau) into per-step shares that sum to it, and
+    r_xi(tau) is what the learner gives the trajectory's phi from the torch model."""
+    from langpref.model.checkpoint import load_model
+    from langpref.reward import load
+    from langpref.reward.saved import save_learned_reward
+
+    learner = _learner(kind)
+    path = save_learned_reward(learner, tmp_path, env="metaworld", model=checkpoint, name="x")
+    reward = load(path)
+    assert (reward.task, reward.kind) == ("metaworld", kind)
+    obs, actions = _trajectory(3)
+    per_step = reward.compute_reward(obs, actions)
+    total = reward.trajectory_reward(obs, actions)
+    assert per_step.shape == (len(obs),)
+    assert per_step.sum() == pytest.approx(total, rel=1e-9, abs=1e-12)
+    phi = load_model(checkpoint).encode_trajectories(obs[None], actions[None])
+    assert total == pytest.approx(float(learner.predict(phi.double().numpy())[0]), rel=1e-4, abs=1e-5)
+    progress = reward.progress(obs, actions)
+    assert progress[-1] == pytest.approx(total) and np.ptp(progress) > 0
+    if kind == "linear":  # a function of the step alone: the same step pays the same in another trajectory
+        other_obs, other_actions = _trajectory(4)
+        other_obs[5], other_obs[6], other_actions[6] = obs[5], obs[6], actions[6]
+        assert reward.compute_reward(other_obs, other_actions)[6] == pytest.approx(per_step[6])
+    with pytest.raises(LangprefError, match="observations of 39"):
+        reward.compute_reward(obs[:, :10], actions)
+
+
+def test_reward_files_are_versioned(checkpoint, tmp_path):
+    """A file of a newer format version is refused in one line; one without a version (the first) is read."""
+    import json
+
+    from langpref.reward import load
+    from langpref.reward.api import FORMAT_VERSION
+    from langpref.reward.saved import save_learned_reward
+
+    path = save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=checkpoint, name="v")
+    doc = json.loads(path.read_text())
+    assert doc["format_version"] == FORMAT_VERSION == 1
+    obs, actions = _trajectory(5)
+    expected = load(path).trajectory_reward(obs, actions)
+
+    newer = tmp_path / "newer.json"
+    newer.write_text(json.dumps({**doc, "format_version": FORMAT_VERSION + 1}))
+    with pytest.raises(LangprefError) as err:
+        load(newer)
+    message = str(err.value)
+    assert "\n" not in message and f"format version {FORMAT_VERSION + 1}" in message and "upgrade langpref" in message
+
+    unversioned = tmp_path / "unversioned.json"
+    unversioned.write_text(json.dumps({k: v for k, v in doc.items() if k != "format_version"}))
+    assert load(unversioned).trajectory_reward(obs, actions) == pytest.approx(expected)
+
+    for bad, match in (
+        ({**doc, "format_version": "1"}, "invalid reward format version"),
+        ({**doc, "format": "something-else"}, "not a langpref reward"),
+        ({**doc, "kind": "transformer"}, "does not know"),
+        ({k: v for k, v in doc.items() if k != "params"}, "incomplete"),
+    ):
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps(bad))
+        with pytest.raises(LangprefError, match=match):
+            load(path)
+    with pytest.raises(LangprefError, match="no saved reward"):
+        load(tmp_path / "absent.json")
+
+
+def test_success_prefixes_embed_each_successful_episode_step_by_step(checkpoint, tmp_path, make_synthetic_dataset):
+    """The last phi_t of an episode is the model's phi of the whole episode, and the last theta_t its standardised
+    features, as the space holds them: value-order reads the same reward the metrics score."""
+    from langpref.dataset.storage import load_dataset
+    from langpref.feedback.space import _normalised_theta
+    from langpref.model.checkpoint import load_model
+    from langpref.reward.steps import success_prefixes
+
+    data = make_synthetic_dataset(tmp_path / "ds", n=16, horizon=HORIZON)
+    dataset = load_dataset(data)
+    rows = [i for i in dataset.split("test") if dataset.success[i]]
+    episodes = success_prefixes(data, checkpoint, "test")
+    assert rows and len(episodes.phi) == len(episodes.theta) == len(rows)
+    obs, actions = dataset.arrays(None)
+    phi = load_model(checkpoint).encode_trajectories(obs[rows], actions[rows]).double().numpy()
+    np.testing.assert_allclose([p[-1] for p in episodes.phi], phi, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose([t[-1] for t in episodes.theta], _normalised_theta(dataset)[rows], atol=1e-6)
+    assert all(p.shape == (HORIZON, phi.shape[1]) for p in episodes.phi)
+
+
+def test_learn_reward_reports_the_standard_metrics_with_a_model(checkpoint, tmp_path, make_synthetic_dataset, capsys):
+    """With a state model and a recording with success labels, learn-reward adds Kendall's tau, EPIC and the
+    value-order correlation (of the learned and of the true reward) to its JSON and its text."""
+    import json
+
+    from langpref.cli import main
+
+    data = make_synthetic_dataset(tmp_path / "ds", n=16, horizon=HORIZON)
+    args = ["learn-reward", "--model", str(checkpoint), "--data", str(data), "--feedback", "language", "--queries", "2"]
+    assert main([*args, "--humans", "1", "--seeds", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["kendall_tau"]) == len(out["epic_distance"]) == 3
+    assert len(out["value_order_correlation_runs"]) == 2 and "value_order_correlation_true_reward" in out
+    assert main([*args, "--humans", "1", "--seeds", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "Kendall tau" in text and "EPIC distance" in text and "value-order correlation" in text

@@ -173,12 +173,18 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
     if args.figure:
         require("plots", "learn-reward --figure")  # before the runs, not after them
     space = _space(args)
+    episodes = None
+    if not args.perfect_latent:  # the value-order metric reads the model's steps on the eval split's successes
+        from langpref.reward.steps import success_prefixes
+
+        episodes = success_prefixes(args.data, args.model, cfg.eval_split, cfg.human.feature_scale)
     result = learn_reward(
         space,
         cfg,
         generation=_generation(args, space) if args.optimize else None,
         save_reward=args.save_reward,
         model=None if args.perfect_latent else args.model,
+        episodes=episodes,
     )
     if args.figure:
         from langpref.experiments.reward import plot_reward_curves
@@ -197,6 +203,14 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
             + " ".join(f"{v:.2f}" for v in r["true_reward_of_best"])
             + f"\narea under the true-reward curve {r['auc_true_reward']:.3f}; reaches 0.95 after "
             + f"{r['queries_to_0.95']} queries"
+            + f"\nafter {len(r['kendall_tau']) - 1} queries: Kendall tau {r['kendall_tau'][-1]:.3f}, "
+            + f"EPIC distance {r['epic_distance'][-1]:.3f}"
+            + (
+                f", value-order correlation {r['value_order_correlation']:.3f} "
+                f"(the true reward's {r.get('value_order_correlation_true_reward', float('nan')):.3f})"
+                if "value_order_correlation" in r
+                else ""
+            )
             + (f"; figure {r['figure']}" if "figure" in r else "")
             + (
                 f"\ngenerated r_xi optimum: mean normalised true reward {r['optimized_true_reward_mean']:.2f}, "

@@ -13,7 +13,11 @@ curves stay where the last refit left them.
 
 Metrics (Sec. 5.1), on an evaluation split: `cross_entropy(P_w, P_xi)` averaged over all its unordered pairs, and
 `reward_of_best`, the normalised true reward (0 worst, 1 best of the split) of the trajectory r_xi ranks first
-(averaged over ties, so a constant r_xi scores the split's mean).
+(averaged over ties, so a constant r_xi scores the split's mean). Beside them, the metrics reward models are compared
+by elsewhere (`langpref.reward.metrics`): `kendall_tau` between the true and the learned ranking of the evaluation
+split and `epic_distance` between the two rewards over every trajectory of the dataset, after every query; and with
+per-step embeddings of the evaluation split's successful episodes (`langpref.reward.steps.success_prefixes`),
+`value_order`, the value-order correlation of r_xi through them after the last query.
 
 Beyond the dataset (`learn-reward --optimize`, `langpref.propose`): after the last query, r_xi's own optimum is
 generated in the simulator (CMA-ES on a surrogate of phi, decided by r_xi of real rollouts embedded by the real
@@ -35,7 +39,8 @@ from langpref.feedback.space import LatentSpace
 from langpref.reward.answer_model import LEARNERS, AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner, confirm
 from langpref.reward.cost import query_costs
 from langpref.reward.learner import RewardConfig, RewardLearner
-from langpref.reward.metrics import cross_entropy, reward_of_best
+from langpref.reward.metrics import cross_entropy, epic_distance, kendall_tau, reward_of_best, value_order_correlation
+from langpref.reward.steps import SuccessEpisodes
 
 
 def feedback_choices() -> tuple[str, ...]:
@@ -61,13 +66,32 @@ class Curves:
     directions after the last query (a calibration check; read by the metrics only)."""
     confirmed: list[int] = field(default_factory=list)
     """With `confirm_margin`, per language answer: -1 not asked, -2 "none of these", else the meaning clicked."""
+    kendall_tau: list[float] = field(default_factory=list)
+    """Kendall's tau-b between the true and the learned ranking of the evaluation split, after 0..Q queries."""
+    epic_distance: list[float] = field(default_factory=list)
+    """EPIC distance between the true and the learned reward over every trajectory of the dataset, after 0..Q
+    queries."""
+    value_order: float | None = None
+    """With successful episodes step by step: the value-order correlation of r_xi through them after the last
+    query."""
+    value_order_true: float | None = None
+    """The same of the synthetic human's true reward: what a reward that matched it exactly would score (a reward
+    of preferences need not rise through a successful episode, as a reward of task progress does)."""
 
     def record(
-        self, learner: RewardLearner, space: LatentSpace, eval_rows: np.ndarray, R_eval: np.ndarray, rationality: float
+        self,
+        learner: RewardLearner,
+        space: LatentSpace,
+        eval_rows: np.ndarray,
+        R_eval: np.ndarray,
+        rationality: float,
+        R_all: np.ndarray,
     ) -> None:
         r = learner.predict(space.phi[eval_rows])
         self.cross_entropy.append(cross_entropy(R_eval, r, rationality))
         self.true_reward_of_best.append(reward_of_best(R_eval, r))
+        self.kendall_tau.append(kendall_tau(R_eval, r))
+        self.epic_distance.append(epic_distance(R_all, learner.predict(space.phi)))
 
 
 # ---- simulated sessions (`langpref learn-reward`) -----------------------------------------------------------------
@@ -209,6 +233,7 @@ def run_reward_learning(
     record: list | None = None,
     generation=None,
     learners: list | None = None,
+    episodes: SuccessEpisodes | None = None,
 ) -> Curves:
     """One run: Q queries of `cfg.feedback` to the synthetic human with weights `w`; metrics after each. Queries
     are drawn uniformly (`random`, from their own stream) or chosen by `cfg.query_selection` (from another stream,
@@ -218,11 +243,13 @@ def run_reward_learning(
     `infogain` run, answer for answer. With `record`, appends each query's `langpref.reward.selection.Selection`
     (score None for random) and answer as a pair. With `generation` (`langpref.propose.Generation`), generates r_xi's
     optimum after the last query and scores it (`Curves.optimized_true_reward`); with `learners`, appends the final
-    reward model."""
+    reward model; with `episodes` (successful episodes step by step, `langpref.reward.steps`), scores the final
+    r_xi's value-order correlation through them, and the true reward's (`Curves.value_order`, `value_order_true`)."""
     cfg.validate()
     pool = space.split(cfg.query_split)
     eval_rows = space.split(cfg.eval_split)
     R_eval = true_reward(w, space.theta[eval_rows])
+    R_all = true_reward(w, space.theta)
     rng_query, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
     learner_seed = int(np.random.default_rng([*run_seed, 4]).integers(2**31))
     if cfg.learner == "answer-model":
@@ -233,7 +260,7 @@ def run_reward_learning(
     rng_select = np.random.default_rng([*run_seed, 5])
     costs = cfg.costs
     curves = Curves(seconds=[0.0])
-    curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+    curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
     if cfg.feedback == MIXED:  # each kind's human on the stream of that kind's own runs (common random numbers)
         humans = {
             name: get_kind(name).make_human(w, space, pool, cfg.human, np.random.default_rng([*run_seed, 2]))
@@ -270,13 +297,17 @@ def run_reward_learning(
                 learner.fit()
             curves.kinds.append(kind.name)
             curves.seconds.append(curves.seconds[-1] + seconds)
-            curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality)
+            curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
     if cfg.learner == "answer-model":
         curves.credible = learner.credible(np.asarray(w)[learner.features])  # the experimenter's check
     if generation is not None:
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
         raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
         curves.optimized_true_reward = float(normalised_reward(raw, R_eval)[0])
+    if episodes is not None:
+        order = value_order_correlation([learner.predict(np.ascontiguousarray(p)) for p in episodes.phi])
+        truth = value_order_correlation([true_reward(w, t) for t in episodes.theta])
+        curves.value_order, curves.value_order_true = (None if np.isnan(v) else v for v in (order, truth))
     if learners is not None:
         learners.append(learner)
     return curves
@@ -335,7 +366,31 @@ def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
         **kinds_summary(runs),
         **optimized_summary(runs),
         **confirm_summary(runs),
+        **standard_summary(runs),
     }
+
+
+def standard_summary(runs: list[Curves]) -> dict:
+    """Mean and std over runs, per query count, of `kendall_tau` and `epic_distance`, and of runs scored on
+    successful episodes the mean `value_order` correlation (with its std, the per-run values, and the mean of the
+    true reward's, `value_order_correlation_true_reward`). Empty for runs
+    recorded before these were kept (an older experiment cache)."""
+    out: dict = {}
+    for name in ("kendall_tau", "epic_distance"):
+        curves = [getattr(c, name) for c in runs]
+        if runs and all(curves) and len({len(c) for c in curves}) == 1:
+            values = np.array(curves)
+            out[name] = values.mean(axis=0).tolist()
+            out[f"{name}_std"] = values.std(axis=0).tolist()
+    orders = [c.value_order for c in runs]
+    if runs and all(v is not None for v in orders):
+        out["value_order_correlation"] = float(np.mean(orders))
+        out["value_order_correlation_std"] = float(np.std(orders))
+        out["value_order_correlation_runs"] = [float(v) for v in orders]
+        truth = [c.value_order_true for c in runs]
+        if all(v is not None for v in truth):
+            out["value_order_correlation_true_reward"] = float(np.mean(truth))
+    return out
 
 
 def confirm_summary(runs: list[Curves]) -> dict:
@@ -392,11 +447,14 @@ def learn_reward(
     generation=None,
     save_reward: str | None = None,
     model: str | None = None,
+    episodes: SuccessEpisodes | None = None,
 ) -> dict:
     """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config. With `generation`
     (`langpref.propose.Generation`), each run also generates r_xi's optimum (`optimized_true_reward`, one per run);
     with `save_reward` (a directory), each run's r_xi is written there for `langpref.reward.saved.LearnedReward`, beside
-    a reference to the checkpoint `model` whose trajectory encoder it reads."""
+    a reference to the checkpoint `model` whose trajectory encoder it reads. With `episodes` (the evaluation split's
+    successful episodes step by step, `langpref.reward.steps.success_prefixes`), each run's final r_xi is scored by
+    its value-order correlation through them, beside the true reward's (`value_order_correlation`)."""
     from tqdm import tqdm
 
     cfg.validate()
@@ -416,7 +474,9 @@ def learn_reward(
             for s in range(cfg.seeds):
                 learners = [] if save_reward else None
                 runs.append(
-                    run_reward_learning(space, w, cfg, (cfg.seed, h, s), generation=generation, learners=learners)
+                    run_reward_learning(
+                        space, w, cfg, (cfg.seed, h, s), generation=generation, learners=learners, episodes=episodes
+                    )
                 )
                 if save_reward:
                     from langpref.reward.saved import save_learned_reward

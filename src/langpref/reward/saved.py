@@ -1,23 +1,16 @@
-"""The learned reward r_xi outside langpref: saved by `langpref learn-reward --save-reward DIR`, and given per step
-by a Gymnasium wrapper any RL library can train on.
+"""The learned reward r_xi saved for outside tools (`langpref learn-reward --save-reward DIR`), and a Gymnasium wrapper
+any RL library can train on.
 
     import gymnasium as gym
     from langpref.reward.saved import LearnedReward
     env = LearnedReward(gym.make("langpref/metaworld-button-press"), "DIR")   # DIR/reward.json, or a reward file
 
-A saved reward (`reward-NAME.json`) holds r_xi's parameters, the task, and a reference to the checkpoint whose
-trajectory encoder makes phi (its path and the checksum of its weights; the encoder's input normalisation is read
-from there and checked). Only the trajectory encoder is loaded, not the language model.
-
-Per-step reward. phi(tau) = (1/T) sum_t e_t, the time mean of per-step embeddings e_t = W h(s_t, a_t) + c (the
-encoder's last layer is linear). With the running mean phi_t = (1/t) sum_{k<=t} e_k, step t pays
-
-    r_t = t r_xi(phi_t) - (t - 1) r_xi(phi_{t-1})
-
-which telescopes: sum_t r_t = T r_xi(phi_T) = T r_xi(tau), for any r_xi. For the linear r_xi = xi . phi this is
-r_t = xi . e_t, a function of the step alone (Markov in the observation and the previous one). For the `mlp` r_xi the
-sum is the same but r_t depends on the whole history through phi_t: a dense, exact shaping of the episode's
-T r_xi(tau), not a Markov reward of the step.
+The file format, loading and the per-step reward are `langpref.reward.api` (`langpref.reward.load`). The wrapper pays,
+at step t, t r_xi(phi_t) - (t - 1) r_xi(phi_{t-1}) (phi_t the running mean of the per-step embeddings), which
+telescopes: an episode of T steps returns T r_xi(tau), T times `Reward.compute_reward`'s share at every step (the
+wrapper cannot divide by a T it does not know until the episode ends). For the linear r_xi = xi . phi this is
+xi . e_t, a function of the step alone (Markov in the observation and the previous one); for the `mlp` r_xi it
+depends on the history through phi_t: a dense, exact shaping of T r_xi(tau), not a Markov reward of the step.
 """
 
 from __future__ import annotations
@@ -30,10 +23,7 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
-
-FORMAT = "langpref-reward"
-FORMAT_VERSION = 1
-DEFAULT_NAME = "reward.json"
+from langpref.reward.api import DEFAULT_NAME, FORMAT, FORMAT_VERSION, Reward, load
 
 
 def check_saveable(model: str | Path | None) -> dict:
@@ -62,6 +52,7 @@ def save_learned_reward(
     """Write a learner's r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`): the paper learner's
     parameters, or the answer-model learner's posterior-mean reward as the linear r = xi . phi it is (up to a
     constant, which shifts every trajectory alike)."""
+    from langpref import __version__
     from langpref.model.checkpoint import WEIGHTS
 
     cfg = check_saveable(model)
@@ -77,6 +68,7 @@ def save_learned_reward(
     doc = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
+        "written_by": f"langpref {__version__}",
         "task": env,
         "kind": kind,
         "params": params,
@@ -99,58 +91,8 @@ def save_learned_reward(
     return path
 
 
-class SavedReward:
-    """A saved r_xi with the per-step trajectory encoder it reads: `step_embedding` and `value` in numpy."""
-
-    def __init__(self, path: str | Path):
-        from safetensors.numpy import load_file
-
-        from langpref.model.checkpoint import WEIGHTS, read_config
-
-        path = Path(path)
-        path = path / DEFAULT_NAME if path.is_dir() else path
-        try:
-            doc = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise LangprefError(
-                f"no saved reward at {path}: write one with `langpref learn-reward ... --save-reward DIR`"
-            ) from None
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            raise LangprefError(f"{path} is not a saved reward (not JSON)") from None
-        if doc.get("format") != FORMAT or doc.get("format_version") != FORMAT_VERSION:
-            raise LangprefError(f"{path} is not a langpref reward of format version {FORMAT_VERSION}")
-        model = Path(doc["model"]["path"])
-        cfg = read_config(model)
-        if cfg["files"][WEIGHTS]["sha256"] != doc["model"]["sha256"]:
-            raise LangprefError(f"the checkpoint {model} has changed since the reward {path} was saved; learn it again")
-        state = load_file(str(model / WEIGHTS))
-        self.path, self.doc, self.task, self.kind = path, doc, doc["task"], doc["kind"]
-        self.deltas = bool(doc["observation_deltas"])
-        self.obs_dim, self.action_dim = int(doc["obs_dim"]), int(doc["action_dim"])
-        self.mean, self.std = state["traj.mean"].astype(np.float64), state["traj.std"].astype(np.float64)
-        layers = sorted({int(k.split(".")[2]) for k in state if k.startswith("traj.body.")})
-        self.body = [
-            (state[f"traj.body.{i}.weight"].astype(np.float64), state[f"traj.body.{i}.bias"].astype(np.float64))
-            for i in layers
-        ]
-        self.out = (state["traj.out.weight"].astype(np.float64), state["traj.out.bias"].astype(np.float64))
-        self.params = {k: np.asarray(v, dtype=np.float64) for k, v in doc["params"].items()}
-
-    def step_embedding(self, obs: np.ndarray, prev_obs: np.ndarray, action: np.ndarray) -> np.ndarray:
-        """e_t of one step: the encoder's MLP on (s_t, [s_t - s_{t-1}], a_t), normalised as in training."""
-        parts = [obs, obs - prev_obs] if self.deltas else [obs]
-        x = np.concatenate([*parts, action]).astype(np.float32).astype(np.float64)
-        h = (x - self.mean) / self.std
-        for w, b in self.body:
-            h = np.maximum(w @ h + b, 0.0)
-        return self.out[0] @ h + self.out[1]
-
-    def value(self, phi: np.ndarray) -> float:
-        """r_xi(phi)."""
-        p = self.params
-        if self.kind == "linear":
-            return float(p["xi"] @ phi)
-        return float(np.maximum(phi @ p["w1"] + p["b1"], 0.0) @ p["w2"])
+SavedReward = Reward
+"""The loaded reward under its earlier name (`langpref.reward.api.Reward`)."""
 
 
 def _import_gym():
@@ -165,9 +107,9 @@ class LearnedReward(_import_gym().Wrapper):
     """Replaces the wrapped env's reward with the learned r_xi, per step (see the module docstring); the env's own
     reward goes to `info["env_reward"]`, the running r_xi(phi_t) to `info["r_xi"]`."""
 
-    def __init__(self, env, reward: str | Path | SavedReward):
+    def __init__(self, env, reward: str | Path | Reward):
         super().__init__(env)
-        self.reward = reward if isinstance(reward, SavedReward) else SavedReward(reward)
+        self.reward = reward if isinstance(reward, Reward) else load(reward)
         shape = getattr(env.observation_space, "shape", None)
         if shape != (self.reward.obs_dim,) or env.action_space.shape != (self.reward.action_dim,):
             raise LangprefError(
@@ -183,13 +125,14 @@ class LearnedReward(_import_gym().Wrapper):
     def reset(self, **kwargs: Any):
         obs, info = self.env.reset(**kwargs)
         self._obs = self._prev = np.asarray(obs, dtype=np.float32)
-        self._sum, self._t, self._last = np.zeros_like(self.reward.out[1]), 0, 0.0
+        self._sum, self._t, self._last = np.zeros(self.reward.encoder.dim), 0, 0.0
         return obs, info
 
     def step(self, action):
         if self._obs is None:
             raise LangprefError("call reset() before step()")
-        e = self.reward.step_embedding(self._obs, self._prev, np.asarray(action, dtype=np.float32))
+        steps = np.stack([self._prev, self._obs])  # the previous observation gives the change of observation
+        e = self.reward.step_embeddings(steps, np.stack([action, action]).astype(np.float32))[1]
         obs, env_reward, terminated, truncated, info = self.env.step(action)
         self._t += 1
         self._sum = self._sum + e
