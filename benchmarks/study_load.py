@@ -1,4 +1,4 @@
-"""Load benchmark of the study server: `python -m langpref.study.bench` (part of `make bench`).
+"""Load benchmark of the study server: `python -m benchmarks.study_load` (part of `make bench`).
 
 20 simulated participants (synthetic humans, `langpref.study.simulate`) run whole sessions of the paper's protocol
 (10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve` in
@@ -11,14 +11,14 @@ the target is a p95 under 150 ms for a language answer (embedding, reward update
 Without --model it trains a model of the default architecture (MiniLM language encoder, D = 128; language model
 frozen, one epoch: the serving cost does not depend on how well it is trained) on a fresh Meta-World dataset. The
 paced run's database is exported (`langpref study export`) and summarised beside the load figures in the results
-file, between `<!-- bench:study-load -->` markers. Videos are not part of the load (the simulated participants do
-not download them; a real study renders them ahead at start).
+file (this checkout's docs/results.md unless --results says otherwise), between `<!-- bench:study-load -->` markers.
+Videos are not part of the load (the simulated participants do not download them; a real study renders them ahead
+at start).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
 import re
@@ -29,17 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-RESULTS = Path("docs/results.md")
-
-
-def write_section(path: Path, name: str, body: str) -> None:
-    """Replace (or append) the block between `<!-- bench:NAME -->` markers of a results file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = path.read_text() if path.exists() else "# Results\n"
-    block = f"<!-- bench:{name} -->\n{body.strip()}\n<!-- /bench:{name} -->"
-    pattern = re.compile(rf"<!-- bench:{name} -->.*?<!-- /bench:{name} -->", re.DOTALL)
-    text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
-    path.write_text(text)
+from benchmarks.common import RESULTS, ROOT, shown, today, use_egl, write_section
 
 
 def prepare(work: Path, num_trajectories: int) -> tuple[Path, Path]:
@@ -165,7 +155,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument(
         "--export-out",
         type=Path,
-        default=Path("results/study_bench"),
+        default=ROOT / "results" / "study_bench",
         help="where the paced run's export goes (default %(default)s)",
     )
     args = p.parse_args(argv)
@@ -189,17 +179,17 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         summary = json.loads(Path(exported["summary"]).read_text())
 
     model_note = (
-        f"model `{args.model}`"
+        f"model `{shown(args.model)}`"
         if args.model
         else "a model of the default architecture (MiniLM language encoder, D = 128) trained one epoch here"
     )
     if isinstance(val_acc, float):
         model_note += f", validation accuracy {val_acc:.3f}"
-    today = dt.date.today().isoformat()
     n = args.participants
     lines = [
         (
-            f"Measured {today} with `python -m langpref.study.bench` on this machine ({os.cpu_count()} cores, no GPU): "
+            f"Measured {today()} with `python -m benchmarks.study_load` on this machine ({os.cpu_count()} cores, "
+            "no GPU): "
             f"{n} simulated participants at once run whole sessions of the paper's protocol against "
             f"`langpref study serve --query-selection {sel}` on loopback (server in its own process; {model_note}). "
             "Latency per answer as the "
@@ -222,7 +212,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "",
         (
             f"Export of the paced run (`langpref study export`, synthetic humans as participants; report in "
-            f"`{args.export_out}/report.html`): {summary['participants']} participants, "
+            f"`{shown(args.export_out)}/report.html`): {summary['participants']} participants, "
             f"{summary['finished']} finished, orders {summary['method_order']}. Area under the rating curve "
             f"(queries {r['points']}): language "
             f"{f(r['language']['auc']['mean'])} +- {f(r['language']['auc']['std'])}, comparison "
@@ -233,12 +223,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             "depends on how well the model is trained."
         ),
     ]
-    write_section(args.results, "study-load", "\n".join(lines))
+    write_section("study-load", "\n".join(lines), args.results)
     print(f"wrote {args.results}", flush=True)
     return {"paced": paced, "burst": burst, "export": exported}
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    use_egl()
     main()
