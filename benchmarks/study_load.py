@@ -138,46 +138,10 @@ def _row(name: str, r: dict[str, Any]) -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", type=Path, default=None, help="checkpoint (default: train one, see above)")
-    p.add_argument("--data", type=Path, default=None, help="dataset of --model")
-    p.add_argument("--split", default="test", help="study split (default %(default)s)")
-    p.add_argument("--participants", type=int, default=20)
-    p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
-    p.add_argument("--no-burst", action="store_true", help="only the paced run")
-    p.add_argument(
-        "--query-selection",
-        default="random",
-        help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
-    )
-    p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
-    p.add_argument(
-        "--export-out",
-        type=Path,
-        default=ROOT / "results" / "study_bench",
-        help="where the paced run's export goes (default %(default)s)",
-    )
-    args = p.parse_args(argv)
-    if (args.model is None) != (args.data is None):
-        p.error("pass both --model and --data, or neither")
-    from langpref.model.checkpoint import read_config
-    from langpref.study.export import export
-
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
-        val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
-        sel = args.query_selection
-        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel)
-        print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
-        burst = None
-        if not args.no_burst:
-            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel)
-            print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
-        exported = export(work / "paced.sqlite", args.export_out)
-        summary = json.loads(Path(exported["summary"]).read_text())
-
+def results_text(
+    args: argparse.Namespace, val_acc: float | None, paced: dict, burst: dict | None, summary: dict[str, Any]
+) -> str:
+    """The `study-load` block: how it was measured, the latency table, and what the paced run's export says."""
     model_note = (
         f"model `{shown(args.model)}`"
         if args.model
@@ -191,7 +155,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             f"Measured {today()} with `python -m benchmarks.study_load` on this machine ({os.cpu_count()} cores, "
             "no GPU): "
             f"{n} simulated participants at once run whole sessions of the paper's protocol against "
-            f"`langpref study serve --query-selection {sel}` on loopback (server in its own process; {model_note}). "
+            f"`langpref study serve --query-selection {args.query_selection}` on loopback (server in its own "
+            f"process; {model_note}). "
             "Latency per answer as the "
             "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
             "query) under 150 ms.\n"
@@ -223,7 +188,57 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             "depends on how well the model is trained."
         ),
     ]
-    write_section("study-load", "\n".join(lines), args.results)
+    return "\n".join(lines)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The options: the model and data (or none: made here), the participants, the runs, where results go."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", type=Path, default=None, help="checkpoint (default: train one, see above)")
+    p.add_argument("--data", type=Path, default=None, help="dataset of --model")
+    p.add_argument("--split", default="test", help="study split (default %(default)s)")
+    p.add_argument("--participants", type=int, default=20)
+    p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
+    p.add_argument("--no-burst", action="store_true", help="only the paced run")
+    p.add_argument(
+        "--query-selection",
+        default="random",
+        help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
+    )
+    p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
+    p.add_argument(
+        "--export-out",
+        type=Path,
+        default=ROOT / "results" / "study_bench",
+        help="where the paced run's export goes (default %(default)s)",
+    )
+    return p
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Run the paced (and burst) load, export the paced run, and rewrite the `study-load` block of the results."""
+    p = parser()
+    args = p.parse_args(argv)
+    if (args.model is None) != (args.data is None):
+        p.error("pass both --model and --data, or neither")
+    from langpref.model.checkpoint import read_config
+    from langpref.study.export import export
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
+        val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
+        sel = args.query_selection
+        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel)
+        print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
+        burst = None
+        if not args.no_burst:
+            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel)
+            print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
+        exported = export(work / "paced.sqlite", args.export_out)
+        summary = json.loads(Path(exported["summary"]).read_text())
+
+    write_section("study-load", results_text(args, val_acc, paced, burst, summary), args.results)
     print(f"wrote {args.results}", flush=True)
     return {"paced": paced, "burst": burst, "export": exported}
 
