@@ -30,13 +30,14 @@ demo: install
 	$(BIN)/langpref demo
 
 test: install
-	$(BIN)/ruff check src tests examples
-	$(BIN)/ruff format --check src tests examples
+	$(BIN)/ruff check src tests examples benchmarks
+	$(BIN)/ruff format --check src tests examples benchmarks
 	$(BIN)/python -m pytest -q
 
+# benchmarks/ (outside the package): speed tables into docs/results.md, its paths resolved from the repository root
 bench: install
-	$(BIN)/python -m langpref.bench
-	$(BIN)/python -m langpref.study.bench
+	$(BIN)/python -m benchmarks.pipeline
+	$(BIN)/python -m benchmarks.study_load
 
 # Every experiment of the paper's simulation section, both envs, from nothing: data, models, experiments, figures.
 # Hours on a CPU; each step resumes or skips what is done. BACKEND=ray fans generation and sweeps out over Ray.
@@ -64,14 +65,14 @@ reproduce: install
 wheel-check: install
 	PY=$(PY) .ci/wheel_check.sh
 
-# ruff over src, tests and examples (configured in pyproject.toml), as `make test` runs it; `make format` fixes it
+# ruff over src, tests, examples and benchmarks (pyproject.toml), as `make test` runs it; `make format` fixes it
 lint: install
-	$(BIN)/ruff check src tests examples
-	$(BIN)/ruff format --check src tests examples
+	$(BIN)/ruff check src tests examples benchmarks
+	$(BIN)/ruff format --check src tests examples benchmarks
 
 format: install
-	$(BIN)/ruff format src tests examples
-	$(BIN)/ruff check --fix src tests examples
+	$(BIN)/ruff format src tests examples benchmarks
+	$(BIN)/ruff check --fix src tests examples benchmarks
 
 # the documentation site (mkdocs.yml, docs/), API pages generated from the docstrings; a warning fails the build
 docs: install

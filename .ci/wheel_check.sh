@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# `make wheel-check`: build langpref's sdist and wheel, install the wheel with only the core into a fresh venv (as a
-# lab would: torch 2.13.0 first, then the wheel, with the known-good constraints), and smoke-test it there: import,
-# --help, --version, `langpref import` + `langpref train` on a tiny plain recording, and the one-line message of each
-# command that needs an extra which is not installed (simulators, study, LeRobot, figures, videos). Writes
-# build/wheel-check/install.json (time and size of the fresh core install). Takes about 2-3 minutes.
+# `make wheel-check`: build langpref's sdist and wheel, check the wheel holds no benchmark code, install it with only
+# the core into a fresh venv (as a lab would: torch 2.13.0 first, then the wheel, with the known-good constraints),
+# and smoke-test it there: import, --help, --version, `langpref import` + `langpref train` on a tiny plain recording,
+# and the one-line message of each command that needs an extra which is not installed (simulators, study, LeRobot,
+# figures, videos). Writes build/wheel-check/install.json (time and size of the fresh core install). About 2-3 min.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -16,6 +16,14 @@ echo "wheel-check: building the sdist and the wheel (python -m build)"
 .venv/bin/python -m build --outdir "$OUT/dist" . >"$OUT/build.log" 2>&1 || { tail -30 "$OUT/build.log"; exit 1; }
 WHEEL=$(ls "$OUT"/dist/langpref-*.whl)
 echo "wheel-check: $(basename "$WHEEL") ($(du -k "$WHEEL" | cut -f1) kB); installing the core into a fresh venv"
+# benchmarks live in benchmarks/ at the repository root: none of their code may ship in the wheel
+.venv/bin/python - "$WHEEL" <<'PY' || { echo "wheel-check: FAILED: benchmark code in the wheel" >&2; exit 1; }
+import re, sys, zipfile
+names = zipfile.ZipFile(sys.argv[1]).namelist()
+bench = [n for n in names if n.startswith("benchmarks/") or re.search(r"(^|/)[^/]*bench[^/]*\.py$", n)]
+print(f"wheel-check: {len(names)} files in the wheel, no benchmark code" if not bench else f"benchmark code: {bench}")
+sys.exit(1 if bench else 0)
+PY
 
 start=$(date +%s%N)
 "$PY" -m venv "$OUT/venv"

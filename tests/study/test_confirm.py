@@ -131,7 +131,7 @@ def test_the_confirmed_meaning_is_what_the_learner_receives(serve, h, learner):
     meanings = state.engine.meanings
     assert (row["meaning"], row["rank"], row["text"], row["shown"]) == (second, 2, "Move faster.", shown)
     assert (row["feature"], row["direction"]) == (meanings.feature(second), meanings.direction(second))
-    p = state._participant(conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone())
+    p = state.participant(conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone())
     kept = state.robot._learners[(pid, "language")][0]
     rebuilt = StudyRobot(state.engine, state._history, cfg=state.cfg, confirmations=state._confirmations)
     again = rebuilt._learner(p, "language", 1)
@@ -165,7 +165,7 @@ def test_none_of_these_is_stored_and_not_learned_from(serve, h):
     row = dict(conn.execute("SELECT * FROM confirmations").fetchone())
     assert row["meaning"] is None and row["rank"] is None and row["feature"] is None and row["text"] == "Move faster."
     assert conn.execute("SELECT count(*) FROM feedback WHERE phase='pref_language'").fetchone()[0] == 1
-    p = state._participant(conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone())
+    p = state.participant(conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone())
     rebuilt = StudyRobot(state.engine, state._history, cfg=state.cfg, confirmations=state._confirmations)
     assert len(rebuilt._learner(p, "language", 1).answers) == 0
 

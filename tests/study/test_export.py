@@ -78,13 +78,13 @@ def test_summary_holds_the_papers_analyses(simulated_db, tmp_path):
 def test_paired_test_matches_scipy():
     from scipy import stats
 
-    from langpref.study.export import _paired_tests
+    from langpref.study.analysis.stats import paired_tests
 
     a, b = [10.0, 12.0, 9.0, 14.0, 11.0], [8.0, 11.0, 9.5, 10.0, 7.0]
-    got = _paired_tests(a, b)
+    got = paired_tests(a, b)
     assert got["t_p_value"] == pytest.approx(stats.ttest_rel(a, b).pvalue)
     assert got["wilcoxon_p_value"] == pytest.approx(stats.wilcoxon(a, b).pvalue)
-    assert _paired_tests([1.0], [2.0])["t_p_value"] is None
+    assert paired_tests([1.0], [2.0])["t_p_value"] is None
 
 
 def test_cli_export_and_its_errors(simulated_db, tmp_path, capsys):

@@ -155,31 +155,32 @@ def test_host_check_takes_the_bind_host_allowed_names_and_origins():
 
 
 def test_one_clients_wrong_codes_do_not_lock_the_others_out(client, h, study_state):
-    from langpref.study.app import MAX_RESUME_FAILURES
     from langpref.study.guard import HttpError
+    from langpref.study.participants import resume
+    from langpref.study.state import MAX_RESUME_FAILURES
 
     pid, headers = h.join(client)
     code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]
     wrong = json.dumps({"code": "BBBBB-BBBBB"}).encode()
     for _ in range(MAX_RESUME_FAILURES):
         with pytest.raises(HttpError) as exc:
-            study_state.resume(wrong, "203.0.113.7")
+            resume(study_state, wrong, "203.0.113.7")
         assert exc.value.status == 404
     for body in (wrong, json.dumps({"code": code}).encode()):  # that client is held back, even with a right code
         with pytest.raises(HttpError) as exc:
-            study_state.resume(body, "203.0.113.7")
+            resume(study_state, body, "203.0.113.7")
         assert exc.value.status == 429
     # everyone else: the right code restores the session, a wrong one is a plain 404
-    assert study_state.resume(json.dumps({"code": code}).encode(), "198.51.100.2")["participant_id"] == pid
+    assert resume(study_state, json.dumps({"code": code}).encode(), "198.51.100.2")["participant_id"] == pid
     with pytest.raises(HttpError) as exc:
-        study_state.resume(wrong, "198.51.100.3")
+        resume(study_state, wrong, "198.51.100.3")
     assert exc.value.status == 404
     # over HTTP the client is the connection's address
     assert client.post("/api/participants/resume", json={"code": code}).status_code == 200
 
 
 def test_one_code_restores_a_bounded_number_of_sessions_a_minute(client, h, study_state):
-    from langpref.study.app import MAX_RESUMES_PER_CODE
+    from langpref.study.state import MAX_RESUMES_PER_CODE
 
     pid, headers = h.join(client)
     code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]

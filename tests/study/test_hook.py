@@ -287,7 +287,7 @@ def test_a_replay_in_flight_ends_when_the_server_is_killed(tmp_path):
     import signal
     import subprocess
 
-    from langpref.study.faultbench import alive
+    from benchmarks.common import alive
 
     src = str(Path(__file__).resolve().parents[2] / "src")
 

@@ -54,7 +54,7 @@ def test_formulas_are_neutralised_in_every_csv(client, h, study_state, tmp_path)
 
 
 def test_csv_cell():
-    from langpref.study.export import csv_cell
+    from langpref.study.analysis.tables import csv_cell
 
     assert csv_cell("=1+1") == "'=1+1" and csv_cell("  @SUM(A1)") == "'  @SUM(A1)" and csv_cell("\tx") == "'\tx"
     assert csv_cell("-2") == "'-2" and csv_cell(-2) == -2 and csv_cell(1.5) == 1.5 and csv_cell("Move up") == "Move up"
@@ -106,7 +106,8 @@ def test_a_client_of_the_design_contract_needs_no_seq(client, h, study_state):
 
 
 def test_time_per_query_uses_server_time_where_the_page_is_inconsistent(client, h, study_state):
-    from langpref.study.export import analyse, read_tables
+    from langpref.study.analysis.stats import analyse
+    from langpref.study.analysis.tables import read_tables
 
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "comparison")
@@ -123,7 +124,9 @@ def test_time_per_query_uses_server_time_where_the_page_is_inconsistent(client, 
 
 def test_excluded_participants_are_left_out(client, h, study_state, tmp_path):
     from langpref.errors import LangprefError
-    from langpref.study.export import analyse, export, read_tables
+    from langpref.study.analysis.stats import analyse
+    from langpref.study.analysis.tables import read_tables
+    from langpref.study.export import export
 
     people = [h.join(client) for _ in range(3)]
     for pid, headers in people:

@@ -37,7 +37,7 @@ def _walk(client, h, pid, headers, stop=None):
 
 def _participant(state, pid):
     row = state.connect().execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone()
-    return state._participant(row)
+    return state.participant(row)
 
 
 def test_the_answer_model_learner_answers_language_and_comparisons_with_its_own_infogain(engine, h, tmp_path):
@@ -88,7 +88,7 @@ def test_a_rebuilt_answer_model_learner_chooses_the_same_next_query(engine, h, t
                 kept = state.robot._learners[(pid, method)][0]
                 # a new server process on the same database: no learner in memory
                 restarted = StudyRobot(state.engine, state._history, cfg=state.cfg)
-                shown, _ = state._current(state.connect(), pid)
+                shown, _ = state.current_step(state.connect(), pid)
                 chosen = restarted.query(p, method, 4)
                 assert chosen.shown == shown.shown and chosen.record() == shown.selection
                 rebuilt = restarted._learners[(pid, method)][0]

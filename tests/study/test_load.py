@@ -1,6 +1,6 @@
 """Load on loopback: 20 simulated participants at once run whole sessions against a real server process; every
 answer is in the database afterwards. The run is bounded (a deadline) and stops by itself. The latency target
-(p95 of a language answer < 150 ms) is measured by `python -m langpref.study.bench`, not asserted here."""
+(p95 of a language answer < 150 ms) is measured by `python -m benchmarks.study_load`, not asserted here."""
 
 from __future__ import annotations
 

@@ -11,8 +11,7 @@ import time
 
 import httpx
 import pytest
-
-from langpref.study.faultbench import alive, descendants
+from benchmarks.common import alive, descendants
 
 
 def start_rendering(h, tmp_path, name: str):

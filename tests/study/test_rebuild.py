@@ -24,7 +24,7 @@ def test_a_learner_rebuilt_from_the_database_equals_the_one_in_memory(client, h,
         assert r.status_code == 200, r.text
         step, n = r.json(), n + 1
     conn = study_state.connect()
-    p = study_state._participant(conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone())
+    p = study_state.participant(conn.execute("SELECT * FROM participants WHERE id=?", (pid,)).fetchone())
     live = study_state.robot
     restarted = StudyRobot(study_state.engine, study_state._history)  # a new server process on the same database
     phi = study_state.engine.space.phi

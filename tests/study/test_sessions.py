@@ -28,7 +28,7 @@ def test_resume_code_restores_the_session(client, h, study_state):
     # the dashboard shows the code; the export does not
     rows = client.get("/api/admin/participants", headers=h.admin).json()["participants"]
     assert rows[0]["resume_code"] == code
-    from langpref.study.export import read_tables
+    from langpref.study.analysis.tables import read_tables
 
     tables = read_tables(study_state.connect())
     assert "resume_code" not in tables["participants"][0] and "participant_tokens" not in tables

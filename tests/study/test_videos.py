@@ -11,7 +11,7 @@ import httpx
 
 
 def test_unrendered_videos_do_not_freeze_the_server(engine, h, tmp_path):
-    from langpref.study import app as sapp
+    from langpref.study import participants as sapp
     from langpref.study.serve import BackgroundServer, build_state
 
     cfg = h.serve_config(tmp_path / "v.sqlite")

@@ -230,6 +230,34 @@ def _number(body: dict, key: str, lo: float, hi: float, what: str, integer: bool
 def parse_answer(body: Any, step: Step) -> Answer:
     """Check an answer body against the current step: a WrongStep (409) for another kind or another step's `seq`,
     else AnswerError (400): a bad value, control characters in text."""
+    kind = _answer_kind(body, step)
+    body = clean_text(body)
+    client_ms = None
+    if kind in METHODS:
+        client_ms = float(
+            _number(
+                body,
+                "client_ms",
+                0,
+                MAX_CLIENT_MS,
+                "the milliseconds from showing the videos to the answer (a number >= 0)",
+                integer=False,
+            )
+        )
+    value = _answer_value(kind, body, step)
+    stored: dict[str, Any] = {"seq": step.seq}
+    if kind == "survey":
+        stored["answers"] = value
+    else:
+        key = next(k for k, v in ANSWER_KEYS.items() if v == kind)
+        stored[key] = body[key]
+        if client_ms is not None:
+            stored["client_ms"] = client_ms
+    return Answer(kind, value, client_ms, stored)
+
+
+def _answer_kind(body: Any, step: Step) -> str:
+    """The kind of answer `body` holds, checked against the current step (its kind and, when sent, its `seq`)."""
     if not isinstance(body, dict):
         raise AnswerError("the body must be a JSON object")
     # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in DESIGN.md's
@@ -249,49 +277,32 @@ def parse_answer(body: Any, step: Step) -> Answer:
         raise AnswerError("'seq' must be the integer seq of the step you answer")
     if body.get("seq", step.seq) != step.seq:
         raise WrongStep(f"step {body['seq']!r} was already answered; the current step is {step.seq}")
-    body = clean_text(body)
-    client_ms = None
-    if kind in METHODS:
-        client_ms = float(
-            _number(
-                body,
-                "client_ms",
-                0,
-                MAX_CLIENT_MS,
-                "the milliseconds from showing the videos to the answer (a number >= 0)",
-                integer=False,
-            )
-        )
+    return kind
+
+
+def _answer_value(kind: str, body: dict[str, Any], step: Step) -> Any:
+    """The answer's value, checked (a feedback kind parses its own; a library error becomes an AnswerError)."""
     try:
         if kind in METHODS:
             feedback = get_kind(kind)
-            value: Any = feedback.parse(body[feedback.answer_key], feedback.query(*step.shown))
-        elif kind == "survey":
-            value = validate_answers(step.survey or "", body["answers"])
-        elif kind == "confirm":
+            return feedback.parse(body[feedback.answer_key], feedback.query(*step.shown))
+        if kind == "survey":
+            return validate_answers(step.survey or "", body["answers"])
+        if kind == "confirm":
             value = body["meaning"]
             offered = [o["meaning"] for o in step.extra.get("options", ())]
             if isinstance(value, bool) or not (value is None or isinstance(value, int)) or value not in offered:
                 raise AnswerError("'meaning' must be the meaning of one of the options, or null for none of these")
-        elif kind == "satisfaction":
-            value = body["satisfied"]
-            if not isinstance(value, bool):
+            return value
+        if kind == "satisfaction":
+            if not isinstance(body["satisfied"], bool):
                 raise AnswerError("'satisfied' must be true or false")
-        else:
-            value = _number(body, "rating", 1, 5, "an integer from 1 to 5", integer=True)
+            return body["satisfied"]
+        return _number(body, "rating", 1, 5, "an integer from 1 to 5", integer=True)
     except AnswerError:
         raise
     except LangprefError as exc:
         raise AnswerError(str(exc)) from None
-    stored: dict[str, Any] = {"seq": step.seq}
-    if kind == "survey":
-        stored["answers"] = value
-    else:
-        key = next(k for k, v in ANSWER_KEYS.items() if v == kind)
-        stored[key] = body[key]
-        if client_ms is not None:
-            stored["client_ms"] = client_ms
-    return Answer(kind, value, client_ms, stored)
 
 
 @dataclass
@@ -320,69 +331,90 @@ def _after_method(cfg: StudyConfig, p: Participant, robot: Robot, seq: int, meth
 
 def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
     """The next step after `answer` to `step` (already checked by `parse_answer`), and the rows to store."""
-    seq = step.seq + 1
-    timing = {"client_ms": answer.client_ms}
     if step.kind == "survey":
-        items = {q["id"]: q for q in SURVEYS[step.survey or ""]}
-        records = [
-            (
-                "survey_responses",
-                {
-                    "survey": step.survey,
-                    "question_id": qid,
-                    "item": items[qid]["item"],
-                    "method": items[qid]["method"],
-                    "value": json.dumps(v),
-                },
-            )
-            for qid, v in answer.value.items()
-        ]
-        if step.survey == "pre":
-            return Transition(Step(seq, "improve", "language", (robot.start_trajectory(p),), number=0), records)
-        if step.survey == "improve":
-            return Transition(_pref_start(cfg, p, robot, seq, p.method_order[0]), records)
-        return Transition(Step(seq, "done", "done"), records)
-
+        return _after_survey(cfg, p, step, answer, robot)
     if step.phase == "improve":
-        shown = step.shown[0]
-        if step.kind == "language":
-            text = answer.value.text
-            improved, understood = robot.improve(p, shown, text, step.number + 1)
-            row = {
-                "phase": "improve",
-                "number": step.number + 1,
-                "shown": shown,
-                "text": text,
-                "improved": improved,
-                **_understood_columns(understood),
-                **timing,
-            }
-            extra = {"understood": {**understood, "text": text}, "previous": shown, "unchanged": improved == shown}
-            return Transition(
-                Step(seq, "improve", "satisfaction", (improved,), number=step.number + 1, extra=extra),
-                [("feedback", row)],
-            )
-        row = {"iteration": step.number, "shown": shown, "satisfied": int(answer.value)}
-        if answer.value or step.number >= cfg.improve_max_iterations:
-            return Transition(Step(seq, "improve_survey", "survey", survey="improve"), [("satisfaction", row)])
-        return Transition(Step(seq, "improve", "language", (shown,), number=step.number), [("satisfaction", row)])
+        return _after_improve(cfg, p, step, answer, robot)
+    assert step.method is not None, step  # Study 2 from here on: every step belongs to a method
+    if step.kind == "rating":
+        return _after_rating(cfg, p, step, answer, robot)
+    if step.kind == "confirm":
+        return _confirmed(cfg, p, step, answer, robot, step.method)
+    return _after_query(cfg, p, step, answer, robot)
 
+
+def _after_survey(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
+    """A questionnaire answered: its responses, then Study 1 (after the first), Study 2 (after Study 1's) or done."""
+    seq = step.seq + 1
+    items = {q["id"]: q for q in SURVEYS[step.survey or ""]}
+    records = [
+        (
+            "survey_responses",
+            {
+                "survey": step.survey,
+                "question_id": qid,
+                "item": items[qid]["item"],
+                "method": items[qid]["method"],
+                "value": json.dumps(v),
+            },
+        )
+        for qid, v in answer.value.items()
+    ]
+    if step.survey == "pre":
+        return Transition(Step(seq, "improve", "language", (robot.start_trajectory(p),), number=0), records)
+    if step.survey == "improve":
+        return Transition(_pref_start(cfg, p, robot, seq, p.method_order[0]), records)
+    return Transition(Step(seq, "done", "done"), records)
+
+
+def _after_improve(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
+    """Study 1: feedback improves the trajectory shown, then the participant says whether they are satisfied; the
+    study goes on to its survey when they are, or when the rounds are used up."""
+    seq = step.seq + 1
+    shown = step.shown[0]
+    if step.kind == "language":
+        text = answer.value.text
+        improved, understood = robot.improve(p, shown, text, step.number + 1)
+        row = {
+            "phase": "improve",
+            "number": step.number + 1,
+            "shown": shown,
+            "text": text,
+            "improved": improved,
+            **_understood_columns(understood),
+            "client_ms": answer.client_ms,
+        }
+        extra = {"understood": {**understood, "text": text}, "previous": shown, "unchanged": improved == shown}
+        return Transition(
+            Step(seq, "improve", "satisfaction", (improved,), number=step.number + 1, extra=extra), [("feedback", row)]
+        )
+    row = {"iteration": step.number, "shown": shown, "satisfied": int(answer.value)}
+    if answer.value or step.number >= cfg.improve_max_iterations:
+        return Transition(Step(seq, "improve_survey", "survey", survey="improve"), [("satisfaction", row)])
+    return Transition(Step(seq, "improve", "language", (shown,), number=step.number), [("satisfaction", row)])
+
+
+def _after_rating(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
+    """Study 2: a rating of the best trajectory so far; then the next query, or the method is over."""
     method = step.method
     assert method is not None, step
-    if step.kind == "rating":
-        row = {"method": method, "after_queries": step.number, "shown": step.shown[0], "rating": answer.value}
-        if step.number >= cfg.pref_queries:
-            return Transition(_after_method(cfg, p, robot, seq, method), [("ratings", row)])
-        q = step.number + 1
-        return Transition(_query(p, robot, seq, method, step.number + 1), [("ratings", row)])
+    seq = step.seq + 1
+    row = {"method": method, "after_queries": step.number, "shown": step.shown[0], "rating": answer.value}
+    if step.number >= cfg.pref_queries:
+        return Transition(_after_method(cfg, p, robot, seq, method), [("ratings", row)])
+    return Transition(_query(p, robot, seq, method, step.number + 1), [("ratings", row)])
 
-    q = step.number
-    if step.kind == "confirm":
-        return _confirmed(cfg, p, step, answer, robot, method)
+
+def _after_query(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
+    """Study 2: an answer to query number `step.number` of the step's method. The robot learns from it, or (with
+    `--confirm-margin`, when unsure what a sentence meant) asks first in a confirm step."""
+    method = step.method
+    assert method is not None, step
+    seq, q = step.seq + 1, step.number
     kind, feedback = get_kind(method), answer.value
     ask = robot.confirm(p, method, feedback) if cfg.confirm_margin is not None else None
     understood = ask["understood"] if ask is not None else robot.learn(p, method, q, feedback)
-    row = {**kind.to_record(feedback), "number": q, **timing}
+    row = {**kind.to_record(feedback), "number": q, "client_ms": answer.client_ms}
     extra: dict[str, Any] = {}
     if understood is not None:  # language: its reading is stored (the feedback table, Study 1's too, says the phase)
         row.update(phase=step.phase, improved=None, **_understood_columns(understood))

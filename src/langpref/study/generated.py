@@ -23,8 +23,9 @@ Where things live and how a restart continues:
   `DB.generated/` beside the database) that replays, renders and loads like any other, and its row in the database
   table `generated` (id, round, where the search started, scores, its parameters and phi, its index in that dataset)
   says what it is. Its video is then rendered like any other (`langpref.study.videos`).
-- Until then its video is answered 503 with Retry-After (`langpref.study.app`), and the page says the robot is making
-  a new trajectory; an answer about a trajectory that is not made yet is answered 503 the same way (`NotReady`).
+- Until then its video is answered 503 with Retry-After (`langpref.study.participants`), and the page says the
+  robot is making a new trajectory; an answer about a trajectory that is not made yet is answered 503 the same way
+  (`NotReady`).
 - The `--on-show` hook (`langpref.study.hook`) runs for a generated trajectory once it is made, given its index in
   the generated dataset; simulated participants (`langpref.study.simulate`) read its features from there.
 """

@@ -6,7 +6,7 @@
   (table `confirmations`), in `summary.json`;
 - `bank_additions`: the phrasings they confirmed, as a bank file for the lab to review (`--bank-additions FILE`).
 
-Each takes the study's tables (`export.read_tables`) and the ids of the participants left out of the analyses.
+Each takes the study's tables (`analysis.tables.read_tables`) and the ids of the participants left out of the analyses.
 """
 
 from __future__ import annotations

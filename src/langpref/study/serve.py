@@ -21,11 +21,12 @@ from typing import Any
 from langpref import __version__
 from langpref.errors import LangprefError
 from langpref.study import db as sdb
-from langpref.study.app import StudyApp, create_app
+from langpref.study.app import create_app
 from langpref.study.config import ServeConfig, StudyConfig
 from langpref.study.engine import StudyEngine
 from langpref.study.generated import Generator, check_generation
 from langpref.study.hook import ShowHook
+from langpref.study.state import StudyApp
 from langpref.study.videos import VideoCache
 
 

@@ -7,8 +7,8 @@ dataset and (for rendered videos) the render settings, so a cache folder never s
 Videos are made in one worker process (MuJoCo on EGL, or PyAV's encoder, apart from the server's threads) that keeps
 its env between trajectories. At start every study trajectory is queued (`prerender`), and a video asked for before
 its turn goes to the front of the queue (`request`); no server thread waits for it: the app answers 503 with
-Retry-After, or waits asynchronously for a short while (`langpref.study.app`). The worker exits by itself when the
-server process dies (it watches its parent), and `close` kills it rather than waiting for a render to finish.
+Retry-After, or waits asynchronously for a short while (`langpref.study.participants`). The worker exits by itself
+when the server process dies (it watches its parent), and `close` kills it rather than waiting for a render to finish.
 
 Study 1 with generated candidates (`langpref.study.generated`, `attach`): a generated trajectory's video is named
 `gen000123-<tag>.webm` (the tag also hashes the folder of the generated dataset, so a video folder shared by two

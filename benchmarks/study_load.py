@@ -1,4 +1,4 @@
-"""Load benchmark of the study server: `python -m langpref.study.bench` (part of `make bench`).
+"""Load benchmark of the study server: `python -m benchmarks.study_load` (part of `make bench`).
 
 20 simulated participants (synthetic humans, `langpref.study.simulate`) run whole sessions of the paper's protocol
 (10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve` in
@@ -11,14 +11,14 @@ the target is a p95 under 150 ms for a language answer (embedding, reward update
 Without --model it trains a model of the default architecture (MiniLM language encoder, D = 128; language model
 frozen, one epoch: the serving cost does not depend on how well it is trained) on a fresh Meta-World dataset. The
 paced run's database is exported (`langpref study export`) and summarised beside the load figures in the results
-file, between `<!-- bench:study-load -->` markers. Videos are not part of the load (the simulated participants do
-not download them; a real study renders them ahead at start).
+file (this checkout's docs/results.md unless --results says otherwise), between `<!-- bench:study-load -->` markers.
+Videos are not part of the load (the simulated participants do not download them; a real study renders them ahead
+at start).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
 import re
@@ -29,17 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-RESULTS = Path("docs/results.md")
-
-
-def write_section(path: Path, name: str, body: str) -> None:
-    """Replace (or append) the block between `<!-- bench:NAME -->` markers of a results file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = path.read_text() if path.exists() else "# Results\n"
-    block = f"<!-- bench:{name} -->\n{body.strip()}\n<!-- /bench:{name} -->"
-    pattern = re.compile(rf"<!-- bench:{name} -->.*?<!-- /bench:{name} -->", re.DOTALL)
-    text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
-    path.write_text(text)
+from benchmarks.common import RESULTS, ROOT, shown, today, use_egl, write_section
 
 
 def prepare(work: Path, num_trajectories: int) -> tuple[Path, Path]:
@@ -148,60 +138,25 @@ def _row(name: str, r: dict[str, Any]) -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", type=Path, default=None, help="checkpoint (default: train one, see above)")
-    p.add_argument("--data", type=Path, default=None, help="dataset of --model")
-    p.add_argument("--split", default="test", help="study split (default %(default)s)")
-    p.add_argument("--participants", type=int, default=20)
-    p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
-    p.add_argument("--no-burst", action="store_true", help="only the paced run")
-    p.add_argument(
-        "--query-selection",
-        default="random",
-        help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
-    )
-    p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
-    p.add_argument(
-        "--export-out",
-        type=Path,
-        default=Path("results/study_bench"),
-        help="where the paced run's export goes (default %(default)s)",
-    )
-    args = p.parse_args(argv)
-    if (args.model is None) != (args.data is None):
-        p.error("pass both --model and --data, or neither")
-    from langpref.model.checkpoint import read_config
-    from langpref.study.export import export
-
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
-        val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
-        sel = args.query_selection
-        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel)
-        print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
-        burst = None
-        if not args.no_burst:
-            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel)
-            print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
-        exported = export(work / "paced.sqlite", args.export_out)
-        summary = json.loads(Path(exported["summary"]).read_text())
-
+def results_text(
+    args: argparse.Namespace, val_acc: float | None, paced: dict, burst: dict | None, summary: dict[str, Any]
+) -> str:
+    """The `study-load` block: how it was measured, the latency table, and what the paced run's export says."""
     model_note = (
-        f"model `{args.model}`"
+        f"model `{shown(args.model)}`"
         if args.model
         else "a model of the default architecture (MiniLM language encoder, D = 128) trained one epoch here"
     )
     if isinstance(val_acc, float):
         model_note += f", validation accuracy {val_acc:.3f}"
-    today = dt.date.today().isoformat()
     n = args.participants
     lines = [
         (
-            f"Measured {today} with `python -m langpref.study.bench` on this machine ({os.cpu_count()} cores, no GPU): "
+            f"Measured {today()} with `python -m benchmarks.study_load` on this machine ({os.cpu_count()} cores, "
+            "no GPU): "
             f"{n} simulated participants at once run whole sessions of the paper's protocol against "
-            f"`langpref study serve --query-selection {sel}` on loopback (server in its own process; {model_note}). "
+            f"`langpref study serve --query-selection {args.query_selection}` on loopback (server in its own "
+            f"process; {model_note}). "
             "Latency per answer as the "
             "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
             "query) under 150 ms.\n"
@@ -222,7 +177,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "",
         (
             f"Export of the paced run (`langpref study export`, synthetic humans as participants; report in "
-            f"`{args.export_out}/report.html`): {summary['participants']} participants, "
+            f"`{shown(args.export_out)}/report.html`): {summary['participants']} participants, "
             f"{summary['finished']} finished, orders {summary['method_order']}. Area under the rating curve "
             f"(queries {r['points']}): language "
             f"{f(r['language']['auc']['mean'])} +- {f(r['language']['auc']['std'])}, comparison "
@@ -233,12 +188,61 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             "depends on how well the model is trained."
         ),
     ]
-    write_section(args.results, "study-load", "\n".join(lines))
+    return "\n".join(lines)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The options: the model and data (or none: made here), the participants, the runs, where results go."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", type=Path, default=None, help="checkpoint (default: train one, see above)")
+    p.add_argument("--data", type=Path, default=None, help="dataset of --model")
+    p.add_argument("--split", default="test", help="study split (default %(default)s)")
+    p.add_argument("--participants", type=int, default=20)
+    p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
+    p.add_argument("--no-burst", action="store_true", help="only the paced run")
+    p.add_argument(
+        "--query-selection",
+        default="random",
+        help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
+    )
+    p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
+    p.add_argument(
+        "--export-out",
+        type=Path,
+        default=ROOT / "results" / "study_bench",
+        help="where the paced run's export goes (default %(default)s)",
+    )
+    return p
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Run the paced (and burst) load, export the paced run, and rewrite the `study-load` block of the results."""
+    p = parser()
+    args = p.parse_args(argv)
+    if (args.model is None) != (args.data is None):
+        p.error("pass both --model and --data, or neither")
+    from langpref.model.checkpoint import read_config
+    from langpref.study.export import export
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
+        val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
+        sel = args.query_selection
+        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel)
+        print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
+        burst = None
+        if not args.no_burst:
+            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel)
+            print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
+        exported = export(work / "paced.sqlite", args.export_out)
+        summary = json.loads(Path(exported["summary"]).read_text())
+
+    write_section("study-load", results_text(args, val_acc, paced, burst, summary), args.results)
     print(f"wrote {args.results}", flush=True)
     return {"paced": paced, "burst": burst, "export": exported}
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    use_egl()
     main()

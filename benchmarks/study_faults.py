@@ -1,4 +1,4 @@
-"""Fault and freeze figures of the study server: `python -m langpref.study.faultbench --model M --data D`.
+"""Fault and freeze figures of the study server: `python -m benchmarks.study_faults --model M --data D`.
 
 1. 80 concurrent requests for videos that are not made yet (no prerender, a fresh cache): the latency of `/healthz`
    and `POST /api/participants` meanwhile (target: under 1 s), and how the 80 were answered (200 or 503).
@@ -27,39 +27,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from langpref.study.bench import start_server
+from benchmarks.common import alive, cmdline, descendants, rss_mib, use_egl
+from benchmarks.study_load import start_server
 
 CASES = ("freeze", "sigterm", "sigkill", "uploads", "hook_kill")
-
-
-def descendants(pid: int) -> set[int]:
-    """Every live process below `pid` (from /proc)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            children.setdefault(int(stat[stat.rindex(")") + 2 :].split()[1]), []).append(int(entry.name))
-    out, todo = set(), [pid]
-    while todo:
-        for c in children.get(todo.pop(), []):
-            out.add(c)
-            todo.append(c)
-    return out
-
-
-def alive(pids: set[int]) -> set[int]:
-    """Those of `pids` that still run (not gone, not zombies)."""
-    out = set()
-    for p in pids:
-        try:
-            if Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
-                out.add(p)
-        except OSError:
-            pass
-    return out
 
 
 def _start(model: Path, data: Path, db: Path, split: str) -> tuple[subprocess.Popen, str]:
@@ -164,14 +135,6 @@ def stop(model: Path, data: Path, work: Path, split: str, sig: int) -> dict[str,
     }
 
 
-def rss_mib(pid: int) -> float:
-    """Resident memory of process `pid` in MiB (from /proc)."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return 0.0
-
-
 def uploads(url: str, pid: int, mib: int = 256, parallel: int = 3) -> dict[str, Any]:
     """`parallel` uploads of `mib` MiB each, first with Content-Length, then chunked: their answers and the server's
     memory (before, peak while they ran)."""
@@ -251,12 +214,12 @@ def hook_kill(model: Path, data: Path, work: Path, split: str) -> dict[str, Any]
     )
     _video_urls(url, 1)  # a step with a video: the hook starts
     deadline = time.time() + 60
-    while not any(_cmdline(p).startswith("sleep ") for p in descendants(proc.pid)):  # the replay's own child
+    while not any(cmdline(p).startswith("sleep ") for p in descendants(proc.pid)):  # the replay's own child
         if time.time() > deadline:
             proc.kill()
             raise RuntimeError("the hook did not start")
         time.sleep(0.05)
-    kids = {p for p in descendants(proc.pid) if _cmdline(p).startswith("sleep ") or HANGING_REPLAY in _cmdline(p)}
+    kids = {p for p in descendants(proc.pid) if cmdline(p).startswith("sleep ") or HANGING_REPLAY in cmdline(p)}
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=60)
     deadline = time.time() + 5
@@ -266,13 +229,6 @@ def hook_kill(model: Path, data: Path, work: Path, split: str) -> dict[str, Any]
     for p in left:  # leave nothing behind on the machine that ran the bench
         os.kill(p, signal.SIGKILL)
     return {"hook_processes": len(kids), "left_after_5_s": len(left)}
-
-
-def _cmdline(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -306,6 +262,5 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    use_egl()
     main()

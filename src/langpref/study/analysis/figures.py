@@ -1,0 +1,142 @@
+"""The study's PNG figures from its summary (`stats.analyse`): one function per figure, `figures` makes them all.
+
+study1_attributes  Study 1's attribute scores            study1_iterations  iterations to satisfaction
+study2_attributes  Study 2's attribute scores by method  study2_ratings     rating curves by method (Fig. 9)
+study2_time        seconds per query, per participant and on average (Appendix E)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from langpref.study.config import METHODS
+from langpref.study.surveys import METHOD_LABELS
+
+COLORS = {"language": "#1f77b4", "comparison": "#ff7f0e"}
+STUDY1_COLOR = "#2ca02c"
+
+
+def figures(summary: dict[str, Any], out: Path) -> dict[str, str]:
+    """Every figure of `FIGURES` as `out/NAME.png`; returns name -> file name."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the study's figures")
+    made = {}
+    for name, draw in DRAW.items():
+        fig = draw(plt, summary)
+        path = out / f"{name}.png"
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        made[name] = path.name
+    return made
+
+
+def _bar_err(ax, x, stats_list, label=None, width=0.8, offset=0.0, color=None) -> None:
+    """Bars of the means with the standard deviations as error bars (a missing one drawn as 0)."""
+    mean = [s["mean"] if s["mean"] is not None else 0.0 for s in stats_list]
+    err = [s["std"] if s["std"] is not None else 0.0 for s in stats_list]
+    ax.bar(np.asarray(x) + offset, mean, width, yerr=err, capsize=3, label=label, color=color)
+
+
+def study1_attributes(plt, summary: dict[str, Any]):
+    """Study 1's attribute scores (mean and std, 1-5)."""
+    a1 = summary["study1_attributes"]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    _bar_err(ax, range(len(a1)), list(a1.values()), color=STUDY1_COLOR)
+    ax.set_xticks(range(len(a1)), ["Satisfaction", "Adaptation speed", "Experience"][: len(a1)])
+    ax.set_ylim(0, 5.5)
+    ax.set_ylabel("score (1-5)")
+    ax.set_title("Study 1: attribute scores")
+    return fig
+
+
+def study1_iterations(plt, summary: dict[str, Any]):
+    """How many participants were satisfied after each round, and how many never were."""
+    it = summary["study1_iterations_to_satisfaction"]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    keys = list(it["histogram"]) + ["never"]
+    ax.bar(range(len(keys)), list(it["histogram"].values()) + [it["not_satisfied"]], color=STUDY1_COLOR)
+    ax.set_xticks(range(len(keys)), keys)
+    ax.set_xlabel("iterations to satisfaction")
+    ax.set_ylabel("participants")
+    ax.set_title("Study 1: iterations to satisfaction")
+    return fig
+
+
+def study2_attributes(plt, summary: dict[str, Any]):
+    """Study 2's attribute scores, the two methods side by side."""
+    a2 = summary["study2_attributes"]
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    x = np.arange(len(a2))
+    for k, m in enumerate(METHODS):
+        _bar_err(
+            ax, x, [a2[s][m] for s in a2], label=METHOD_LABELS[m], width=0.38, offset=(k - 0.5) * 0.4, color=COLORS[m]
+        )
+    ax.set_xticks(x, ["Adaptation speed", "Experience", "Noticed learning", "Trust"][: len(a2)])
+    ax.set_ylim(0, 5.5)
+    ax.set_ylabel("score (1-5)")
+    ax.legend(fontsize=8)
+    ax.set_title("Study 2: attribute scores")
+    return fig
+
+
+def study2_ratings(plt, summary: dict[str, Any]):
+    """Rating of the best trajectory after each rating point, mean +- std per method (Fig. 9)."""
+    r = summary["study2_ratings"]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    for m in METHODS:
+        pts = [int(q) for q in r["points"]]
+        stats_m = [r[m]["per_point"][str(q)] for q in pts]
+        mean = np.array([s["mean"] if s["mean"] is not None else np.nan for s in stats_m])
+        std = np.array([s["std"] if s["std"] is not None else 0.0 for s in stats_m])
+        ax.plot(pts, mean, "o-", color=COLORS[m], label=METHOD_LABELS[m])
+        ax.fill_between(pts, mean - std, mean + std, color=COLORS[m], alpha=0.2)
+    ax.set_xlabel("queries")
+    ax.set_ylabel("rating of the best trajectory (1-5)")
+    ax.set_ylim(0.5, 5.5)
+    ax.legend(fontsize=8)
+    ax.set_title("Study 2: ratings")
+    return fig
+
+
+def study2_time(plt, summary: dict[str, Any]):
+    """Seconds per query: per participant and method, and the mean per method (Appendix E)."""
+    t = summary["study2_time_per_query_s"]
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2), gridspec_kw={"width_ratios": [3, 1]})
+    pids = sorted(set(t["language"]["per_participant_s"]) | set(t["comparison"]["per_participant_s"]))
+    x = np.arange(len(pids))
+    for k, m in enumerate(METHODS):
+        axes[0].bar(
+            x + (k - 0.5) * 0.4,
+            [t[m]["per_participant_s"].get(p, 0.0) for p in pids],
+            0.38,
+            color=COLORS[m],
+            label=METHOD_LABELS[m],
+        )
+    top = max([t[m]["per_participant_s"].get(p, 0.0) for m in METHODS for p in pids] or [1.0])
+    axes[0].set_ylim(0, 1.35 * top if top > 0 else 1.0)  # room for the legend
+    axes[0].set_xticks(x, [str(i + 1) for i in range(len(pids))])
+    axes[0].set_xlabel("participant")
+    axes[0].set_ylabel("seconds per query")
+    axes[0].legend(fontsize=8, ncol=2, loc="upper left")
+    _bar_err(axes[1], range(2), [t[m] for m in METHODS], color=[COLORS[m] for m in METHODS])
+    axes[1].set_xticks(range(2), ["Language", "Comparison"])
+    axes[1].set_title("mean")
+    fig.suptitle("Study 2: time per query")
+    return fig
+
+
+DRAW: dict[str, Callable[[Any, dict[str, Any]], Any]] = {
+    "study1_attributes": study1_attributes,
+    "study1_iterations": study1_iterations,
+    "study2_attributes": study2_attributes,
+    "study2_ratings": study2_ratings,
+    "study2_time": study2_time,
+}
+"""Each figure's drawing function: (pyplot, summary) -> figure."""
+FIGURES = tuple(DRAW)

@@ -1,0 +1,80 @@
+"""What a browser opens: the pages (`/` guidelines and consent, `/study`, `/admin`), their static files, `/healthz`
+and `/api/info` (the task and the protocol the pages describe)."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from fastapi import APIRouter
+from fastapi.responses import HTMLResponse
+
+from langpref.study.config import METHODS, StudyConfig
+from langpref.study.state import StudyApp
+from langpref.study.surveys import METHOD_LABELS, task_text
+
+HERE = Path(__file__).parent
+STATIC = HERE / "static"
+PAGES = (("/", "index.html"), ("/study", "study.html"), ("/admin", "admin.html"))
+"""Route -> template in `templates/`."""
+
+
+def page_router(state: StudyApp) -> APIRouter:
+    """The pages, `/healthz` and `/api/info` over `state` (the static files are mounted by `create_app`)."""
+    router = APIRouter()
+
+    def page_route(template: str):
+        def _page() -> HTMLResponse:  # no parameters: nothing from the request chooses the file
+            return HTMLResponse(render_page(state, template), headers={"Cache-Control": "no-store"})
+
+        return _page
+
+    for route, template in PAGES:
+        router.add_api_route(route, page_route(template), methods=["GET"], include_in_schema=False)
+
+    @router.get("/healthz")
+    def healthz():
+        return {"ok": True}
+
+    @router.get("/api/info")
+    def info():
+        return {
+            "env": state.engine.env,
+            "task": task_text(state.engine.env),
+            "study": state.cfg.to_dict(),
+            "methods": {m: METHOD_LABELS[m] for m in METHODS},
+        }
+
+    return router
+
+
+def render_page(state: StudyApp, name: str) -> str:
+    """The template `name` with the task's text and the protocol's numbers filled in (HTML-escaped)."""
+    task = task_text(state.engine.env)
+    c = state.cfg
+    values = {
+        "ROBOT": task["robot"],
+        "TASK": task["task"],
+        "EXAMPLES": ", ".join(f"\u201c{e}\u201d" for e in task["examples"]),
+        "IMPROVE_MAX": str(c.improve_max_iterations),
+        "PREF_QUERIES": str(c.pref_queries),
+        "RATING_EVERY": str(c.rating_every),
+        "LANGUAGE": METHOD_LABELS["language"],
+        "COMPARISON": METHOD_LABELS["comparison"],
+        "DURATION": duration_text(c),
+    }
+    text = (HERE / "templates" / name).read_text()
+    for key, value in values.items():
+        text = text.replace("{{" + key + "}}", html.escape(value))
+    return text
+
+
+def duration_text(c: StudyConfig) -> str:
+    """How long the study takes, from its protocol, for the guidelines ("30 to 45 minutes" for the paper's): surveys
+    8-10 minutes in all, a Study-1 round 40-60 s (most people are satisfied within 3), a language query 30-40 s, a
+    comparison 20-25 s, a rating 10-15 s."""
+    ratings = 2 * len(c.rating_points())
+    lo = 8 * 60 + 40 * min(c.improve_max_iterations, 3) + c.pref_queries * (30 + 20) + ratings * 10
+    hi = 10 * 60 + 60 * c.improve_max_iterations + c.pref_queries * (40 + 25) + ratings * 15
+    lo_min = max(5, 5 * round(lo / 300))
+    return f"{lo_min} to {max(5 * round(hi / 300), lo_min + 5)} minutes"
