@@ -272,7 +272,8 @@ def test_config_reruns_a_recorded_command_to_identical_output(tmp_path, capsys, 
     assert again.pop("figure") == "b.png" and recorded.pop("figure") == "a.png"
     assert again == recorded
     record = json.loads((tmp_path / "b.config.json").read_text())
-    assert "--config" not in record["command"] and record["command"].endswith("--figure b.png")
+    assert "--config" not in record["command"] and record["command"].endswith("--json --figure b.png")
+    assert record["command"].count("--figure") == 1  # the record's --figure replaced, not repeated
     assert record["config"] == json.loads((tmp_path / "a.config.json").read_text())["config"]
 
     assert main(["learn-reward", "--config=b.config.json", "--queries", "2", "--figure", "c.png"]) == 0

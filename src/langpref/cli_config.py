@@ -207,10 +207,11 @@ def _command_name(argv: list[str]) -> str | None:
     return next((" ".join(words[:n]) for n in range(len(words), 0, -1) if " ".join(words[:n]) in COMMANDS), None)
 
 
-def expand_rerun(argv: list[str]) -> list[str]:
+def expand_rerun(argv: list[str], parser_for: Callable[[list[str]], argparse.ArgumentParser]) -> list[str]:
     """`argv` with `--config PATH` replaced by the command line recorded at PATH, for a command that takes
-    `--config` (`RERUN`): the recorded arguments first, then the others of `argv`, so that those override them.
-    Any other `argv` is returned as it is (argparse then reports a misplaced `--config`)."""
+    `--config` (`RERUN`): the recorded arguments, less the options `argv` gives again, then the others of `argv`
+    (`parser_for(argv)` builds the parser that says which tokens are an option's values). Any other `argv` is
+    returned as it is (argparse then reports a misplaced `--config`)."""
     at = next((i for i, a in enumerate(argv) if a == "--config" or a.startswith("--config=")), None)
     name = _command_name(argv)
     if at is None or name is None or RERUN not in COMMANDS[name][2]:
@@ -233,7 +234,37 @@ def expand_rerun(argv: list[str]) -> list[str]:
     words = shlex.split(recorded)[1:]
     if _command_name(words) != name:
         raise LangprefError(f"--config {where} records `{recorded[:60]}`, not `langpref {name}`; run that command")
-    return [*words, *rest[len(name.split()) :]]
+    given = rest[len(name.split()) :]
+    return [*_without_given(_leaf(parser_for(words), name), words, given), *given]
+
+
+def _leaf(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    """The parser of command `name` inside the top-level `parser`."""
+    for word in name.split():
+        (sub,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        parser = sub.choices[word]
+    return parser
+
+
+def _without_given(p: argparse.ArgumentParser, recorded: list[str], given: list[str]) -> list[str]:
+    """`recorded` without the options (and their values) whose destination `given` sets again, so that a rerun's
+    record does not grow with each override. Options that accumulate (`append`) are kept: argparse adds to them."""
+    actions = p._option_string_actions
+
+    def action(token: str) -> argparse.Action | None:
+        return actions.get(token.split("=", 1)[0]) if token.startswith("-") else None
+
+    again = {a.dest for a in map(action, given) if a is not None}
+    out, i = [], 0
+    while i < len(recorded):
+        a = action(recorded[i])
+        replaced = a is not None and a.dest in again and a.nargs in (None, 0)
+        if not replaced or isinstance(a, argparse._AppendAction):
+            out.append(recorded[i])
+            i += 1
+        else:
+            i += 1 if "=" in recorded[i] or a.nargs == 0 else 2
+    return out
 
 
 def _add_inverse_switches(p: argparse.ArgumentParser) -> None:

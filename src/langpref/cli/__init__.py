@@ -54,7 +54,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        argv = cc.expand_rerun(argv)  # `--config PATH`: the recorded command line, then the options given here
+        argv = cc.expand_rerun(argv, build_parser)  # `--config PATH`: the record's command line, overridden
         args = build_parser(argv).parse_args(argv)
         args.argv = argv
         args.func(args)
