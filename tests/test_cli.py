@@ -2,6 +2,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from langpref.cli import main
 
 
@@ -248,3 +250,64 @@ def test_improve_and_experiments_write_their_resolved_config(tmp_path, capsys):
         "ray_address": None,
     }
     assert saved["config"]["data"] == str(data) and saved["config"]["out"] == str(out)
+
+
+# ---- --config PATH: rerun a record ---------------------------------------------------------------------------------
+
+
+def _learn_reward(data, *extra):
+    return ["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", "comparison", *extra]
+
+
+def test_config_reruns_a_recorded_command_to_identical_output(tmp_path, capsys, monkeypatch):
+    from test_improve import write_features_dataset
+
+    monkeypatch.chdir(tmp_path)
+    data = write_features_dataset(tmp_path / "d")
+    first = _learn_reward(data, "--queries", "3", "--humans", "1", "--seeds", "1", "--rationality", "2")
+    assert main([*first, "--figure", "a.png", "--json"]) == 0
+    recorded = json.loads(capsys.readouterr().out)
+    assert main(["learn-reward", "--config", "a.config.json", "--figure", "b.png"]) == 0  # --json from the record
+    again = json.loads(capsys.readouterr().out)
+    assert again.pop("figure") == "b.png" and recorded.pop("figure") == "a.png"
+    assert again == recorded
+    record = json.loads((tmp_path / "b.config.json").read_text())
+    assert "--config" not in record["command"] and record["command"].endswith("--json --figure b.png")
+    assert record["command"].count("--figure") == 1  # the record's --figure replaced, not repeated
+    assert record["config"] == json.loads((tmp_path / "a.config.json").read_text())["config"]
+
+    assert main(["learn-reward", "--config=b.config.json", "--queries", "2", "--figure", "c.png"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["cross_entropy"]) == 3  # a flag given here overrides the record
+    assert main(["learn-reward", "--config", "c.config.json", "--no-perfect-latent", "--model", "m"]) == 2
+    assert "m" in capsys.readouterr().err  # the switch turned off: now it reads --model m, which is not there
+
+
+def test_config_errors_are_one_line(tmp_path, capsys):
+    (tmp_path / "bad.json").write_text("{not json")
+    (tmp_path / "other.config.json").write_text(json.dumps({"command": "langpref improve --data d"}))
+    for argv, text in (
+        (["learn-reward", "--config", str(tmp_path / "none.json")], "no such file"),
+        (["learn-reward", "--config", str(tmp_path / "bad.json")], "not a resolved config"),
+        (["learn-reward", "--config", str(tmp_path / "other.config.json")], "not `langpref learn-reward`"),
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and text in err[0], err
+    with pytest.raises(SystemExit):
+        main(["inspect", "d", "--config", str(tmp_path / "other.config.json")])  # inspect records nothing
+
+
+def test_every_command_that_records_takes_config_and_one_device_default():
+    from langpref.cli.common import DEFAULT_DEVICE
+    from langpref.cli_config import COMMANDS, RERUN
+    from langpref.model.config import TrainConfig
+
+    recording = {name for name, (_, _, options, _) in COMMANDS.items() if RERUN in options}
+    assert {"train", "generate", "import", "learn-reward", "improve", "bank augment", "study export"} <= recording
+    assert {f"experiment {name}" for name in ("alignment", "observations", "reward", "active")} <= recording
+    p = parsers()
+    for name in recording:
+        assert "--config" in {o for a in p[name]._actions for o in a.option_strings}, name
+    devices = {name: a.default for name, q in p.items() for a in q._actions if "--device" in a.option_strings}
+    assert {"train", "evaluate", "experiment observations"} <= set(devices)
+    assert set(devices.values()) == {DEFAULT_DEVICE} == {TrainConfig().device}

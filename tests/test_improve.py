@@ -226,19 +226,29 @@ def test_experiment_refuses_a_zero_override_and_writes_nothing(tmp_path, capsys,
     assert "must" in capsys.readouterr().err and not out.exists()
 
 
-def test_experiment_command_records_every_non_default_option(tmp_path, monkeypatch):
-    """The command an experiment writes into its .md/.json reproduces it: --seeds, --iterations and --phrasings."""
+def test_experiment_command_is_the_command_line_that_ran_it(tmp_path, monkeypatch, capsys):
+    """The command an experiment writes into its .md/.json is the one that ran it (without --json); from Python,
+    its base command, the options being in the summary's configs."""
     from langpref.experiments.improve import run_improve_experiment
     from langpref.feedback import HumanConfig
 
     monkeypatch.chdir(tmp_path)
     data = write_features_dataset(tmp_path / "d")
     phrasings = Path(__file__).resolve().parents[1] / "heldout" / "utterances.json"
-    cfg = ImproveConfig(seeds=2, iterations=2, human=HumanConfig(phrasings=str(phrasings)))
-    res = run_improve_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
+    argv = ["experiment", "improve", "--env", "metaworld", "--data", str(data), "--perfect-latent"]
+    argv += ["--seeds", "2", "--iterations", "2", "--phrasings", str(phrasings)]
+    assert main([*argv, "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
     assert Path(res["figure"]).parent == Path("results/improve/metaworld-perfect-phrasings")
-    for flag in ("--seeds 2", "--iterations 2", f"--phrasings {phrasings}"):
-        assert flag in res["command"]
+    assert res["command"] == " ".join(["langpref", *argv])
+    assert f"`{res['command']}`" in Path(res["figure"]).with_suffix(".md").read_text()
+    cfg = ImproveConfig(seeds=2, iterations=2, human=HumanConfig(phrasings=str(phrasings)))
+    res = run_improve_experiment("metaworld", data, None, tmp_path / "o", perfect=True, config=cfg, progress=False)
+    assert (
+        res["command"]
+        == f"langpref experiment improve --env metaworld --data {data} --perfect-latent --out {tmp_path / 'o'}"
+    )
+    assert res["strategies"]["paper"]["config"]["human"]["phrasings"] == str(phrasings)
 
 
 def test_run_cache_outlives_an_option_added_later_but_not_a_changed_one(tmp_path):

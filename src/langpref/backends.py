@@ -17,11 +17,13 @@ import os
 import pickle
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import Any, Literal, get_args
 
 from langpref.errors import LangprefError
 
-BACKENDS = ("local", "ray")
+Backend = Literal["local", "ray"]
+"""Where jobs run: local worker processes or Ray tasks."""
+BACKENDS: tuple[str, ...] = get_args(Backend)
 _SETUP_CACHE: dict[tuple, Any] = {}
 
 

@@ -10,7 +10,8 @@ names predate this module.
 
 `@command(name, help, options)` registers a command; `make_parser` builds only the options of the command being
 run, so `--help` imports nothing heavy. `record(args, where, config)` writes the resolved config of a command with
-its command line and langpref's version.
+its command line and langpref's version; a command that records takes `RERUN` (`--config PATH`), which reruns the
+recorded command line with the options given after it overriding the record's (`expand_rerun`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 from typing import Any
+
+from langpref.errors import LangprefError
 
 Options = Callable[[argparse.ArgumentParser], None]
 COMMANDS: dict[str, tuple[str, str | None, list[Options], Callable[[argparse.Namespace], None]]] = {}
@@ -62,13 +65,24 @@ def _comma_tuple(item: type):
 
 
 def _base_type(hint: Any) -> Any:
-    """`X | None` -> X; `tuple[T, ...]` -> a parser of "a,b,c" into a tuple of T."""
+    """`X | None` -> X; `tuple[T, ...]` -> a parser of "a,b,c" into a tuple of T; `Literal[a, b]` -> the type of a."""
     args = [a for a in typing.get_args(hint) if a is not type(None)]
     if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:
         return _base_type(args[0])
+    if typing.get_origin(hint) is typing.Literal:
+        return type(args[0])
     if typing.get_origin(hint) is tuple:
         return _comma_tuple(args[0])
     return hint
+
+
+def literal_choices(hint: Any) -> tuple | None:
+    """The values of a `Literal[...]` field (also of `Literal[...] | None`): its flag's `choices`; else None."""
+    if typing.get_origin(hint) is typing.Literal:
+        return typing.get_args(hint)
+    if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:
+        return next((c for a in typing.get_args(hint) if (c := literal_choices(a)) is not None), None)
+    return None
 
 
 def _default(f: dataclasses.Field) -> Any:
@@ -102,6 +116,8 @@ def add_config(
         aliases = spec.pop("aliases", ())
         text = spec.pop("help", None) or docs.get(f.name, "")
         kw: dict[str, Any] = {"dest": name}
+        if literal_choices(hint) is not None and "choices" not in spec:
+            spec["choices"] = literal_choices(hint)
         if hint is bool:
             flag = flag if default is False or flag.startswith("--no-") else "--no-" + flag[2:]
             kw["action"] = "store_true" if default is False else "store_false"
@@ -170,6 +186,102 @@ def config(where: str, opts: dict | Callable[[], dict] | None = None, **kw: Any)
     return add
 
 
+RERUN_HELP = (
+    "rerun the command recorded in this resolved config (COMMAND.config.json, STEM.config.json): its command line, "
+    "with the options given here after it, so these override the record's (a switch the record turned on is turned "
+    "off with its --no- form); relative paths are read from the current directory, as when it ran"
+)
+RERUN = opt("--config", metavar="PATH", type=Path, help=RERUN_HELP)
+"""The `--config PATH` option of every command that records its resolved config (`record`)."""
+
+
+def command_of(args: argparse.Namespace, shown: bool = False) -> str:
+    """The command line that ran (with `--config`, the recorded one followed by the options given with it);
+    `shown`: without `--json`, which changes only how the result is printed (for a command written into results)."""
+    return shlex.join(["langpref", *(a for a in args.argv if not (shown and a == "--json"))])
+
+
+def _command_name(argv: list[str]) -> str | None:
+    """The registered command `argv` starts with (its longest match), if any."""
+    words = list(itertools.takewhile(lambda a: not a.startswith("-"), argv))
+    return next((" ".join(words[:n]) for n in range(len(words), 0, -1) if " ".join(words[:n]) in COMMANDS), None)
+
+
+def expand_rerun(argv: list[str], parser_for: Callable[[list[str]], argparse.ArgumentParser]) -> list[str]:
+    """`argv` with `--config PATH` replaced by the command line recorded at PATH, for a command that takes
+    `--config` (`RERUN`): the recorded arguments, less the options `argv` gives again, then the others of `argv`
+    (`parser_for(argv)` builds the parser that says which tokens are an option's values). Any other `argv` is
+    returned as it is (argparse then reports a misplaced `--config`)."""
+    at = next((i for i, a in enumerate(argv) if a == "--config" or a.startswith("--config=")), None)
+    name = _command_name(argv)
+    if at is None or name is None or RERUN not in COMMANDS[name][2]:
+        return argv
+    if argv[at] == "--config":
+        if at + 1 >= len(argv):
+            return argv
+        where, rest = argv[at + 1], argv[:at] + argv[at + 2 :]
+    else:
+        where, rest = argv[at].split("=", 1)[1], argv[:at] + argv[at + 1 :]
+    try:
+        recorded = json.loads(Path(where).read_text())["command"]
+    except FileNotFoundError:
+        raise LangprefError(f"--config {where}: no such file; give the .config.json a command wrote") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise LangprefError(
+            f"--config {where} is not a resolved config written by langpref ({type(exc).__name__}); give the "
+            ".config.json a command wrote"
+        ) from None
+    words = shlex.split(recorded)[1:]
+    if _command_name(words) != name:
+        raise LangprefError(f"--config {where} records `{recorded[:60]}`, not `langpref {name}`; run that command")
+    given = rest[len(name.split()) :]
+    return [*_without_given(_leaf(parser_for(words), name), words, given), *given]
+
+
+def _leaf(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    """The parser of command `name` inside the top-level `parser`."""
+    for word in name.split():
+        (sub,) = (a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        parser = sub.choices[word]
+    return parser
+
+
+def _without_given(p: argparse.ArgumentParser, recorded: list[str], given: list[str]) -> list[str]:
+    """`recorded` without the options (and their values) whose destination `given` sets again, so that a rerun's
+    record does not grow with each override. Options that accumulate (`append`) are kept: argparse adds to them."""
+    actions = p._option_string_actions
+
+    def action(token: str) -> argparse.Action | None:
+        return actions.get(token.split("=", 1)[0]) if token.startswith("-") else None
+
+    again = {a.dest for a in map(action, given) if a is not None}
+    out, i = [], 0
+    while i < len(recorded):
+        a = action(recorded[i])
+        replaced = a is not None and a.dest in again and a.nargs in (None, 0)
+        if not replaced or isinstance(a, argparse._AppendAction):
+            out.append(recorded[i])
+            i += 1
+        else:
+            i += 1 if "=" in recorded[i] or a.nargs == 0 else 2
+    return out
+
+
+def _add_inverse_switches(p: argparse.ArgumentParser) -> None:
+    """For each on/off switch, its opposite (`--x` and `--no-x`), hidden from `--help`, so that a rerun with
+    `--config` can turn off a switch its record turned on."""
+    taken = {o for a in p._actions for o in a.option_strings}
+    for action in list(p._actions):
+        if not isinstance(action, argparse._StoreTrueAction | argparse._StoreFalseAction) or not action.option_strings:
+            continue
+        flag = action.option_strings[0]
+        other = "--" + flag[5:] if flag.startswith("--no-") else "--no-" + flag[2:]
+        if other not in taken:
+            value = not isinstance(action, argparse._StoreTrueAction)
+            p.add_argument(other, dest=action.dest, action="store_const", const=value, help=argparse.SUPPRESS)
+            taken.add(other)
+
+
 def emit(obj: Any, as_json: bool, human: Callable[[Any], str] | None = None) -> None:
     print(json.dumps(obj) if as_json else human(obj) if human else json.dumps(obj, indent=2))
 
@@ -183,11 +295,11 @@ def record(args: argparse.Namespace, where: str | Path, config: Any = None, **in
         config = {
             k: v
             for k, v in vars(args).items()
-            if k not in ("func", "argv", "json", "command", "experiment", "study_command", "bank_command")
+            if k not in ("func", "argv", "json", "command", "experiment", "study_command", "bank_command", "config")
         }
     out = {
         "langpref_version": __version__,
-        "command": shlex.join(["langpref", *args.argv]),
+        "command": command_of(args),
         "config": {**inputs, "config": config} if inputs else config,
     }
     Path(where).parent.mkdir(parents=True, exist_ok=True)
@@ -222,4 +334,6 @@ def make_parser(
         if argv is None or argv[: len(group) + 1] == [*group, leaf]:
             for add in options:
                 add(p)
+            if RERUN in options:
+                _add_inverse_switches(p)
     return parser

@@ -33,9 +33,11 @@ import sys
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 
+from langpref.dataset.storage import Split
 from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.language import LanguageHuman, LanguageQuery, language_pairs
@@ -43,8 +45,12 @@ from langpref.feedback.space import LatentSpace
 from langpref.propose import GENERATED
 from langpref.reward import RewardConfig, RewardLearner
 
-STRATEGIES = ("paper", "history")
-OBJECTIVES = ("cosine", "printed")
+Strategy = Literal["paper", "history"]
+Objective = Literal["cosine", "printed"]
+CandidateSplit = Literal["train", "val", "test", "generated"]
+"""A dataset split, or `generated` (`langpref.propose.GENERATED`)."""
+STRATEGIES: tuple[str, ...] = get_args(Strategy)
+OBJECTIVES: tuple[str, ...] = get_args(Objective)
 
 
 @dataclass
@@ -57,18 +63,18 @@ class ImproveConfig:
     """Runs (the paper's 100); each draws its own human weights w and start."""
     seed: int = 0
     """Master seed: the same seed gives the same numbers."""
-    candidate_split: str = "test"
+    candidate_split: CandidateSplit = "test"
     """The candidate set C the argmax searches (and whose best/worst define the normalised reward); `generated`:
     the base split plus new trajectories made in the simulator (`langpref.propose`)."""
-    base_split: str | None = None
+    base_split: Split | None = None
     """With candidates `generated`: the split of the start trajectory, whose trajectories stay candidates and whose
     best/worst define the normalised reward (above 1: better than any trajectory of it); None: test."""
     generated_out: str | None = None
     """With candidates `generated`: also store every generated trajectory shown as a dataset in this directory (it
     replays from its stored parameters and seed; `langpref render` makes its video)."""
-    strategy: str = "paper"
+    strategy: Strategy = "paper"
     """`paper` (Eq. 4, last feedback only) or `history` (reward learned from all feedback so far)."""
-    objective: str = "cosine"
+    objective: Objective = "cosine"
     """`paper` only: Eq. 4 as the text describes it, `cosine`: cos(phi' - phi^t, psi_l), or as printed, `printed`:
     psi_l . (phi' - phi^t) / (|phi'| |phi^t|); see the module docstring."""
     exclude_shown: bool = False

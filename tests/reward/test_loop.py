@@ -384,17 +384,21 @@ def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
     assert "| language |" in (tmp_path / "p" / "prior.md").read_text()
 
 
-def test_experiment_records_the_command_that_reproduces_it(tmp_path, monkeypatch):
+def test_experiment_records_the_command_that_ran_it(tmp_path, monkeypatch, capsys):
+    """From the command line, the command that ran it (without --json); from Python, its base command (the options
+    are in the summary's configs). Each setting has its own default output."""
     from langpref.experiments.reward import run_reward_experiment
 
     monkeypatch.chdir(tmp_path)
     data = write_dataset(tmp_path / "d", "metaworld", n=40)
-    cfg = LearnRewardConfig(queries=2, humans=1, seeds=1, reward=RewardConfig(model="mlp"))
-    res = run_reward_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
+    argv = ["experiment", "reward", "--env", "metaworld", "--data", str(data), "--perfect-latent"]
+    argv += ["--queries", "2", "--humans", "1", "--seeds", "1", "--reward-model", "mlp"]
+    assert main([*argv, "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
     assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-mlp")  # not the linear model's runs
-    for flag in ("--perfect-latent", "--queries 2", "--humans 1", "--seeds 1", "--reward-model mlp"):
-        assert flag in res["command"]
+    assert res["command"] == " ".join(["langpref", *argv])
     cfg = LearnRewardConfig(queries=2, humans=1, seeds=1, human=HumanConfig(phrasing_split="all"))
     res = run_reward_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
     assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-bank-all")
-    assert res["command"].endswith("--phrasing-split all")
+    assert res["command"].endswith("--perfect-latent --out results/reward/metaworld-perfect-bank-all")
+    assert res["methods"]["language"]["config"]["human"]["phrasing_split"] == "all"

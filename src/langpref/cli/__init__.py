@@ -5,6 +5,7 @@ A command's options come from its config dataclass (`config(...)`, see `langpref
 the field's docstring as its help); only inputs that are not config fields (paths, `--json`) are declared here. Each
 command that writes a directory or file writes its resolved config, command line and langpref version beside it:
 `NAME.config.json` inside an output directory (NAME the command) or beside an output file (NAME the file's stem).
+`--config PATH` reruns such a record: its command line, with the options given after it overriding the record's.
 
 Heavy modules (simulators, torch, transformers) are imported inside the command that needs them, and a command's
 options are built only when that command runs, so `--help` is instant. Every `--json` prints exactly one JSON
@@ -42,7 +43,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         "Teach robots with comparative language feedback: datasets, a shared latent "
         "space of trajectories and language, trajectory improvement and reward learning. A command "
         "that writes a directory or a file writes its resolved config beside it: "
-        "DIR/COMMAND.config.json, STEM.config.json.",
+        "DIR/COMMAND.config.json, STEM.config.json; `--config` on that command reruns it.",
         GROUPS,
         argv,
     )
@@ -52,9 +53,10 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser(argv).parse_args(argv)
-    args.argv = argv
     try:
+        argv = cc.expand_rerun(argv, build_parser)  # `--config PATH`: the record's command line, overridden
+        args = build_parser(argv).parse_args(argv)
+        args.argv = argv
         args.func(args)
     except LangprefError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 
 from langpref.cli.common import JSON
-from langpref.cli_config import command, emit, opt, path, record
+from langpref.cli_config import RERUN, command, emit, opt, path, record
 from langpref.errors import LangprefError
 
 WHERE = opt(
@@ -131,6 +131,7 @@ def _human(result) -> str:
         opt("--force", action="store_true", help="overwrite --out if it exists (never the bank or task file)"),
         SEED,
         JSON,
+        RERUN,
     ],
     "Negations of the opposite direction (Don't be so slow.), intensifiers (Move much faster.) and indirect forms "
     "(It should be faster.), built from templates over the words of the bank's train phrasings. The file is a "

@@ -8,7 +8,10 @@ from langpref.cli_config import opt, path
 
 TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
 SPLITS = ("train", "val", "test")
-BACKENDS = ("local", "ray")
+DEVICES = ("auto", "cpu", "cuda")
+DEFAULT_DEVICE = "auto"
+"""One default for every command that takes `--device` (`train`'s `TrainConfig.device`, `evaluate`): `auto` is
+CUDA where there is one, else the CPU."""
 # Command groups: name -> (help, dest, metavar)
 GROUPS = {
     "experiment": ("the paper's experiments, one command each", "experiment", "EXPERIMENT"),
@@ -22,6 +25,12 @@ DIR = path("dir", help="dataset directory")
 MODEL = path("--model", required=True, help="checkpoint directory (`langpref train`)")
 DATA = path("--data", required=True, help="dataset directory (`langpref generate`)")
 TASK = opt("--env", required=True, metavar="TASK", help=TASK_HELP)
+DEVICE = opt(
+    "--device",
+    choices=DEVICES,
+    default=DEFAULT_DEVICE,
+    help="where the model runs: auto (CUDA when there is one, else the CPU), cpu or cuda (default %(default)s)",
+)
 
 
 def load(args: argparse.Namespace, with_data: bool = True):
@@ -31,4 +40,5 @@ def load(args: argparse.Namespace, with_data: bool = True):
     from langpref.model.train import resolve_device
 
     dataset = load_dataset(args.data) if with_data else None
-    return load_model(args.model, device=resolve_device(getattr(args, "device", "cpu")), dataset=dataset), dataset
+    device = resolve_device(getattr(args, "device", "cpu"))  # commands without --device run on the CPU
+    return load_model(args.model, device=device, dataset=dataset), dataset

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from langpref.cli.common import BACKENDS, DIR, JSON
-from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+from langpref.cli.common import DIR, JSON
+from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.errors import LangprefError
 
 
@@ -16,13 +16,10 @@ from langpref.errors import LangprefError
     [
         config(
             "langpref.dataset.generate:GenerateConfig",
-            {
-                "env": {"metavar": "TASK"},
-                "backend": {"choices": BACKENDS},
-                "frames.frame_size": {"metavar": "WIDTH,HEIGHT"},
-            },
+            {"env": {"metavar": "TASK"}, "frames.frame_size": {"metavar": "WIDTH,HEIGHT"}},
         ),
         JSON,
+        RERUN,
     ],
     "Roll out closed-loop controllers whose parameters are drawn by Latin hypercube sampling so that every "
     "feature is covered, and store the trajectories with their features.",
@@ -56,6 +53,7 @@ def cmd_generate(args: argparse.Namespace) -> None:
             },
         ),
         JSON,
+        RERUN,
     ],
     "Read a recording of your own robot into a langpref dataset of the task described by a task file (TOML: "
     "name, description, features, features_from, utterances). A plain folder holds NAME.npz episodes "
@@ -174,6 +172,7 @@ def cmd_inspect(args: argparse.Namespace) -> None:
         opt("--height", type=int, default=240, help="pixels (default %(default)s)"),
         opt("--fps", type=int, default=40, help="frame rate, one frame per stored step (default %(default)s)"),
         JSON,
+        RERUN,
     ],
     "Replays the stored simulator states offscreen (EGL) into a video.",
 )
@@ -191,6 +190,7 @@ def cmd_render(args: argparse.Namespace) -> None:
     [
         path("--out", default=Path("demo_out"), help="where the demo writes (default demo_out/)"),
         opt("--workers", type=int, default=None, help="parallel worker processes (default: all cores)"),
+        RERUN,
     ],
 )
 def cmd_demo(args: argparse.Namespace) -> None:

@@ -6,8 +6,9 @@ import argparse
 import importlib
 from pathlib import Path
 
-from langpref.cli.common import DATA, JSON, MODEL, SPLITS, TASK, load
-from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, SPLITS, TASK, load
+from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
+from langpref.experiments.registry import EXPERIMENTS
 from langpref.extras import require
 
 
@@ -19,7 +20,7 @@ from langpref.extras import require
             "langpref.model.config:TrainConfig",
             lambda: {
                 "model.lang_model": {"metavar": "NAME_OR_PATH"},
-                "device": {"choices": ("auto", "cpu", "cuda")},
+                "device": {"choices": DEVICES},
                 "stage1_epochs": "--epochs",
                 "stage1_batch_size": "--batch-size",
                 "stage1_lr": "--lr",
@@ -35,6 +36,7 @@ from langpref.extras import require
             },
         ),
         JSON,
+        RERUN,
     ],
     "Stage 1 trains the trajectory encoder and a language head with the language model frozen; stage 2 "
     "co-finetunes the transformer (paper Sec. 4.1). Keeps the epoch with the best validation accuracy, stops "
@@ -87,7 +89,7 @@ def cmd_train(args: argparse.Namespace) -> None:
             default=None,
             help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split",
         ),
-        opt("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="default %(default)s"),
+        DEVICE,
         opt(
             "--oracle",
             default=None,
@@ -187,6 +189,7 @@ def cmd_embed(args: argparse.Namespace) -> None:
         path("--out", required=True, help="image to write (.png, .pdf, .svg)"),
         opt("--split", default=None, choices=SPLITS, help="default: every trajectory"),
         JSON,
+        RERUN,
     ],
 )
 def cmd_visualize(args: argparse.Namespace) -> None:
@@ -207,31 +210,32 @@ def cmd_utterances(args: argparse.Namespace) -> None:
 
 @command(
     "experiment alignment",
-    "Appendix C: test accuracy, co-finetuned vs frozen language model",
+    EXPERIMENTS["alignment"].help,
     [
         TASK,
         path("--data", default=None, help="dataset directory (default data/ENV)"),
-        path("--out", default=None, help="output directory (default results/alignment/ENV)"),
+        path("--out", default=None, help=f"output directory (default {EXPERIMENTS['alignment'].default_out})"),
         opt("--force", action="store_true", help="overwrite models already in --out"),
         JSON,
+        RERUN,
     ],
     "Trains once (the frozen model is stage 1 of the co-finetuned one), evaluates both on the test split with "
     "the bank's test phrasings, writes alignment.md/.json.",
 )
 def cmd_experiment_alignment(args: argparse.Namespace) -> None:
-    from langpref.experiments.alignment import alignment_table, default_out, run_alignment_experiment
+    from langpref.experiments.alignment import alignment_table, default_out
 
     args.data, args.out = args.data or Path("data") / args.env, args.out or default_out(args.env)
-    summary = run_alignment_experiment(args.env, args.data, args.out, force=args.force)
+    summary = EXPERIMENTS["alignment"].runner()(args.env, args.data, args.out, force=args.force)
     record(args, Path(args.out) / "alignment.config.json")
     emit(summary, args.json, lambda s: alignment_table([s]) + f"\n(wrote {args.out}/alignment.md and alignment.json)")
 
 
 @command(
     "experiment observations",
-    "issue 19: state vs camera images vs both as the trajectory encoder's input",
+    EXPERIMENTS["observations"].help,
     [
-        config("langpref.experiments.observations:ObservationsConfig", {"env": {"metavar": "TASK"}}),
+        config(EXPERIMENTS["observations"].config, {"env": {"metavar": "TASK"}}),
         config(
             "langpref.model.config:TrainConfig",
             {"train.stage1_epochs": "--epochs", "train.stage2_epochs": "--finetune-epochs"},
@@ -244,18 +248,20 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
             ),
         ),
         JSON,
+        RERUN,
     ],
     "Trains one model per observation kind (state, images, images+state) on a dataset with frames (made with "
     "`generate --images` when missing), each in a fresh process, and writes observations.md/.json with test "
     "(and --heldout) accuracy, per-feature accuracy, training time, peak memory and a latent-space figure per model.",
 )
 def cmd_experiment_observations(args: argparse.Namespace) -> None:
-    from langpref.experiments.observations import ObservationsConfig, observations_table, run_observations_experiment
+    from langpref.experiments.observations import observations_table
     from langpref.model.config import TrainConfig
 
     require("plots", "langpref experiment observations")  # each model's latent-space figure
-    cfg = from_args(ObservationsConfig, args).resolved()
+    experiment = EXPERIMENTS["observations"]
+    cfg = from_args(experiment.config_class(), args).resolved()
     train_cfg = from_args(TrainConfig, args, "train.")
-    summary = run_observations_experiment(cfg, train_config=train_cfg)
+    summary = experiment.runner()(cfg, train_config=train_cfg)
     record(args, Path(str(cfg.out)) / "observations.config.json", cfg, train=train_cfg.to_dict())
     emit(summary, args.json, lambda s: observations_table(s) + f"\n(wrote {cfg.out}/observations.md and .json)")

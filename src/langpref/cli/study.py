@@ -8,7 +8,7 @@ from pathlib import Path
 
 from langpref import cli_config as cc
 from langpref.cli.common import JSON, SPLITS
-from langpref.cli_config import command, config, emit, from_args, record
+from langpref.cli_config import RERUN, command, config, emit, from_args, record
 
 
 @command(
@@ -106,7 +106,7 @@ def cmd_study_simulate(args: argparse.Namespace) -> None:
 @command(
     "study export",
     "CSV tables, analyses and figures of a study (HTML report + JSON)",
-    [config("langpref.study.config:ExportConfig"), JSON],
+    [config("langpref.study.config:ExportConfig"), RERUN, JSON],
     "Writes the tables, summary.json, learned_rewards.json, the figures and report.html into --out.",
 )
 def cmd_study_export(args: argparse.Namespace) -> None:

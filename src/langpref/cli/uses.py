@@ -4,37 +4,32 @@ latent space, with synthetic humans."""
 from __future__ import annotations
 
 import argparse
-import importlib
 from pathlib import Path
 from typing import Any
 
 from langpref import cli_config as cc
-from langpref.cli.common import BACKENDS, JSON, SPLITS, TASK
-from langpref.cli_config import beside, command, config, emit, from_args, opt, path, record
+from langpref.cli.common import JSON, TASK
+from langpref.cli_config import RERUN, beside, command, command_of, config, emit, from_args, opt, path, record
+from langpref.experiments.registry import EXPERIMENTS, Experiment, get_experiment
 from langpref.extras import require
 
 
 def _use_opts(experiment: bool = False) -> dict[str, Any]:
-    """The flags of the fields of the synthetic human, the reward model and the splits, where they differ from the
-    derived ones."""
-    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, FEATURE_SCALES, HumanConfig
-    from langpref.feedback.space import PHRASING_SPLITS
-    from langpref.improve import OBJECTIVES, STRATEGIES
-    from langpref.reward import DEFAULT_WEIGHT_DECAY, LOSSES, MODELS, NEGATIVES, feedback_choices
-    from langpref.reward.answer_model import LEARNERS
+    """The flags of the synthetic human, the reward model and the splits where they differ from the derived ones
+    (`choices` come from the fields' `Literal` types, the feedback kinds from their registry)."""
+    from langpref.feedback.humans import HumanConfig
+    from langpref.reward import DEFAULT_WEIGHT_DECAY, feedback_choices
 
     docs, out = cc.field_docs(HumanConfig), (lambda s: f" Results go to ENV-{s} unless --out." if experiment else "")
     return {
-        "human.phrasing_split": {"choices": PHRASING_SPLITS, "help": docs["phrasing_split"] + out("bank-SPLIT")},
+        "human.phrasing_split": {"help": docs["phrasing_split"] + out("bank-SPLIT")},
         "human.phrasings": {"metavar": "FILE", "help": docs["phrasings"] + out("phrasings")},
-        "human.feature_scale": {"choices": FEATURE_SCALES, "help": docs["feature_scale"] + out("paper-scale")},
-        "human.direction": {"choices": DIRECTION_RULES, "help": docs["direction"] + out("toward-best")},
-        "human.feature_rule": {"choices": FEATURE_RULES, "help": docs["feature_rule"] + out("largest-change")},
+        "human.feature_scale": {"help": docs["feature_scale"] + out("paper-scale")},
+        "human.direction": {"help": docs["direction"] + out("toward-best")},
+        "human.feature_rule": {"help": docs["feature_rule"] + out("largest-change")},
         "human.vague": {"help": docs["vague"] + out("vagueP")},
-        "reward.model": {"flag": "--reward-model", "choices": MODELS},
+        "reward.model": "--reward-model",
         "reward.hidden": "--reward-hidden",
-        "reward.loss": {"choices": LOSSES},
-        "reward.negatives": {"choices": NEGATIVES},
         "reward.negative_split": None,
         "reward.weight_decay": {
             "help": "L2 prior on r_xi's parameters, against the weighted mean loss over feedback "
@@ -42,15 +37,9 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
             + ", ".join(f"{v:g} for {k}" for k, v in DEFAULT_WEIGHT_DECAY.items())
             + "; `langpref experiment prior` shows how the linear one was chosen)"
         },
-        "candidate_split": {"flag": "--candidates", "choices": (*SPLITS, "generated")},
-        "base_split": {"choices": SPLITS},
+        "candidate_split": "--candidates",
         "generated_out": {"metavar": "DIR"},
-        "query_split": {"choices": SPLITS},
-        "eval_split": {"choices": SPLITS},
-        "strategy": {"choices": STRATEGIES},
-        "objective": {"choices": OBJECTIVES},
         "feedback": {"required": True, "choices": feedback_choices()},
-        "learner": {"choices": LEARNERS},
     }
 
 
@@ -109,6 +98,7 @@ def _generation(args: argparse.Namespace, space):
         PROPOSE,
         path("--figure", default=None, help="also draw the curve into this PNG"),
         JSON,
+        RERUN,
     ],
     "From a random trajectory of the candidate split, N rounds of synthetic language feedback, each followed by "
     "the argmax over the candidates of Eq. 4's cosine objective (strategy paper) or of the reward learned from "
@@ -160,6 +150,7 @@ def cmd_improve(args: argparse.Namespace) -> None:
         ),
         path("--figure", default=None, help="also draw the curves into this PNG"),
         JSON,
+        RERUN,
     ],
     "Each query shows one train trajectory (language: the human says how to improve it; L_Explicit + "
     "L_Implicit, Eq. 5-9) or a random train pair (comparison: Bradley-Terry). After every query, r_xi is refit "
@@ -225,7 +216,8 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 def cmd_experiment_uses(args: argparse.Namespace) -> None:
     from langpref.experiments.common import SweepConfig
 
-    require("plots", f"langpref experiment {args.experiment}")  # every experiment ends with its figure
+    experiment = get_experiment(args.experiment)
+    require("plots", f"langpref experiment {experiment.name}")  # every experiment ends with its figure
     kw = {
         "env": args.env,
         "data": args.data,
@@ -235,11 +227,8 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
         "force": args.force,
         "sweep": from_args(SweepConfig, args),
     }
-    module = "improve" if EXPERIMENTS[args.experiment][1] == "ImproveConfig" else "reward"
-    cfg = from_args(getattr(importlib.import_module(f"langpref.{module}"), EXPERIMENTS[args.experiment][1]), args)
-    runner = {"improve": "improve", "active": "active", "generate": "generate"}.get(args.experiment, "reward")
-    run = getattr(importlib.import_module(f"langpref.experiments.{runner}"), f"run_{args.experiment}_experiment")
-    summary = run(**kw, config=cfg)
+    cfg = from_args(experiment.config_class(), args)
+    summary = experiment.runner()(**kw, config=cfg, command=command_of(args, shown=True))
     md = Path(summary["figure"]).with_suffix(".md")
     record(
         args,
@@ -254,62 +243,26 @@ def cmd_experiment_uses(args: argparse.Namespace) -> None:
     )
 
 
-PHRASING = ("human.phrasing_split", "human.phrasings", "human.feature_scale", "human.direction")
-REWARD_FLAGS = ("seeds", "humans", "queries", "reward.model", *PHRASING)
-EXPERIMENTS = {  # name: what it is, its config (in langpref.improve or langpref.reward), the fields given a flag
-    "improve": (
-        "Fig. 4: iterative improvement, Eq. 4 (cosine and as printed) and the history strategy, 100 seeds",
-        "ImproveConfig",
-        ("iterations", "seeds", *PHRASING),
-    ),
-    "reward": (
-        "Fig. 5: reward learning, language vs comparisons, 3 humans x 3 seeds, Q = 40",
-        "LearnRewardConfig",
-        REWARD_FLAGS,
-    ),
-    "ablation": ("Fig. 6: language reward loss, explicit + implicit vs each alone", "LearnRewardConfig", REWARD_FLAGS),
-    "prior": (
-        "the L2 prior's strength per reward-learning method, chosen on the val split",
-        "LearnRewardConfig",
-        REWARD_FLAGS,
-    ),
-    "active": (
-        "active queries: language x {random, lal-infogain, infogain} and comparisons x {random, infogain, "
-        "volume-removal}, and both kinds chosen per query by information per modelled second (mixed), 10 humans x 3 "
-        "seeds, Q = 40",
-        "LearnRewardConfig",
-        (*REWARD_FLAGS, "candidates", "posterior_samples", "query_batch", "language_seconds", "comparison_seconds"),
-    ),
-    "generate": (
-        "issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "
-        "best test trajectory (10 humans x 3 seeds, Q = 40)",
-        "ImproveConfig",
-        ("iterations", "seeds"),
-    ),
-}
-ACTIVE_OPTS = {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}}
-for _name, (_text, _cls, _only) in EXPERIMENTS.items():
-    command(
-        f"experiment {_name}",
-        _text,
-        [
-            TASK,
-            *_space_options(experiment=True),
-            path(
-                "--out",
-                default=None,
-                help=f"output directory (default results/{_name}/ENV, or ENV-perfect"
-                + (")" if _name == "improve" else ", ENV-mlp)"),
-            ),
-            config(
-                f"langpref.{'improve' if _cls == 'ImproveConfig' else 'reward'}:{_cls}",
-                lambda n=_name: {**_use_opts(True), **(ACTIVE_OPTS if n == "active" else {})},
-                only=_only,
-            ),
-            opt("--force", action="store_true", help="discard finished runs in --out and start over"),
-            config("langpref.experiments.common:SweepConfig", {"backend": {"choices": BACKENDS}}),
-            JSON,
-        ],
-        _text + ". Writes NAME.json, NAME.png and NAME.md (a section for docs/results.md); an interrupted run "
-        "resumes without redoing finished seeds.",
-    )(cmd_experiment_uses)
+def _experiment_options(experiment: Experiment) -> list[cc.Options]:
+    """The flags of `langpref experiment NAME` for an experiment of the latent space's uses."""
+    return [
+        TASK,
+        *_space_options(experiment=True),
+        path("--out", default=None, help=f"output directory (default {experiment.default_out})"),
+        config(experiment.config, lambda e=experiment: {**_use_opts(True), **e.options}, only=experiment.flags),
+        opt("--force", action="store_true", help="discard finished runs in --out and start over"),
+        config("langpref.experiments.common:SweepConfig"),
+        RERUN,
+        JSON,
+    ]
+
+
+for _experiment in EXPERIMENTS.values():
+    if _experiment.inputs == "space":
+        command(
+            f"experiment {_experiment.name}",
+            _experiment.help,
+            _experiment_options(_experiment),
+            _experiment.help + ". Writes NAME.json, NAME.png and NAME.md (a section for docs/results.md); an "
+            "interrupted run resumes without redoing finished seeds.",
+        )(cmd_experiment_uses)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from langpref.backends import run_jobs
+from langpref.backends import Backend, run_jobs
 from langpref.dataset.frames import FrameOptions, FrameSpec, load_frames, render_trajectory_frames, save_frames
 from langpref.dataset.storage import (
     DatasetMeta,
@@ -60,7 +60,7 @@ class GenerateConfig:
     """Master seed: the same seed gives the same dataset."""
     force: bool = False
     """Overwrite an existing dataset."""
-    backend: str = "local"
+    backend: Backend = "local"
     """Where the rollouts run: local worker processes, or Ray tasks, one per chunk of trajectories (pip install
     'langpref[ray]')."""
     ray_address: str | None = None

@@ -26,7 +26,7 @@ import zipfile
 from dataclasses import asdict, dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -38,7 +38,9 @@ from langpref.tasks.taskfile import load_stored_task
 SCHEMA_VERSION = 2
 FRAMES_SCHEMA_VERSION = 3
 READABLE_SCHEMAS = (1, 2, 3)
-SPLITS = ("train", "val", "test")
+Split = Literal["train", "val", "test"]
+"""A split of a dataset."""
+SPLITS: tuple[str, ...] = get_args(Split)
 _ARRAYS = ("observations", "actions", "step_features")
 _STATE = ("qpos", "qvel")
 

@@ -151,6 +151,7 @@ def run_active_experiment(
     force: bool = False,
     progress: bool = True,
     sweep: SweepConfig | None = None,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Every method of `METHODS` on `env` (`config`, a `LearnRewardConfig`, sets the rest: humans and seeds (default
     10 x 3), queries, candidates, posterior samples, the human); writes active.json/.png/.md."""
@@ -217,7 +218,7 @@ def run_active_experiment(
         "per_run_auc": {m: auc[m][:, 0].tolist() for m in methods},
         "per_run_auc_per_second": {m: auc_s[m][:, 0].tolist() for m in methods},
     }
-    return _save("active", env, data, model, out, space, base, fields, _markdown)
+    return _save("active", env, data, model, out, space, base, fields, _markdown, command)
 
 
 def answer_model_targets(results: dict[str, dict], contrasts: dict[str, dict]) -> dict[str, bool]:

@@ -1,4 +1,4 @@
-"""What the experiments share: where they read and write by default, the command line that reproduces them, the
+"""What the experiments share: where they read and write by default, their base command line, the
 finished-run cache that makes them resume, and the sweep that runs their jobs locally or on Ray.
 """
 
@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from langpref.backends import Backend
 from langpref.errors import LangprefError
 from langpref.experiments.alignment import default_model
 
@@ -60,7 +61,7 @@ class RunCache:
 class SweepConfig:
     """Where the runs of an experiment execute (each run is one task: a seed, or a human x seed x method)."""
 
-    backend: str = "local"
+    backend: Backend = "local"
     """local worker processes or Ray tasks."""
     workers: int = 1
     """Parallel workers (local processes, or CPUs of a local Ray instance)."""
@@ -136,26 +137,11 @@ def default_paths(
     return data, model, out
 
 
-def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path, extra: str = "") -> str:
+def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path) -> str:
+    """The base command of an experiment run from Python (its options are in the summary's configs); a run of
+    `langpref experiment` records its own command line instead."""
     where = "--perfect-latent" if model is None else f"--model {model}"
-    return f"langpref experiment {kind} --env {env} --data {data} {where} --out {out}{extra}"
-
-
-def cli_flags(base, default, names: tuple[str, ...]) -> str:
-    """The `langpref experiment` options that reproduce the config `base`: each of `names` where it differs from
-    `default`, where its language human's phrasings come from when that is not the default, and the humans' feature
-    scale and direction rule when not the defaults."""
-    flags = "".join(
-        f" --{k.replace('_', '-')} {getattr(base, k)}" for k in names if getattr(base, k) != getattr(default, k)
-    )
-    for k in ("feature_scale", "direction", "feature_rule", "vague", "temperature"):
-        if getattr(base.human, k) != getattr(default.human, k):
-            flags += f" --{k.replace('_', '-')} {getattr(base.human, k)}"
-    if base.human.phrasings:
-        return flags + f" --phrasings {base.human.phrasings}"
-    if base.human.phrasing_split != default.human.phrasing_split:
-        return flags + f" --phrasing-split {base.human.phrasing_split}"
-    return flags
+    return f"langpref experiment {kind} --env {env} --data {data} {where} --out {out}"
 
 
 def phrasing_variant(human) -> list[str]:

@@ -89,6 +89,7 @@ def run_generate_experiment(
     force: bool = False,
     progress: bool = True,
     sweep: SweepConfig | None = None,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Both comparisons (module docstring) with `config` (an `ImproveConfig`: seeds, iterations, the human)."""
 
@@ -150,14 +151,7 @@ def run_generate_experiment(
             "optimum_beats_best_test_for_60pct": bool((made > 1.0).mean() >= 0.6),
         },
         "propose": asdict(generation.cfg),
-        "command": command_line(
-            "generate",
-            env,
-            data,
-            model,
-            out,
-            f" --seeds {base.seeds}" + (f" --workers {sweep.workers}" if sweep.workers > 1 else ""),
-        ),
+        "command": command or command_line("generate", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     summary["figure"] = str(

@@ -18,7 +18,6 @@ from typing import Any
 from langpref.experiments.common import (
     RunCache,
     SweepConfig,
-    cli_flags,
     command_line,
     default_paths,
     figure_link,
@@ -90,6 +89,7 @@ def run_improve_experiment(
     force: bool = False,
     progress: bool = True,
     sweep: SweepConfig | None = None,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Every curve of `CURVES` with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and
     markdown."""
@@ -146,9 +146,7 @@ def run_improve_experiment(
         "strategies": results,
         "figure": str(figure),
         "paper": PAPER_FIG4,
-        "command": command_line(
-            "improve", env, data, model, out, cli_flags(base, ImproveConfig(), ("seeds", "iterations"))
-        ),
+        "command": command or command_line("improve", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")

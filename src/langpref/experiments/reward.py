@@ -25,7 +25,6 @@ import numpy as np
 from langpref.experiments.common import (
     RunCache,
     SweepConfig,
-    cli_flags,
     command_line,
     default_paths,
     figure_link,
@@ -291,19 +290,12 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _cli_flags(base) -> str:
-    """The `langpref experiment` options that reproduce `base` where it differs from the defaults."""
-    from langpref.reward import LearnRewardConfig
-
-    d = LearnRewardConfig()
-    model = f" --reward-model {base.reward.model}" if base.reward.model != d.reward.model else ""
-    active = ("candidates", "posterior_samples", "query_batch", "language_seconds", "comparison_seconds")
-    return cli_flags(base, d, ("humans", "seeds", "queries", *active)) + model
-
-
-def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown) -> dict[str, Any]:
+def _save(
+    kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown, command: str | None
+) -> dict[str, Any]:
     """The summary of an experiment (what every kind records, then `fields`), written as KIND.json and, through
-    `markdown(summary)`, KIND.md."""
+    `markdown(summary)`, KIND.md. `command`: the command line that ran it (`langpref experiment` passes its own;
+    None, from Python: the experiment's base command, whose options the summary's configs hold)."""
     summary = {
         "env": env,
         "data": str(data),
@@ -314,7 +306,7 @@ def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, 
         "seeds": base.seeds,
         "queries": base.queries,
         **fields,
-        "command": command_line(kind, env, data, model, out, _cli_flags(base)),
+        "command": command or command_line(kind, env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -323,13 +315,25 @@ def _save(kind: str, env: str, data, model, out, space, base, fields: dict[str, 
 
 
 def _finish(
-    kind: str, title: str, paper: str, env: str, results, space, data, model, out, base, targets, **extra: Any
+    kind: str,
+    title: str,
+    paper: str,
+    env: str,
+    results,
+    space,
+    data,
+    model,
+    out,
+    base,
+    targets,
+    command: str | None,
+    **extra: Any,
 ) -> dict[str, Any]:
     figure = plot_reward_curves(
         results, out / f"{kind}.png", f"{title}, {env}" + title_suffix(model is None, base.human)
     )
     fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}
-    return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper))
+    return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper), command)
 
 
 def run_reward_experiment(
@@ -343,6 +347,7 @@ def run_reward_experiment(
     force: bool = False,
     progress: bool = True,
     sweep: SweepConfig | None = None,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Language (L_Explicit + L_Implicit) vs comparisons with the paper's settings (or `config`, a
     `LearnRewardConfig` whose feedback is replaced); writes reward.json/.png/.md."""
@@ -376,6 +381,7 @@ def run_reward_experiment(
         out,
         base,
         targets,
+        command,
         ce_difference=paired_difference(ce["language"], ce["comparison"]),
         ce_language_lower=ce_lower_count(lang, comp),
     )
@@ -392,6 +398,7 @@ def run_ablation_experiment(
     force: bool = False,
     progress: bool = True,
     sweep: SweepConfig | None = None,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Language feedback with L_Explicit + L_Implicit, L_Explicit alone and L_Implicit alone; writes
     ablation.json/.png/.md."""
@@ -421,6 +428,7 @@ def run_ablation_experiment(
         out,
         base,
         targets,
+        command,
     )
 
 
@@ -484,6 +492,7 @@ def run_prior_experiment(
     force: bool = False,
     progress: bool = True,
     sweep: SweepConfig | None = None,
+    command: str | None = None,
     grid: tuple[float, ...] = PRIOR_GRID,
 ) -> dict[str, Any]:
     """Each method (language with both losses, comparisons, either language loss alone) at every weight decay of
@@ -518,7 +527,7 @@ def run_prior_experiment(
         "methods": results,
         "figure": str(figure),
     }
-    return _save("prior", env, data, model, out, space, base, fields, _prior_markdown)
+    return _save("prior", env, data, model, out, space, base, fields, _prior_markdown, command)
 
 
 def _prior_markdown(summary: dict[str, Any]) -> str:

@@ -6,13 +6,14 @@
     human = LanguageHuman(w, space.theta, space.table("test"), space.split("test"), space.feature_names, seed=0)
     human.answer(LanguageQuery(shown=5))                        # LanguageAnswer(text="Move faster.", ...)
 
-Each kind is one module with one `FeedbackKind` (`kind.py`), registered by name: `get_kind("comparison")`.
+Each kind is one module with one `FeedbackKind` (`kind.py`), registered by name: `get_kind("comparison")`; an
+installed package adds one through the entry-point group `langpref.feedback`.
 """
 
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.comparison import ComparisonAnswer, ComparisonHuman, ComparisonQuery
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, softmax, true_reward
-from langpref.feedback.kind import KINDS, FeedbackKind, get_kind, kind_of, random_query, register_kind
+from langpref.feedback.kind import KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query, register_kind
 from langpref.feedback.language import LanguageAnswer, LanguageHuman, LanguageQuery
 from langpref.feedback.space import (
     FeatureScale,
@@ -42,6 +43,7 @@ __all__ = [
     "PhraseTable",
     "build_latent_space",
     "get_kind",
+    "kind_names",
     "kind_of",
     "load_space",
     "normalised_reward",

@@ -19,11 +19,12 @@ How a human of each kind answers is in that kind's module: `langpref.feedback.la
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.space import file_table_name
+from langpref.feedback.space import PhrasingSplit, file_table_name
 
 Seed = int | np.random.Generator
 
@@ -56,12 +57,15 @@ def normalised_reward(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return (np.asarray(values, dtype=np.float64) - lo) / max(hi - lo, 1e-12)
 
 
-FEATURE_SCALES = ("standardised", "paper")
+FeatureScaleName = Literal["standardised", "paper"]
 """What theta(tau) the synthetic humans' reward weighs (see the module docstring)."""
-DIRECTION_RULES = ("reward", "toward-best")
+DirectionRule = Literal["reward", "toward-best"]
 """How the language human picks the direction of the feature it names (see `HumanConfig.direction`)."""
-FEATURE_RULES = ("eq10", "largest-change")
+FeatureRule = Literal["eq10", "largest-change"]
 """How the language human picks the feature it names (see `HumanConfig.feature_rule`)."""
+FEATURE_SCALES: tuple[str, ...] = get_args(FeatureScaleName)
+DIRECTION_RULES: tuple[str, ...] = get_args(DirectionRule)
+FEATURE_RULES: tuple[str, ...] = get_args(FeatureRule)
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -76,7 +80,7 @@ class HumanConfig:
 
     temperature: float = 1.0
     """Of the language human's softmax over features (Eq. 10 is temperature 1); small = always the best feature."""
-    phrasing_split: str = "test"
+    phrasing_split: PhrasingSplit = "test"
     """Bank split the language human draws its phrasings from (test: unseen by the model; `all`: every split, as the
     paper's human, which speaks "all language utterances of that feature")."""
     phrasings: str | None = None
@@ -84,15 +88,15 @@ class HumanConfig:
     heldout/utterances.json, phrasings written by people who never saw the bank."""
     rationality: float = 1.0
     """Of the comparison human, beta in sigmoid(beta (R_A - R_B)); 1 is Eq. 11, large is noiseless."""
-    feature_scale: str = "standardised"
+    feature_scale: FeatureScaleName = "standardised"
     """theta(tau) of both humans' reward w . theta: `standardised` (per-step mean, standardised by the train split;
     reward differences O(1)) or `paper` (Sec. 5.1: raw per-step features summed over the trajectory's steps; reward
     differences of tens of units, so both humans are nearly noiseless)."""
-    direction: str = "reward"
+    direction: DirectionRule = "reward"
     """The direction the language human says for the feature it picked (Eq. 10 does not say): `reward`, the one
     that raises its reward (sign of w_f), or `toward-best`, the one that moves tau^0 toward tau* (sign of theta*_f -
     theta0_f, the difference Eq. 10's softmax weighs; the sign of w_f when they are equal)."""
-    feature_rule: str = "eq10"
+    feature_rule: FeatureRule = "eq10"
     """How the language human picks the feature it names: `eq10` (the paper's softmax of w_f (theta*_f - theta0_f))
     or `largest-change`, a human no learner models: the feature whose raw value differs most between tau^0 and tau*
     (|theta*_f - theta0_f|, whatever its weight), said in the direction toward tau*."""

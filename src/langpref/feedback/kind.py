@@ -12,12 +12,20 @@ learner (`langpref.reward`) fits whatever the kind.
 The two kinds of the paper are `langpref.feedback.language` and `langpref.feedback.comparison`; the package imports
 both, so they are in `KINDS` whenever `langpref.feedback` is imported. A new kind is one module that builds a
 `FeedbackKind` and passes it to `register_kind`; `langpref learn-reward` and the reward loop then take it by name.
+An installed package adds a kind with no edit here by declaring an entry point in the group `langpref.feedback` (as
+tasks do in `langpref.tasks`) that points at a `FeedbackKind` or at a function returning one; `kind_names()` and
+`get_kind` load them on first use.
+
+A kind's active query selections are its own: `strategies` maps each `--query-selection` name to the factory of its
+selector (`langpref.reward.selection.Selector`), so the reward loop asks the kind, never a table beside it.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -29,12 +37,18 @@ if TYPE_CHECKING:
     from langpref.feedback.humans import HumanConfig
     from langpref.feedback.space import LatentSpace
     from langpref.reward import RewardConfig
+    from langpref.reward.selection import Selector
 
 
 class Human(Protocol):
     """A synthetic human of one kind: answers that kind's queries."""
 
     def answer(self, query: Any) -> Any: ...
+
+
+SelectorFactory = Callable[["LatentSpace", Sequence[int], "RewardConfig", "int | None", int], "Selector"]
+"""(space, query pool, reward config, candidates or None for the whole pool, posterior samples) -> the selector of
+one active strategy (`langpref.reward.selection`)."""
 
 
 @dataclass(frozen=True)
@@ -66,10 +80,18 @@ class FeedbackKind:
     """answer -> its columns of `table` (the study adds the query number and times)."""
     from_record: Callable[[Mapping[str, Any]], Any]
     """A stored row of `table` -> the answer again (the study replays them to rebuild a learner)."""
+    strategies: Mapping[str, SelectorFactory | None] = field(default_factory=lambda: {RANDOM: None})
+    """`--query-selection` name -> the factory of its selector, in the order errors list them; `random` (uniform,
+    `random_query`; the paper's) has none and every kind should keep it."""
 
 
+RANDOM = "random"
+"""The query selection every kind has: uniform over the pool (`random_query`)."""
 KINDS: dict[str, FeedbackKind] = {}
-"""The registered kinds by name."""
+"""The registered kinds by name (plugins once `kind_names()` or `get_kind` has loaded them)."""
+ENTRY_POINT_GROUP = "langpref.feedback"
+"""The entry-point group through which installed packages add kinds."""
+_plugins_loaded = False
 MIXED = "mixed"
 """The `feedback` of a learner that asks either kind, chosen per query (`langpref.reward.mixed`); not a kind."""
 MIXED_KINDS = ("language", "comparison")
@@ -85,8 +107,39 @@ def register_kind(kind: FeedbackKind) -> FeedbackKind:
     return kind
 
 
+def load_plugins() -> None:
+    """Register every kind declared under the `langpref.feedback` entry-point group (once per process). A plugin
+    that fails to load, gives no `FeedbackKind` or takes a taken name is skipped with a warning naming it."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            obj = ep.load()
+            kind = obj() if callable(obj) and not isinstance(obj, FeedbackKind) else obj
+            if not isinstance(kind, FeedbackKind):
+                raise TypeError(f"it gives a {type(kind).__name__}, not a langpref.feedback.FeedbackKind")
+            if kind.name == MIXED:
+                raise ValueError(f"it is named {MIXED!r}, which is not a kind but both of the paper's")
+            register_kind(kind)
+        except Exception as exc:  # a broken plugin must not break the other kinds: say which one and go on
+            warnings.warn(
+                f"langpref: skipped the feedback plugin {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}",
+                stacklevel=2,
+            )
+
+
+def kind_names() -> tuple[str, ...]:
+    """Every kind known in this process: the paper's two, then those registered in code or by plugins."""
+    load_plugins()
+    return tuple(KINDS)
+
+
 def get_kind(name: str) -> FeedbackKind:
-    """The registered kind called `name`."""
+    """The registered kind called `name` (a plugin's too)."""
+    if not isinstance(name, str) or name not in KINDS:
+        load_plugins()
     try:
         return KINDS[name]
     except (KeyError, TypeError):

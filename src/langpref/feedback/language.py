@@ -29,7 +29,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
-from langpref.feedback.kind import FeedbackKind, register_kind
+from langpref.feedback.kind import RANDOM, FeedbackKind, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
 from langpref.language.bank import DIRECTIONS, VAGUE_FEEDBACK
 
@@ -229,6 +229,23 @@ def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
     return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
 
 
+# ---- active query selection (`langpref.reward.selection`, imported when a strategy is used) --------------------
+
+
+def infogain(space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None, samples: int):
+    """`infogain`: the information about xi in the person's answer, under the answer model (Eq. 10 with xi)."""
+    from langpref.reward.selection import LanguageInfoGain
+
+    return LanguageInfoGain(space, pool, reward, candidates, samples)
+
+
+def lal_infogain(space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None, samples: int):
+    """`lal-infogain`: the authors' follow-up's selection."""
+    from langpref.reward.selection import LalInfoGain
+
+    return LalInfoGain(space, pool, candidates)
+
+
 LANGUAGE = register_kind(
     FeedbackKind(
         name="language",
@@ -243,5 +260,6 @@ LANGUAGE = register_kind(
         table="feedback",
         to_record=to_record,
         from_record=from_record,
+        strategies={RANDOM: None, "infogain": infogain, "lal-infogain": lal_infogain},
     )
 )

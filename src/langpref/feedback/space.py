@@ -16,6 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -26,8 +27,9 @@ BANK_SPLITS = ("train", "val", "test")
 """The bank splits a space embeds by default: any of them can be the synthetic humans' phrasings."""
 ALL_SPLITS = "all"
 """The table name of every bank split together (what the paper's synthetic human speaks from)."""
-PHRASING_SPLITS = (*BANK_SPLITS, ALL_SPLITS)
-"""What a synthetic human's `phrasing_split` may name."""
+PhrasingSplit = Literal["train", "val", "test", "all"]
+"""What a synthetic human's `phrasing_split` may name: a bank split or `all` of them."""
+PHRASING_SPLITS: tuple[str, ...] = get_args(PhrasingSplit)
 
 Encoder = Callable[[Sequence[str]], np.ndarray]
 

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -61,8 +61,9 @@ from langpref.reward.selection import (
     mutual_information,
 )
 
-LEARNERS = ("paper", "answer-model")
+Learner = Literal["paper", "answer-model"]
 """`--learner`: Eq. 9's Bradley-Terry pairs (the paper's, `langpref.reward.learner`) or this module's."""
+LEARNERS: tuple[str, ...] = get_args(Learner)
 READING_TEMPERATURES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 """The grid T_read is fitted on."""
 

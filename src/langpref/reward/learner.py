@@ -24,6 +24,7 @@ from __future__ import annotations
 import threading
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -31,9 +32,12 @@ from langpref.errors import LangprefError
 from langpref.feedback import bradley_terry
 from langpref.feedback.bradley_terry import PairBatch
 
-LOSSES = ("both", "explicit", "implicit")
-NEGATIVES = ("other_meaning", "any")
-MODELS = ("linear", "mlp")
+Loss = Literal["both", "explicit", "implicit"]
+Negatives = Literal["other_meaning", "any"]
+Model = Literal["linear", "mlp"]
+LOSSES: tuple[str, ...] = get_args(Loss)
+NEGATIVES: tuple[str, ...] = get_args(Negatives)
+MODELS: tuple[str, ...] = get_args(Model)
 DEFAULT_WEIGHT_DECAY = {"linear": 1.0, "mlp": 0.25}
 
 
@@ -41,7 +45,7 @@ DEFAULT_WEIGHT_DECAY = {"linear": 1.0, "mlp": 0.25}
 class RewardConfig:
     """The reward model r_xi and how it is fit."""
 
-    model: str = "linear"
+    model: Model = "linear"
     """`linear` (r = xi . phi, the authors' choice) or `mlp` (one hidden layer of `hidden` ReLU units)."""
     hidden: int = 32
     """Hidden units of the `mlp` model."""
@@ -53,11 +57,11 @@ class RewardConfig:
     humans the test experiments never see, in both envs (L_Implicit alone picks 0.5, by 0.002); `langpref experiment
     prior --env ENV` reruns that choice. On the mlp's two layers the same L2 acts as a stronger penalty on the
     function: at 1.0 it stays at the flat reward, hence its weaker default."""
-    loss: str = "both"
+    loss: Loss = "both"
     """`both` (L_Explicit + L_Implicit, Eq. 9), `explicit` or `implicit` (the ablation)."""
     num_negatives: int = 20
     """k, other utterances per language query for L_Implicit."""
-    negatives: str = "other_meaning"
+    negatives: Negatives = "other_meaning"
     """`other_meaning`: negatives of other (feature, direction) meanings than the model's reading of l;
     `any`: any pool utterance with another text (the paper's wording)."""
     negative_split: str = "train"

@@ -32,11 +32,19 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from langpref.dataset.storage import Split
 from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
-from langpref.feedback.kind import KINDS, MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_of, random_query
+from langpref.feedback.kind import MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query
 from langpref.feedback.space import LatentSpace
-from langpref.reward.answer_model import LEARNERS, AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner, confirm
+from langpref.reward.answer_model import (
+    LEARNERS,
+    AnswerModelConfig,
+    AnswerModelInfoGain,
+    AnswerModelLearner,
+    Learner,
+    confirm,
+)
 from langpref.reward.cost import query_costs
 from langpref.reward.learner import RewardConfig, RewardLearner
 from langpref.reward.metrics import cross_entropy, epic_distance, kendall_tau, reward_of_best, value_order_correlation
@@ -44,9 +52,9 @@ from langpref.reward.steps import SuccessEpisodes
 
 
 def feedback_choices() -> tuple[str, ...]:
-    """Every `feedback` a learner takes: each registered kind, and `mixed` (language and comparisons, chosen per
-    query)."""
-    return (*KINDS, MIXED)
+    """Every `feedback` a learner takes: each registered kind (an installed plugin's too), and `mixed` (language and
+    comparisons, chosen per query)."""
+    return (*kind_names(), MIXED)
 
 
 @dataclass
@@ -113,13 +121,13 @@ class LearnRewardConfig:
     """Runs per human (query draws, answer noise, negatives)."""
     seed: int = 0
     """Master seed: the same seed gives the same numbers."""
-    query_split: str = "train"
+    query_split: Split = "train"
     """Trajectories shown in queries; the language human's tau* is the best of this split."""
-    eval_split: str = "test"
+    eval_split: Split = "test"
     """Split of the metrics."""
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
-    learner: str = "paper"
+    learner: Learner = "paper"
     """`paper`: Eq. 5-9's Bradley-Terry pairs fit by `reward` (`langpref.reward.learner`, the reproduction);
     `answer-model`: a belief over the reward whose likelihood of a sentence depends on the trajectory it was said
     about, with comparisons in the same belief (`langpref.reward.answer_model`; `random` or `infogain` queries)."""

@@ -64,14 +64,9 @@ if TYPE_CHECKING:
     from langpref.reward import RewardConfig, RewardLearner
 
 STRATEGIES = ("random", "infogain", "lal-infogain", "volume-removal")
-"""Every `query_selection`."""
-BY_KIND = {
-    "language": ("random", "infogain", "lal-infogain"),
-    "comparison": ("random", "infogain", "volume-removal"),
-    "mixed": ("infogain",),
-}
-"""The strategies each built-in kind has (`random` works for every registered kind); `mixed` (both kinds in one
-learner, `langpref.reward.mixed`) chooses by information per second, so only `infogain`."""
+"""The `query_selection`s of the paper's two kinds; each kind lists its own (`FeedbackKind.strategies`)."""
+MIXED_STRATEGIES = ("infogain",)
+"""`mixed` (both kinds in one learner, `langpref.reward.mixed`) chooses by information per second: only `infogain`."""
 DEFAULT_SAMPLES = 64
 """Posterior draws of xi per selection."""
 ANSWER_TEMPERATURE = 1.0
@@ -93,11 +88,28 @@ class Selection:
     """How many trajectories (language) or pairs (comparisons) were scored; both together for a mixed learner."""
 
 
+def strategies_of(feedback: str) -> tuple[str, ...]:
+    """The query selections of `feedback`: a registered kind's own, `MIXED_STRATEGIES` for `mixed`."""
+    from langpref.feedback.kind import KINDS, MIXED, RANDOM
+
+    if feedback == MIXED:
+        return MIXED_STRATEGIES
+    kind = KINDS.get(feedback)
+    return tuple(kind.strategies) if kind is not None else (RANDOM,)
+
+
+def known_strategies() -> tuple[str, ...]:
+    """Every query selection of some registered kind, the paper's first."""
+    from langpref.feedback.kind import kind_names
+
+    return tuple(dict.fromkeys([*STRATEGIES, *(s for name in kind_names() for s in strategies_of(name))]))
+
+
 def check_strategy(strategy: str, kind: str) -> None:
     """One line naming the choices when `strategy` is unknown or not defined for feedback `kind`."""
-    if strategy not in STRATEGIES:
-        raise LangprefError(f"unknown query selection {strategy!r}: choose one of {', '.join(STRATEGIES)}")
-    allowed = BY_KIND.get(kind, ("random",))
+    if strategy not in known_strategies():
+        raise LangprefError(f"unknown query selection {strategy!r}: choose one of {', '.join(known_strategies())}")
+    allowed = strategies_of(kind)
     if strategy not in allowed:
         raise LangprefError(
             f"query selection {strategy!r} is not defined for {kind} feedback: choose one of {', '.join(allowed)}"
@@ -343,14 +355,11 @@ def make_selector(
     candidates: int | None = None,
     samples: int | None = None,
 ) -> Selector | None:
-    """The selector of `strategy` for feedback `kind`; None for `random` (the caller draws uniformly)."""
+    """The selector of `strategy` for feedback `kind` (built by the kind's own factory, `FeedbackKind.strategies`);
+    None for `random` (the caller draws uniformly)."""
     check_strategy(strategy, kind.name)
     require_linear(reward.model, strategy)
-    samples = DEFAULT_SAMPLES if samples is None else int(samples)
-    if strategy == "random":
+    factory = kind.strategies[strategy]
+    if factory is None:
         return None
-    if kind.name == "language":
-        if strategy == "lal-infogain":
-            return LalInfoGain(space, pool, candidates)
-        return LanguageInfoGain(space, pool, reward, candidates, samples)
-    return ComparisonActive(space, pool, strategy, candidates, samples)
+    return factory(space, pool, reward, candidates, DEFAULT_SAMPLES if samples is None else int(samples))
