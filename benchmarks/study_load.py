@@ -112,10 +112,12 @@ def run(
     participants: int,
     think_ms: tuple[float, float],
     query_selection: str = "random",
+    learner: str = "paper",
 ) -> dict[str, Any]:
     from langpref.study.simulate import SimConfig, simulate
 
-    proc, url = start_server(model, data, db, split, extra=("--query-selection", query_selection))
+    extra = ("--query-selection", query_selection, "--learner", learner)
+    proc, url = start_server(model, data, db, split, extra=extra)
     try:
         return simulate(
             url, SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0), data_dir=data, split=split
@@ -155,7 +157,8 @@ def results_text(
             f"Measured {today()} with `python -m benchmarks.study_load` on this machine ({os.cpu_count()} cores, "
             "no GPU): "
             f"{n} simulated participants at once run whole sessions of the paper's protocol against "
-            f"`langpref study serve --query-selection {args.query_selection}` on loopback (server in its own "
+            f"`langpref study serve --query-selection {args.query_selection} --learner {args.learner}` on loopback "
+            "(server in its own "
             f"process; {model_note}). "
             "Latency per answer as the "
             "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
@@ -205,6 +208,12 @@ def parser() -> argparse.ArgumentParser:
         default="random",
         help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
     )
+    p.add_argument(
+        "--learner",
+        default="paper",
+        help="Study 2's reward learner, as `study serve --learner`; a learner other than the paper's writes its own "
+        "block, `study-load-LEARNER` (default %(default)s)",
+    )
     p.add_argument("--results", type=Path, default=RESULTS, help="results file to update (default %(default)s)")
     p.add_argument(
         "--export-out",
@@ -228,17 +237,18 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         work = Path(tmp)
         data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
         val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
-        sel = args.query_selection
-        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel)
+        sel, learner = args.query_selection, args.learner
+        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel, learner)
         print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
         burst = None
         if not args.no_burst:
-            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel)
+            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel, learner)
             print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
         exported = export(work / "paced.sqlite", args.export_out)
         summary = json.loads(Path(exported["summary"]).read_text())
 
-    write_section("study-load", results_text(args, val_acc, paced, burst, summary), args.results)
+    block = "study-load" if args.learner == "paper" else f"study-load-{args.learner}"
+    write_section(block, results_text(args, val_acc, paced, burst, summary), args.results)
     print(f"wrote {args.results}", flush=True)
     return {"paced": paced, "burst": burst, "export": exported}
 
