@@ -112,7 +112,7 @@ def label_dataset(cfg: LabelConfig, progress: bool = True) -> dict[str, Any]:
 
 
 def _check_paths(src: Path, out: Path, force: bool) -> None:
-    """One-line errors before any work: no dataset, OUT taken (without --force), OUT inside the dataset or holding it."""
+    """One-line errors before any work: no dataset, OUT taken (without --force), OUT and the dataset overlapping."""
     if not src.exists():
         raise LangprefError(f"dataset {src} not found (a LeRobotDataset v3 or a folder of NAME.npz episodes)")
     if not src.is_dir():
