@@ -177,7 +177,7 @@ def label_plain(src: Path, out: Path, reward: Any, progress: bool = True) -> dic
         if entry.name in labelled:
             continue
         if entry.is_dir():
-            shutil.copytree(entry, out / entry.name, copy_function=link_or_copy)
+            shutil.copytree(entry, out / entry.name)
         elif entry.suffix in VIDEO_SUFFIXES:
             link_or_copy(entry, out / entry.name)
         else:
