@@ -142,9 +142,45 @@ def verify(out: Path) -> dict:
     return result
 
 
+def record(recording: Path, out: Path, fps: int = 20) -> dict:
+    """(lerobot's venv) A plain recording folder (NAME.npz episodes) rewritten by lerobot's own writer as a
+    LeRobotDataset v3 at `out`, state and action only (no camera): real-size data for timing `langpref label` on
+    the LeRobot layout and for loading its labelled copy."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    files = sorted(recording.glob("*.npz"))
+    with np.load(files[0]) as first:
+        obs_dim, action_dim = first["observations"].shape[1], first["actions"].shape[1]
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (obs_dim,), "names": None},
+        "action": {"dtype": "float32", "shape": (action_dim,), "names": None},
+    }
+    dataset = LeRobotDataset.create(
+        repo_id="langpref/recording", fps=fps, features=features, root=out, use_videos=False
+    )
+    for path in files:
+        with np.load(path) as npz:
+            for state, action in zip(npz["observations"], npz["actions"]):
+                frame = {"observation.state": state.astype(np.float32), "action": action.astype(np.float32)}
+                dataset.add_frame({**frame, "task": recording.name})
+        dataset.save_episode()
+    dataset.finalize()
+    return {"episodes": len(files), "frames": dataset.meta.total_frames, "out": str(out)}
+
+
+def verify_one(original: Path, labelled: Path) -> dict:
+    """(lerobot's venv) `_verify_one` for any original and its labelled copy."""
+    return _verify_one(original, labelled)
+
+
 def main(argv: list[str]) -> int:
+    if len(argv) == 3 and argv[0] in ("record", "verify-one"):
+        run = record if argv[0] == "record" else verify_one
+        print(json.dumps(run(Path(argv[1]), Path(argv[2]))))
+        return 0
     if len(argv) != 2 or argv[0] not in ("prepare", "verify"):
-        print("usage: python -m benchmarks.lerobot_check prepare|verify OUT", file=sys.stderr)
+        print("usage: python -m benchmarks.lerobot_check prepare|verify OUT | record RECORDING OUT", file=sys.stderr)
+        print("       python -m benchmarks.lerobot_check verify-one ORIGINAL LABELLED", file=sys.stderr)
         return 2
     out = Path(argv[1])
     if argv[0] == "prepare":
