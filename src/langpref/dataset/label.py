@@ -93,8 +93,10 @@ def label_dataset(cfg: LabelConfig, progress: bool = True) -> dict[str, Any]:
         else:
             kind, totals = "plain", label_plain(src, tmp, reward, progress)
         _write_record(tmp / (Path("meta") if kind == "lerobot" else Path()) / RECORD, src, reward, kind)
-        if out.exists():
+        if out.is_dir() and not out.is_symlink():
             shutil.rmtree(out)
+        elif out.exists() or out.is_symlink():
+            out.unlink()
         tmp.rename(out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
