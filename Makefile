@@ -8,7 +8,7 @@ export PYOPENGL_PLATFORM ?= egl
 export TOKENIZERS_PARALLELISM ?= false
 export HF_HUB_OFFLINE ?= 1
 
-.PHONY: install demo test bench reproduce wheel-check lint format docs clean
+.PHONY: install demo test bench reproduce wheel-check lerobot-check lint format docs clean
 
 install: $(STAMP)
 
@@ -65,6 +65,23 @@ reproduce: install
 wheel-check: install
 	PY=$(PY) .ci/wheel_check.sh
 
+# LeRobot's own LeRobotDataset loads copies `langpref label` wrote of the LeRobot fixtures (benchmarks/lerobot_check.py;
+# CI checks the format without lerobot). lerobot 0.4.4 pins torch < 2.11 and langpref torch 2.13.0, so lerobot gets
+# its own venv. PyPI has no CPU-only torch for Linux: pip pulls torch 2.10 with its CUDA libraries (about 8 GB, about
+# 3 minutes the first time); it runs on the CPU all the same. Prints one JSON object; fails if a check fails.
+LEROBOT_VENV ?= .venv-lerobot
+LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
+
+$(LEROBOT_STAMP):
+	test -x $(LEROBOT_VENV)/bin/python || $(PY) -m venv $(LEROBOT_VENV)
+	$(LEROBOT_VENV)/bin/pip install --quiet "lerobot==0.4.4"
+	touch $(LEROBOT_STAMP)
+
+lerobot-check: install $(LEROBOT_STAMP)
+	rm -rf build/lerobot-check
+	$(BIN)/python -m benchmarks.lerobot_check prepare build/lerobot-check
+	$(LEROBOT_VENV)/bin/python -m benchmarks.lerobot_check verify build/lerobot-check
+
 # ruff over src, tests, examples and benchmarks (pyproject.toml), as `make test` runs it; `make format` fixes it
 lint: install
 	$(BIN)/ruff check src tests examples benchmarks
@@ -79,4 +96,4 @@ docs: install
 	$(BIN)/mkdocs build --strict --site-dir build/site
 
 clean:
-	rm -rf $(VENV) build dist *.egg-info src/*.egg-info .pytest_cache
+	rm -rf $(VENV) $(LEROBOT_VENV) build dist *.egg-info src/*.egg-info .pytest_cache

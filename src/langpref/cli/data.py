@@ -88,6 +88,33 @@ def cmd_import(args: argparse.Namespace) -> None:
     )
 
 
+@command(
+    "label",
+    "a copy of a LeRobotDataset (v3) or plain recording with per-frame columns of a learned reward",
+    [config("langpref.dataset.label:LabelConfig", {"dataset": {"positional": True}}), JSON, RERUN],
+    "Write a copy of DATASET with three float32 columns per frame from the saved reward (`learn-reward "
+    "--save-reward`): langpref.reward_share (the frame's share; an episode's frames sum to its learned reward), "
+    "langpref.reward_progress (the learned reward of the episode so far) and langpref.episode_reward (the "
+    "episode's learned reward). Original columns keep their bytes, videos are hard-linked, and a LeRobotDataset's "
+    "meta/info.json, meta/stats.json and per-episode statistics list the new columns. See README, 'Labelling a "
+    "dataset with the learned reward'.",
+)
+def cmd_label(args: argparse.Namespace) -> None:
+    from langpref.dataset.label import LabelConfig, label_dataset
+
+    cfg = from_args(LabelConfig, args)
+    summary = label_dataset(cfg)
+    record(args, Path(summary["out"]) / "label.config.json", cfg)
+    emit(
+        summary,
+        args.json,
+        lambda s: (
+            f"labelled {s['episodes']} episodes ({s['frames']} frames) of a {s['format']} dataset into {s['out']} "
+            f"({s['seconds']:.1f} s); columns: {', '.join(s['columns'])}"
+        ),
+    )
+
+
 def _bank_check(dataset: Path) -> dict:
     """`langpref bank check DATASET` with the pretrained language model: its one-line summary and a warning per weak
     meaning on stderr; overall accuracy and weak meanings for the --json summary."""

@@ -1,0 +1,228 @@
+"""`langpref label DATASET --reward R --out OUT`: a copy of a recording with per-frame columns of a learned reward.
+
+Robot-learning code reads rewards where it reads the robot's data: a LeRobotDataset (v3) or a plain recording
+folder (NAME.npz episodes). This writes a copy of either with three float32 columns per frame, computed by the saved
+reward (`langpref.reward.load`) from each episode's observations and actions:
+
+    langpref.reward_share     r_t, the frame's share of the episode's learned reward (`Reward.compute_reward`):
+                              the episode's frames sum to r_xi(tau), up to float32 rounding
+    langpref.reward_progress  v_t = r_xi of the episode up to and including this frame (`Reward.progress`): the
+                              last frame's is r_xi(tau); a per-frame progress, as reward-weighted imitation reads one
+    langpref.episode_reward   r_xi(tau) of the whole episode, on each of its frames (`Reward.trajectory_reward`)
+
+Nothing of the original changes: every original column (or npz array) keeps its bytes, the videos are hard-linked
+(copied where the file system cannot link), and everything else is copied. The copy is written beside OUT and moved
+into place only when complete, so a failure leaves neither a half-written OUT nor a lost one. What was labelled with
+which reward is written to `meta/langpref_label.json` (LeRobotDataset) or `langpref_label.json` (plain folder).
+
+The LeRobotDataset part is `langpref.dataset.label_lerobot`; this module has the plain folder and the command.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import time
+import zipfile
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from langpref.dataset.recording import VIDEO_SUFFIXES, plain_episode_files, read_plain_episode
+from langpref.errors import LangprefError
+
+SHARE = "langpref.reward_share"
+PROGRESS = "langpref.reward_progress"
+EPISODE = "langpref.episode_reward"
+COLUMNS = {
+    SHARE: "r_t, this frame's share of the episode's learned reward; an episode's frames sum to its r_xi(tau)",
+    PROGRESS: "v_t, the learned reward r_xi of the episode up to and including this frame; the last is r_xi(tau)",
+    EPISODE: "r_xi(tau), the learned reward of the whole episode, on each of its frames",
+}
+"""The columns `label` adds, each float32 with one value per frame, and what each holds."""
+RECORD = "langpref_label.json"
+"""What was labelled with which reward: at the top of a plain folder, in meta/ of a LeRobotDataset."""
+
+
+@dataclass
+class LabelConfig:
+    """What `langpref label` reads and writes."""
+
+    dataset: Path
+    """A LeRobotDataset (v3, with meta/info.json) or a plain recording folder (NAME.npz episodes)."""
+    reward: Path
+    """A saved reward: a `--save-reward` directory (its reward.json) or a reward-NAME.json file."""
+    out: Path
+    """The labelled copy to create (a new folder)."""
+    task: str | None = None
+    """Refuse the reward unless it was learned on this task (its name, as `langpref tasks` lists it)."""
+    state_key: str = "observation.state"
+    """LeRobotDataset: the feature the reward reads as observations."""
+    action_key: str = "action"
+    """LeRobotDataset: the feature the reward reads as actions."""
+    force: bool = False
+    """Replace an existing OUT."""
+
+
+def label_dataset(cfg: LabelConfig, progress: bool = True) -> dict[str, Any]:
+    """Write the labelled copy of `cfg.dataset` to `cfg.out` and return its summary: `episodes`, `frames`,
+    `seconds` (wall time), `out`, `format` (`lerobot` or `plain`), `columns` and the episodes' learned rewards
+    (`episode_reward`: mean, min, max)."""
+    from langpref.dataset.label_lerobot import is_lerobot, label_lerobot
+    from langpref.reward.api import load
+
+    start = time.perf_counter()
+    src, out = Path(cfg.dataset), Path(cfg.out)
+    _check_paths(src, out, cfg.force)
+    reward = load(cfg.reward)
+    if cfg.task is not None and reward.task != cfg.task:
+        raise LangprefError(f"the reward {reward.path} was learned on task {reward.task!r}, not {cfg.task!r}")
+    tmp = out.parent / f".{out.name}.labelling-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    try:
+        if is_lerobot(src):
+            kind, totals = "lerobot", label_lerobot(src, tmp, reward, cfg.state_key, cfg.action_key, progress)
+        else:
+            kind, totals = "plain", label_plain(src, tmp, reward, progress)
+        _write_record(tmp / (Path("meta") if kind == "lerobot" else Path()) / RECORD, src, reward, kind)
+        if out.is_dir() and not out.is_symlink():
+            shutil.rmtree(out)
+        elif out.exists() or out.is_symlink():
+            out.unlink()
+        tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    rewards = totals["episode_rewards"]
+    return {
+        "episodes": len(rewards),
+        "frames": totals["frames"],
+        "seconds": round(time.perf_counter() - start, 3),
+        "out": str(out),
+        "format": kind,
+        "columns": list(COLUMNS),
+        "episode_reward": {"mean": float(np.mean(rewards)), "min": float(min(rewards)), "max": float(max(rewards))},
+    }
+
+
+def _check_paths(src: Path, out: Path, force: bool) -> None:
+    """One-line errors before any work: no dataset, OUT taken (without --force), OUT and the dataset overlapping."""
+    if not src.exists():
+        raise LangprefError(f"dataset {src} not found (a LeRobotDataset v3 or a folder of NAME.npz episodes)")
+    if not src.is_dir():
+        raise LangprefError(f"dataset {src} is not a folder (a LeRobotDataset v3 or a folder of NAME.npz episodes)")
+    if out.exists() and not force:
+        raise LangprefError(f"{out} already exists; pass --force to replace it or choose another --out")
+    s, o = src.resolve(), out.resolve()
+    if o == s or s in o.parents or o in s.parents:
+        raise LangprefError(f"--out {out} and the dataset {src} overlap; choose a folder outside the dataset")
+
+
+def episode_columns(reward: Any, observations: np.ndarray, actions: np.ndarray) -> dict[str, np.ndarray]:
+    """The label columns of one episode (T,) each, float32, from the saved `reward`."""
+    share = reward.compute_reward(observations, actions)
+    so_far = reward.progress(observations, actions)
+    total = np.full(len(share), float(so_far[-1]))
+    return {SHARE: share.astype(np.float32), PROGRESS: so_far.astype(np.float32), EPISODE: total.astype(np.float32)}
+
+
+def check_sizes(reward: Any, obs_dim: int, action_dim: int, where: str) -> None:
+    """A one-line error when the dataset's observations or actions are not the size the reward was learned on."""
+    if (obs_dim, action_dim) != (reward.obs_dim, reward.action_dim):
+        raise LangprefError(
+            f"the reward {reward.path} was learned on task {reward.task!r} with observations of {reward.obs_dim} "
+            f"and actions of {reward.action_dim} numbers; {where} has {obs_dim} and {action_dim}: label with a "
+            "reward learned on this robot's data"
+        )
+
+
+def link_or_copy(src: Path, dst: Path) -> None:
+    """`dst` as a hard link to `src` (no bytes copied), or a copy where the file system cannot link."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def bar(items: Iterable, desc: str, total: int, progress: bool) -> Iterable:
+    """A progress bar on stderr over `items` (one per episode)."""
+    return tqdm(items, desc=desc, total=total, unit="episode", disable=not progress, dynamic_ncols=True)
+
+
+# ---- plain recording folder ----------------------------------------------------------------------------------------
+
+
+def label_plain(src: Path, out: Path, reward: Any, progress: bool = True) -> dict[str, Any]:
+    """Label every NAME.npz of the plain recording `src` into `out` (the original file with the label arrays
+    appended, so its own arrays keep their bytes); videos linked, other files and folders copied. Returns
+    {frames, episode_rewards}."""
+    files = plain_episode_files(src)
+    frames, rewards = 0, []
+    for path in bar(files, f"label {src.name}", len(files), progress):
+        episode = read_plain_episode(path)
+        check_sizes(reward, episode.observations.shape[1], episode.actions.shape[1], str(path))
+        columns = episode_columns(reward, episode.observations, episode.actions)
+        _append_arrays(path, out / path.name, columns)
+        frames += len(episode.observations)
+        rewards.append(float(columns[EPISODE][0]))
+    labelled = {p.name for p in files}
+    for entry in sorted(src.iterdir()):
+        if entry.name in labelled:
+            continue
+        if entry.is_dir():
+            shutil.copytree(entry, out / entry.name)
+        elif entry.suffix in VIDEO_SUFFIXES:
+            link_or_copy(entry, out / entry.name)
+        else:
+            shutil.copy2(entry, out / entry.name)
+    return {"frames": frames, "episode_rewards": rewards}
+
+
+def _append_arrays(src: Path, dst: Path, arrays: dict[str, np.ndarray]) -> None:
+    """`dst`: the .npz `src` byte for byte, with `arrays` added as members KEY.npy (compressed as `src`'s first
+    member is); a one-line error if `src` already holds one of them (a labelled copy: label the original)."""
+    shutil.copy2(src, dst)
+    try:
+        with zipfile.ZipFile(dst, "a") as npz:
+            names = set(npz.namelist())
+            taken = [key for key in arrays if f"{key}.npy" in names]
+            if taken:
+                raise LangprefError(f"{src} already has {taken[0]!r} (it was labelled before): label the original")
+            infos = npz.infolist()
+            compression = infos[0].compress_type if infos else zipfile.ZIP_STORED
+            for key, value in arrays.items():
+                buffer = io.BytesIO()
+                np.lib.format.write_array(buffer, np.ascontiguousarray(value), allow_pickle=False)
+                npz.writestr(f"{key}.npy", buffer.getvalue(), compress_type=compression)
+    except zipfile.BadZipFile as exc:
+        raise LangprefError(f"{src}: not a readable .npz episode ({exc})") from None
+
+
+def _write_record(path: Path, src: Path, reward: Any, kind: str) -> None:
+    """What was labelled with which reward, and what each column holds, as JSON at `path`."""
+    from langpref import __version__
+
+    doc = {
+        "written_by": f"langpref {__version__}",
+        "source": str(src.resolve()),
+        "format": kind,
+        "reward": {
+            "path": str(Path(reward.path).resolve()),
+            "task": reward.task,
+            "kind": reward.kind,
+            "format_version": reward.doc.get("format_version", 1),
+            "model": reward.doc.get("model", {}),
+        },
+        "columns": {name: {"dtype": "float32", "shape": [1], "meaning": text} for name, text in COLUMNS.items()},
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
