@@ -106,6 +106,8 @@ VERDICT = FeedbackKind(
     page=StudyPage("text", "Verdict", "Is this trajectory good or bad?", "Type good or bad for each trajectory."),
 )
 STUDY = ("language", "best_of_three", "verdict")
+PICKY = {"random": None, "mine": lambda *args: None}
+"""The strategies of a kind with an active selection of its own, which the study does not run."""
 
 
 class _EntryPoint:
@@ -120,11 +122,12 @@ def installed(monkeypatch):
         _EntryPoint("best_of_three", lambda: BEST),
         _EntryPoint("verdict", lambda: lambda: VERDICT),
         _EntryPoint("pageless", lambda: replace(BEST, name="pageless", table="pageless", page=None)),
+        _EntryPoint("picky", lambda: replace(VERDICT, name="picky", strategies=PICKY)),
     ]
     monkeypatch.setattr(kind, "entry_points", lambda group: eps if group == kind.ENTRY_POINT_GROUP else [])
     monkeypatch.setattr(kind, "_plugins_loaded", False)
     yield
-    for name in ("best_of_three", "verdict", "pageless"):
+    for name in ("best_of_three", "verdict", "pageless", "picky"):
         KINDS.pop(name, None)
 
 
@@ -183,8 +186,12 @@ def test_an_installed_kind_is_a_study_kind_and_a_serve_flag(installed):
     for kinds, message in refused.items():
         with pytest.raises(LangprefError, match=message):
             StudyConfig(kinds=kinds).validate()
-    with pytest.raises(LangprefError, match="random only"):
-        StudyConfig(kinds=("comparison", "verdict"), query_selection="comparison=infogain,verdict=infogain").validate()
+    with pytest.raises(LangprefError, match="asks picky at random only"):  # the kind has it, the study does not
+        StudyConfig(kinds=("comparison", "picky"), query_selection="comparison=infogain,picky=mine").validate()
+    with pytest.raises(LangprefError, match="both store their answers in table 'verdicts'"):
+        StudyConfig(kinds=("verdict", "picky"), query_selection="random").validate()
+    with pytest.raises(LangprefError, match="each once"):
+        StudyConfig(kinds=()).validate()
     with pytest.raises(LangprefError, match="not defined for verdict"):
         StudyConfig(kinds=("verdict",), query_selection="infogain").validate()
     with pytest.raises(LangprefError, match="answer-model reads language and comparisons only"):

@@ -60,6 +60,7 @@ from typing import Any
 
 from langpref.errors import LangprefError
 from langpref.feedback.kind import FeedbackKind, get_kind
+from langpref.study.kinds import KIND_TABLES, kind_answer
 
 SCHEMA_VERSION = 5
 
@@ -256,9 +257,6 @@ TABLES = (
     "rewards",
     "confirmations",
 )
-KIND_TABLES = ("feedback", "comparisons")
-"""The schema's tables of feedback answers, a column per field (the paper's kinds'); any other kind's table holds its
-answer as JSON (`kind_row`)."""
 _KIND_TABLE = """
 CREATE TABLE IF NOT EXISTS {table} (
     participant_id TEXT NOT NULL REFERENCES participants(id),
@@ -459,18 +457,6 @@ def kind_tables(conn: sqlite3.Connection) -> list[str]:
     """The tables of kinds beyond the paper's in this database (none in a study of the paper's two kinds)."""
     names = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
     return [n for n in names if n not in TABLES and n != "participant_tokens" and not n.startswith("sqlite_")]
-
-
-def kind_row(kind: FeedbackKind, answer: Any, read: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The columns of `kind.table` that store `answer` and how the robot `read` it (language; the study adds the
-    query number and times)."""
-    record = {**kind.to_record(answer), **(read or {})}
-    return record if kind.table in KIND_TABLES else {"answer": json.dumps(record)}
-
-
-def kind_answer(kind: FeedbackKind, row: dict[str, Any]) -> Any:
-    """A stored row of `kind.table` as the kind's answer again (`kind_row`'s inverse)."""
-    return kind.from_record(row if kind.table in KIND_TABLES else {**row, **json.loads(row["answer"])})
 
 
 def method_rows(rows: list[dict[str, Any]], method: str) -> list[dict[str, Any]]:

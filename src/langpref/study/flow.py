@@ -29,7 +29,6 @@ from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 from langpref.study import kinds as study_kinds
 from langpref.study.config import METHODS, StudyConfig
-from langpref.study.db import kind_row
 from langpref.study.surveys import survey_questions, validate_answers
 
 if TYPE_CHECKING:
@@ -416,7 +415,7 @@ def _after_query(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, r
     understood = ask["understood"] if ask is not None else robot.learn(p, method, q, feedback)
     # language: its reading is stored (the feedback table, Study 1's too, says the phase)
     read = {} if understood is None else {"phase": step.phase, "improved": None, **_understood_columns(understood)}
-    row = {**kind_row(kind, feedback, read), "number": q, "client_ms": answer.client_ms}
+    row = {**study_kinds.kind_row(kind, feedback, read), "number": q, "client_ms": answer.client_ms}
     extra: dict[str, Any] = {}
     if understood is not None:
         extra = {"understood": {**understood, "text": feedback.text}}

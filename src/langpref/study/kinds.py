@@ -7,7 +7,7 @@ data: Study 2 asks each in turn, and everything it needs of one is the kind's ow
   for participants, the question above the videos and an introduction; the page (`static/study.js`) draws any kind
   from these, sent in the step's `widget`;
 - its answer: the body's field `answer_key`, checked by `parse` into the typed answer, which the learner takes as the
-  kind's `pairs`; stored by `to_record` in the kind's `table` (`langpref.study.db.kind_row`).
+  kind's `pairs`; stored by `to_record` in the kind's `table` (`kind_row`).
 
 A kind from an installed package (entry-point group `langpref.feedback`) runs with no edit here. Study 1 stays the
 paper's improvement with language (`STUDY1`: Eq. 4 reads a sentence). Active query selection and the answer-model
@@ -17,6 +17,7 @@ learner. The paper's two keep their own pages and the analyses (`langpref.study.
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Sequence
 from typing import Any
@@ -32,6 +33,9 @@ OWN_KEYS = {"answers": "survey", "meaning": "confirm", "satisfied": "satisfactio
 """Answer fields of the study's own steps (DESIGN.md's HTTP contract)."""
 RESERVED_KEYS = frozenset({*OWN_KEYS, "seq", "client_ms"})
 """Fields a kind's `answer_key` cannot be: the study's own."""
+KIND_TABLES = ("feedback", "comparisons")
+"""The schema's tables of feedback answers, a column per field (the paper's kinds'); any other kind's table holds its
+answer as JSON (`kind_row`)."""
 NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 """What a kind's name and table must look like for the study (a step kind, a phase, an SQL table)."""
 
@@ -39,7 +43,7 @@ NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 def study_kind(name: str) -> FeedbackKind:
     """The registered kind `name` (a plugin's too), checked for what the study needs: a page, a name usable as a step
     kind, an answer field of its own and a table name (one of the schema's feedback tables, or a new one)."""
-    from langpref.study.db import KIND_TABLES, TABLES
+    from langpref.study.db import TABLES
 
     kind = get_kind(name)
     if kind.page is None:
@@ -115,3 +119,15 @@ def widget(name: str) -> dict[str, Any]:
         "intro": page.intro,
         "option": page.option,
     }
+
+
+def kind_row(kind: FeedbackKind, answer: Any, read: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The columns of `kind.table` that store `answer` and how the robot `read` it (language; the study adds the
+    query number and times)."""
+    record = {**kind.to_record(answer), **(read or {})}
+    return record if kind.table in KIND_TABLES else {"answer": json.dumps(record)}
+
+
+def kind_answer(kind: FeedbackKind, row: dict[str, Any]) -> Any:
+    """A stored row of `kind.table` as the kind's answer again (`kind_row`'s inverse)."""
+    return kind.from_record(row if kind.table in KIND_TABLES else {**row, **json.loads(row["answer"])})
