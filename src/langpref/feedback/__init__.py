@@ -13,7 +13,16 @@ installed package adds one through the entry-point group `langpref.feedback`.
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.comparison import ComparisonAnswer, ComparisonHuman, ComparisonQuery
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, softmax, true_reward
-from langpref.feedback.kind import KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query, register_kind
+from langpref.feedback.kind import (
+    KINDS,
+    FeedbackKind,
+    StudyPage,
+    get_kind,
+    kind_names,
+    kind_of,
+    random_query,
+    register_kind,
+)
 from langpref.feedback.language import LanguageAnswer, LanguageHuman, LanguageQuery
 from langpref.feedback.space import (
     FeatureScale,
@@ -41,6 +50,7 @@ __all__ = [
     "LatentSpace",
     "PairBatch",
     "PhraseTable",
+    "StudyPage",
     "build_latent_space",
     "get_kind",
     "kind_names",

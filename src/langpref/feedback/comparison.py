@@ -18,7 +18,7 @@ from langpref.errors import LangprefError
 from langpref.feedback import bradley_terry
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import HumanConfig, Seed, rng_of, true_reward
-from langpref.feedback.kind import RANDOM, FeedbackKind, register_kind
+from langpref.feedback.kind import RANDOM, FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace
 
 if TYPE_CHECKING:
@@ -144,5 +144,13 @@ COMPARISON = register_kind(
         to_record=to_record,
         from_record=from_record,
         strategies={RANDOM: None, "infogain": infogain, "volume-removal": volume_removal},
+        page=StudyPage(
+            widget="choice",
+            label="Pair-wise comparison",
+            prompt="Which trajectory do you prefer?",
+            intro="Each query shows two trajectories. Choose the one you prefer; the robot learns what you prefer "
+            "from your choices.",
+            option="I prefer trajectory {n}",
+        ),
     )
 )

@@ -16,6 +16,10 @@ An installed package adds a kind with no edit here by declaring an entry point i
 tasks do in `langpref.tasks`) that points at a `FeedbackKind` or at a function returning one; `kind_names()` and
 `get_kind` load them on first use.
 
+A kind that the study web app can ask people (`langpref study serve --kinds NAME,...`) says how in `page`, a
+`StudyPage`: the widget its answer is given with (a text box, or a choice among the shown trajectories), its label
+and the question above the videos; `parse` checks what the widget sends and `pairs` is what the learner takes.
+
 A kind's active query selections are its own: `strategies` maps each `--query-selection` name to the factory of its
 selector (`langpref.reward.selection.Selector`), so the reward loop asks the kind, never a table beside it.
 """
@@ -38,6 +42,31 @@ if TYPE_CHECKING:
     from langpref.feedback.space import LatentSpace
     from langpref.reward import RewardConfig
     from langpref.reward.selection import Selector
+
+
+WIDGETS = ("text", "choice")
+"""How a study page takes an answer: `text`, a text box whose string is sent at `answer_key`; `choice`, one button per
+shown trajectory, whose position (0-based) is sent."""
+
+
+@dataclass(frozen=True)
+class StudyPage:
+    """How the study web app asks a query of one kind (`langpref.study`); the page itself is generic."""
+
+    widget: str
+    """One of `WIDGETS`: what the page shows under the query's videos and sends at the kind's `answer_key`."""
+    label: str
+    """The method's name for participants ("Pair-wise comparison"): titles, questionnaires, the guidelines."""
+    prompt: str
+    """The question above a query's videos ("Which trajectory do you prefer?")."""
+    intro: str = ""
+    """What the page says before the method's first query (how to answer; one or two sentences)."""
+    option: str = "Trajectory {n}"
+    """A `choice` widget's button for the n-th shown trajectory (`{n}` is 1-based): "I prefer trajectory {n}"."""
+
+    def __post_init__(self) -> None:
+        if self.widget not in WIDGETS:
+            raise LangprefError(f"a study page's widget must be one of {', '.join(WIDGETS)}, got {self.widget!r}")
 
 
 class Human(Protocol):
@@ -83,6 +112,8 @@ class FeedbackKind:
     strategies: Mapping[str, SelectorFactory | None] = field(default_factory=lambda: {RANDOM: None})
     """`--query-selection` name -> the factory of its selector, in the order errors list them; `random` (uniform,
     `random_query`; the paper's) has none and every kind should keep it."""
+    page: StudyPage | None = None
+    """How the study web app asks this kind (`langpref study serve --kinds`); None: the study cannot run it."""
 
 
 RANDOM = "random"

@@ -29,7 +29,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
-from langpref.feedback.kind import RANDOM, FeedbackKind, register_kind
+from langpref.feedback.kind import RANDOM, FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
 from langpref.language.bank import DIRECTIONS, VAGUE_FEEDBACK
 
@@ -261,5 +261,12 @@ LANGUAGE = register_kind(
         to_record=to_record,
         from_record=from_record,
         strategies={RANDOM: None, "infogain": infogain, "lal-infogain": lal_infogain},
+        page=StudyPage(
+            widget="text",
+            label="Language feedback",
+            prompt="How should the robot move differently?",
+            intro="Each query shows one trajectory. Type how the robot should move differently, as in Experiment 1. "
+            "The robot does not change this trajectory: it learns what you prefer.",
+        ),
     )
 )

@@ -10,6 +10,7 @@ from langpref.errors import LangprefError
 from langpref.study.hook import parse_command
 
 METHODS = ("language", "comparison")
+"""The paper's two Study-2 methods: the default `StudyConfig.kinds`, and the two the analyses compare."""
 VIDEO_FORMATS = ("webm", "mp4")
 IMPROVE_CANDIDATES = ("split", "generated")
 ADMIN_TOKEN_ENV = "LANGPREF_STUDY_ADMIN_TOKEN"
@@ -31,6 +32,10 @@ class StudyConfig:
     """Study 1 with generated candidates: real rollouts per improvement step, the best of which is shown."""
     improve_search_generations: int = 30
     """Study 1 with generated candidates: CMA-ES generations on the surrogate per improvement step."""
+    kinds: tuple[str, ...] = METHODS
+    """Study 2's methods: the feedback kinds it asks, each in turn (`langpref.study.kinds`), in the order the first
+    participant meets them (each next arrival starts one later). Any registered kind with a study page runs, a
+    plugin's too (entry-point group `langpref.feedback`); the paper's: language,comparison."""
     pref_queries: int = 20
     """Study 2: queries per method."""
     rating_every: int = 5
@@ -80,7 +85,15 @@ class StudyConfig:
 
         if self.learner not in LEARNERS:
             raise LangprefError(f"--learner must be {' or '.join(LEARNERS)}, got {self.learner!r}")
+        from langpref.study.kinds import check_kinds
+
+        self.kinds = check_kinds(self.kinds)
         selections = self.selections()
+        others = sorted(k for k in self.kinds if k not in METHODS)
+        if others and self.learner == "answer-model":
+            raise LangprefError(f"--learner answer-model reads language and comparisons only, not {', '.join(others)}")
+        if any(selections[k] != "random" for k in others):
+            raise LangprefError(f"--query-selection: the study asks {', '.join(others)} at random only")
         if self.learner == "answer-model":
             other = sorted({s for s in selections.values() if s not in ("random", "infogain")})
             if other:
@@ -95,15 +108,15 @@ class StudyConfig:
 
         text = str(self.query_selection).strip()
         if "=" not in text:
-            out = dict.fromkeys(METHODS, text)
+            out = dict.fromkeys(self.kinds, text)
         else:
-            out = dict.fromkeys(METHODS, "random")
+            out = dict.fromkeys(self.kinds, "random")
             for item in filter(None, (x.strip() for x in text.split(","))):
                 method, _, strategy = (x.strip() for x in item.partition("="))
-                if method not in METHODS:
+                if method not in self.kinds:
                     raise LangprefError(
                         f"--query-selection {text}: {method!r} is no Study-2 method; name "
-                        f"{' or '.join(METHODS)}, e.g. language=infogain,comparison=volume-removal"
+                        f"{' or '.join(self.kinds)}, e.g. language=infogain,comparison=volume-removal"
                     )
                 out[method] = strategy
         for method, strategy in out.items():
@@ -111,7 +124,8 @@ class StudyConfig:
                 check_strategy(strategy, method)
             except LangprefError as exc:
                 per_method = "=" not in text and strategy in STRATEGIES
-                hint = " (or give one per method: language=NAME,comparison=NAME)" if per_method else ""
+                each = ",".join(f"{k}=NAME" for k in self.kinds)
+                hint = f" (or give one per method: {each})" if per_method else ""
                 raise LangprefError(f"--query-selection {text}: {exc}{hint}") from None
         return out
 
@@ -128,7 +142,9 @@ class StudyConfig:
     @classmethod
     def from_dict(cls, raw: dict[str, Any]) -> StudyConfig:
         known = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in raw.items() if k in known})
+        out = cls(**{k: v for k, v in raw.items() if k in known})
+        out.kinds = tuple(out.kinds)  # a list in the database's JSON
+        return out
 
 
 @dataclass

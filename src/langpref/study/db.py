@@ -38,6 +38,11 @@ language answer `number` (`shown`, `text`): the reading's `margin`, the `options
 feature, direction, probability, likeliest first), and what was chosen (`meaning`, `feature`, `direction`, `rank`
 among the options; all empty for "none of these").
 
+A feedback kind beyond the paper's two (`StudyConfig.kinds`, `langpref.study.kinds`) stores its Study-2 answers in
+a table of its own name (`FeedbackKind.table`), made when a study that runs it starts (`add_kind_tables`): the
+columns every answer has (participant_id, seq, number, client_ms, server_ms, answered_at) and the kind's `to_record`
+as JSON (`answer`). A study of the paper's two kinds has no such table, and its schema stays the one above.
+
 The app keeps one connection per server thread (`connect`); every write is one `BEGIN IMMEDIATE` transaction, so a
 killed server loses nothing committed and a half-applied answer never exists. WAL with synchronous=NORMAL is durable
 against a killed process (a power cut may lose the last commits, never corrupt the file).
@@ -54,7 +59,8 @@ from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
-from langpref.feedback.kind import get_kind
+from langpref.feedback.kind import FeedbackKind, get_kind
+from langpref.study.kinds import KIND_TABLES, kind_answer
 
 SCHEMA_VERSION = 5
 
@@ -251,6 +257,17 @@ TABLES = (
     "rewards",
     "confirmations",
 )
+_KIND_TABLE = """
+CREATE TABLE IF NOT EXISTS {table} (
+    participant_id TEXT NOT NULL REFERENCES participants(id),
+    seq INTEGER NOT NULL,
+    number INTEGER NOT NULL,
+    answer TEXT NOT NULL,
+    client_ms REAL,
+    server_ms REAL NOT NULL,
+    answered_at REAL NOT NULL,
+    PRIMARY KEY (participant_id, seq)
+)"""
 
 
 def connect(path: str | Path) -> sqlite3.Connection:
@@ -424,6 +441,24 @@ def rows(conn: sqlite3.Connection, sql: str, args: tuple = ()) -> list[dict[str,
     return [dict(r) for r in conn.execute(sql, args)]
 
 
+def add_kind_tables(path: str | Path, kinds: tuple[FeedbackKind, ...]) -> None:
+    """Make the table of each of `kinds` whose answers the schema has no table for (a plugin kind's; see above)."""
+    conn = connect(path)
+    try:
+        with transaction(conn):
+            for kind in kinds:
+                if kind.table not in KIND_TABLES:
+                    conn.execute(_KIND_TABLE.format(table=kind.table))
+    finally:
+        conn.close()
+
+
+def kind_tables(conn: sqlite3.Connection) -> list[str]:
+    """The tables of kinds beyond the paper's in this database (none in a study of the paper's two kinds)."""
+    names = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
+    return [n for n in names if n not in TABLES and n != "participant_tokens" and not n.startswith("sqlite_")]
+
+
 def method_rows(rows: list[dict[str, Any]], method: str) -> list[dict[str, Any]]:
     """The Study-2 answers of `method` among rows of its feedback kind's table: Study 1's language feedback shares the
     `feedback` table, where every row says its phase."""
@@ -434,7 +469,7 @@ def stored_answers(conn: sqlite3.Connection, participant_id: str, method: str) -
     """A participant's stored Study-2 answers of `method`, in query order, as the kind's typed answers."""
     kind = get_kind(method)
     found = rows(conn, f"SELECT * FROM {kind.table} WHERE participant_id=? ORDER BY number", (participant_id,))
-    return [kind.from_record(r) for r in method_rows(found, method)]
+    return [kind_answer(kind, r) for r in method_rows(found, method)]
 
 
 def confirmed_meanings(conn: sqlite3.Connection, participant_id: str, method: str) -> dict[int, int | None]:

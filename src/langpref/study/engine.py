@@ -35,7 +35,7 @@ from langpref.improve import improvement_step
 from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
-from langpref.study.config import METHODS, StudyConfig
+from langpref.study.config import StudyConfig
 from langpref.study.flow import Confirmed, Participant
 from langpref.study.learners import Meanings, learned_reward
 from langpref.study.queries import Chosen, QueryChooser
@@ -228,7 +228,7 @@ class StudyRobot:
     # ---- Study 2: reward learning ----
 
     def _fresh(self, p: Participant, method: str) -> Learner:
-        seed = int(self._rng(p, 3, METHODS.index(method)).integers(2**31))
+        seed = int(self._rng(p, 3, self.cfg.kinds.index(method)).integers(2**31))
         engine = self.engine
         if self.cfg.learner == "answer-model":
             # T_read as the engine fitted it once (the same fit the learner would make)
@@ -343,5 +343,5 @@ class StudyRobot:
     def forget(self, participant_id: str) -> None:
         """Drop cached learners (after an answer that was not stored): the next use replays the database."""
         with self._lock:
-            for method in METHODS:
+            for method in self.cfg.kinds:
                 self._learners.pop((participant_id, method), None)

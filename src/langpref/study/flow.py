@@ -12,9 +12,9 @@ Nothing here touches the database or the model: `advance` gets the current `Step
 in one transaction. Every step fixes what it shows when it is made, so showing it again (a reload, a restart)
 shows the same thing.
 
-The robot's feedback (language and comparison steps) goes one way for either kind: the kind
-(`langpref.feedback.kind`) parses the answer into its typed answer, says what of it is stored, and the robot learns
-from it; each Study-2 method is the kind of its name.
+The robot's feedback goes one way for every kind: the kind (`langpref.feedback.kind`) parses the answer into its
+typed answer, says what of it is stored, and the robot learns from it; each Study-2 method is the kind of its name,
+and the kinds a study runs are its config's (`StudyConfig.kinds`, `langpref.study.kinds`).
 """
 
 from __future__ import annotations
@@ -27,22 +27,15 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
+from langpref.study import kinds as study_kinds
 from langpref.study.config import METHODS, StudyConfig
-from langpref.study.surveys import SURVEYS, validate_answers
+from langpref.study.surveys import survey_questions, validate_answers
 
 if TYPE_CHECKING:
     from langpref.study.queries import Chosen
 
-PHASES = ("pre_survey", "improve", "improve_survey", "pref_language", "pref_comparison", "pref_survey", "done")
-KINDS = ("survey", "language", "comparison", "confirm", "satisfaction", "rating", "done")
-ANSWER_KEYS = {
-    "answers": "survey",
-    **{get_kind(m).answer_key: m for m in METHODS},
-    "meaning": "confirm",
-    "satisfied": "satisfaction",
-    "rating": "rating",
-}
-"""The field of an answer body that says its kind of step (the feedback kinds' own fields in the middle)."""
+PHASES = ("pre_survey", "improve", "improve_survey", *(f"pref_{m}" for m in METHODS), "pref_survey", "done")
+"""The phases of the paper's protocol; a study of other kinds has `pref_NAME` for each of its kinds."""
 MAX_CLIENT_MS = 24 * 3600 * 1000
 NONE_OF_THESE = "none of these"
 """The last option of a confirm step (its `meaning` is null): the answer is stored and not learned from."""
@@ -116,7 +109,10 @@ class Step:
 
     @property
     def method(self) -> str | None:
-        return self.phase[len("pref_") :] if self.phase in ("pref_language", "pref_comparison") else None
+        """The Study-2 method (feedback kind) of the step's phase `pref_NAME`, else None."""
+        if self.phase.startswith("pref_") and self.phase != "pref_survey":
+            return self.phase[len("pref_") :]
+        return None
 
 
 @dataclass(frozen=True)
@@ -227,13 +223,14 @@ def _number(body: dict, key: str, lo: float, hi: float, what: str, integer: bool
     return value
 
 
-def parse_answer(body: Any, step: Step) -> Answer:
-    """Check an answer body against the current step: a WrongStep (409) for another kind or another step's `seq`,
-    else AnswerError (400): a bad value, control characters in text."""
-    kind = _answer_kind(body, step)
+def parse_answer(body: Any, step: Step, kinds: tuple[str, ...] = METHODS) -> Answer:
+    """Check an answer body against the current step of a study of `kinds`: a WrongStep (409) for another kind or
+    another step's `seq`, else AnswerError (400): a bad value, control characters in text."""
+    key = _answer_key(body, step, study_kinds.answer_keys(kinds))
+    kind = step.kind
     body = clean_text(body)
     client_ms = None
-    if kind in METHODS:
+    if study_kinds.asks_feedback(kind):
         client_ms = float(
             _number(
                 body,
@@ -244,50 +241,50 @@ def parse_answer(body: Any, step: Step) -> Answer:
                 integer=False,
             )
         )
-    value = _answer_value(kind, body, step)
+    value = _answer_value(kind, body, step, kinds)
     stored: dict[str, Any] = {"seq": step.seq}
     if kind == "survey":
         stored["answers"] = value
     else:
-        key = next(k for k, v in ANSWER_KEYS.items() if v == kind)
         stored[key] = body[key]
         if client_ms is not None:
             stored["client_ms"] = client_ms
     return Answer(kind, value, client_ms, stored)
 
 
-def _answer_kind(body: Any, step: Step) -> str:
-    """The kind of answer `body` holds, checked against the current step (its kind and, when sent, its `seq`)."""
+def _answer_key(body: Any, step: Step, keys: dict[str, tuple[str, ...]]) -> str:
+    """The answer field `body` holds (one of `keys`, `kinds.answer_keys`), checked against the current step (its kind
+    and, when sent, its `seq`)."""
     if not isinstance(body, dict):
         raise AnswerError("the body must be a JSON object")
     # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in DESIGN.md's
     # contract that outside clients follow; when it is sent, an old answer sent again is never taken for the current
     # step (our pages and simulated participants always send it)
-    kinds = {ANSWER_KEYS[k] for k in body if k in ANSWER_KEYS}
-    if not kinds:
-        raise AnswerError("missing answer field: send one of " + ", ".join(f"'{k}'" for k in ANSWER_KEYS))
-    if len(kinds) > 1:
+    found = [k for k in body if k in keys]
+    if not found:
+        raise AnswerError("missing answer field: send one of " + ", ".join(f"'{k}'" for k in keys))
+    if len(found) > 1:
         raise AnswerError("send one answer at a time: the body has fields of several kinds")
-    kind = kinds.pop()
+    key = found[0]
     if step.kind == "done":
         raise WrongStep("the study is finished; there is nothing left to answer")
-    if kind != step.kind:
-        raise WrongStep(f"the current step is a {step.kind} step, not {kind}: GET the step and answer it")
+    if step.kind not in keys[key]:
+        raise WrongStep(f"the current step is a {step.kind} step, not {keys[key][0]}: GET the step and answer it")
     if "seq" in body and (isinstance(body["seq"], bool) or not isinstance(body["seq"], int)):
         raise AnswerError("'seq' must be the integer seq of the step you answer")
     if body.get("seq", step.seq) != step.seq:
         raise WrongStep(f"step {body['seq']!r} was already answered; the current step is {step.seq}")
-    return kind
+    return key
 
 
-def _answer_value(kind: str, body: dict[str, Any], step: Step) -> Any:
+def _answer_value(kind: str, body: dict[str, Any], step: Step, kinds: tuple[str, ...]) -> Any:
     """The answer's value, checked (a feedback kind parses its own; a library error becomes an AnswerError)."""
     try:
-        if kind in METHODS:
+        if study_kinds.asks_feedback(kind):
             feedback = get_kind(kind)
             return feedback.parse(body[feedback.answer_key], feedback.query(*step.shown))
         if kind == "survey":
-            return validate_answers(step.survey or "", body["answers"])
+            return validate_answers(step.survey or "", body["answers"], kinds)
         if kind == "confirm":
             value = body["meaning"]
             offered = [o["meaning"] for o in step.extra.get("options", ())]
@@ -346,7 +343,7 @@ def advance(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot:
 def _after_survey(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
     """A questionnaire answered: its responses, then Study 1 (after the first), Study 2 (after Study 1's) or done."""
     seq = step.seq + 1
-    items = {q["id"]: q for q in SURVEYS[step.survey or ""]}
+    items = {q["id"]: q for q in survey_questions(step.survey or "", cfg.kinds)}
     records = [
         (
             "survey_responses",
@@ -361,7 +358,8 @@ def _after_survey(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, 
         for qid, v in answer.value.items()
     ]
     if step.survey == "pre":
-        return Transition(Step(seq, "improve", "language", (robot.start_trajectory(p),), number=0), records)
+        start = (robot.start_trajectory(p),)
+        return Transition(Step(seq, "improve", study_kinds.STUDY1, start, number=0), records)
     if step.survey == "improve":
         return Transition(_pref_start(cfg, p, robot, seq, p.method_order[0]), records)
     return Transition(Step(seq, "done", "done"), records)
@@ -372,7 +370,7 @@ def _after_improve(cfg: StudyConfig, p: Participant, step: Step, answer: Answer,
     study goes on to its survey when they are, or when the rounds are used up."""
     seq = step.seq + 1
     shown = step.shown[0]
-    if step.kind == "language":
+    if step.kind == study_kinds.STUDY1:
         text = answer.value.text
         improved, understood = robot.improve(p, shown, text, step.number + 1)
         row = {
@@ -391,7 +389,8 @@ def _after_improve(cfg: StudyConfig, p: Participant, step: Step, answer: Answer,
     row = {"iteration": step.number, "shown": shown, "satisfied": int(answer.value)}
     if answer.value or step.number >= cfg.improve_max_iterations:
         return Transition(Step(seq, "improve_survey", "survey", survey="improve"), [("satisfaction", row)])
-    return Transition(Step(seq, "improve", "language", (shown,), number=step.number), [("satisfaction", row)])
+    again = Step(seq, "improve", study_kinds.STUDY1, (shown,), number=step.number)
+    return Transition(again, [("satisfaction", row)])
 
 
 def _after_rating(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, robot: Robot) -> Transition:
@@ -414,10 +413,11 @@ def _after_query(cfg: StudyConfig, p: Participant, step: Step, answer: Answer, r
     kind, feedback = get_kind(method), answer.value
     ask = robot.confirm(p, method, feedback) if cfg.confirm_margin is not None else None
     understood = ask["understood"] if ask is not None else robot.learn(p, method, q, feedback)
-    row = {**kind.to_record(feedback), "number": q, "client_ms": answer.client_ms}
+    # language: its reading is stored (the feedback table, Study 1's too, says the phase)
+    read = {} if understood is None else {"phase": step.phase, "improved": None, **_understood_columns(understood)}
+    row = {**study_kinds.kind_row(kind, feedback, read), "number": q, "client_ms": answer.client_ms}
     extra: dict[str, Any] = {}
-    if understood is not None:  # language: its reading is stored (the feedback table, Study 1's too, says the phase)
-        row.update(phase=step.phase, improved=None, **_understood_columns(understood))
+    if understood is not None:
         extra = {"understood": {**understood, "text": feedback.text}}
     if ask is not None:  # the robot learns once the participant has said what they meant
         options = [{"meaning": o["meaning"], "text": o["text"]} for o in ask["options"]]
@@ -485,5 +485,8 @@ def _understood_columns(understood: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def questions(step: Step) -> list[dict[str, Any]]:
-    return [dict(q) for q in SURVEYS[step.survey]] if step.kind == "survey" and step.survey else []
+def questions(step: Step, kinds: tuple[str, ...] = METHODS) -> list[dict[str, Any]]:
+    """The questions of a survey step of a study of `kinds` (none for other steps)."""
+    if step.kind != "survey" or not step.survey:
+        return []
+    return [dict(q) for q in survey_questions(step.survey, kinds)]

@@ -9,14 +9,17 @@ from pathlib import Path
 from fastapi import APIRouter
 from fastapi.responses import HTMLResponse
 
-from langpref.study.config import METHODS, StudyConfig
+from langpref.study.config import StudyConfig
+from langpref.study.kinds import label, study_kind
 from langpref.study.state import StudyApp
-from langpref.study.surveys import METHOD_LABELS, task_text
+from langpref.study.surveys import task_text
 
 HERE = Path(__file__).parent
 STATIC = HERE / "static"
 PAGES = (("/", "index.html"), ("/study", "study.html"), ("/admin", "admin.html"))
 """Route -> template in `templates/`."""
+NUMBERS = {1: "one method", 2: "two methods", 3: "three methods", 4: "four methods"}
+"""How the guidelines say how many methods Study 2 has."""
 
 
 def page_router(state: StudyApp) -> APIRouter:
@@ -42,7 +45,7 @@ def page_router(state: StudyApp) -> APIRouter:
             "env": state.engine.env,
             "task": task_text(state.engine.env),
             "study": state.cfg.to_dict(),
-            "methods": {m: METHOD_LABELS[m] for m in METHODS},
+            "methods": {m: label(m) for m in state.cfg.kinds},
         }
 
     return router
@@ -59,14 +62,23 @@ def render_page(state: StudyApp, name: str) -> str:
         "IMPROVE_MAX": str(c.improve_max_iterations),
         "PREF_QUERIES": str(c.pref_queries),
         "RATING_EVERY": str(c.rating_every),
-        "LANGUAGE": METHOD_LABELS["language"],
-        "COMPARISON": METHOD_LABELS["comparison"],
+        "METHOD_COUNT": NUMBERS.get(len(c.kinds), f"{len(c.kinds)} methods"),
         "DURATION": duration_text(c),
     }
     text = (HERE / "templates" / name).read_text()
     for key, value in values.items():
         text = text.replace("{{" + key + "}}", html.escape(value))
-    return text
+    return text.replace("{{METHOD_LIST}}", method_list(c.kinds))
+
+
+def method_list(kinds: tuple[str, ...]) -> str:
+    """The guidelines' list of Study 2's methods: each kind's label and introduction (`StudyPage`), HTML-escaped."""
+    items = []
+    for name in kinds:
+        page = study_kind(name).page
+        assert page is not None  # study_kind checked it
+        items.append(f"<li><strong>{html.escape(page.label)}:</strong> {html.escape(page.intro)}</li>")
+    return "\n".join(items)
 
 
 def duration_text(c: StudyConfig) -> str:

@@ -20,11 +20,12 @@ from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
 from langpref.errors import LangprefError
+from langpref.feedback.language import LanguageAnswer
 from langpref.study import db as sdb
-from langpref.study.config import METHODS
 from langpref.study.flow import AnswerError, Participant, Step, advance, first_step, parse_answer, progress, questions
 from langpref.study.generated import NotReady
 from langpref.study.guard import HttpError, client_key, decode_json, read_body
+from langpref.study.kinds import label, method_order, widget
 from langpref.study.state import StudyApp, sha256
 from langpref.study.surveys import SURVEY_TITLES
 
@@ -99,7 +100,7 @@ def step_json(state: StudyApp, step: Step, resume_code: str | None = None, p: Pa
         "phase": step.phase,
         "kind": step.kind,
         "videos": [state.videos.url(i) for i in step.shown],
-        "questions": questions(step),
+        "questions": questions(step, state.cfg.kinds),
         "progress": progress(state.cfg, step),
         "seq": step.seq,
         "number": step.number,
@@ -115,6 +116,11 @@ def step_json(state: StudyApp, step: Step, resume_code: str | None = None, p: Pa
         out["resume_code"] = resume_code
     if p is not None and step.method:
         out["method_position"] = p.method_order.index(step.method) + 1  # the page's introduction of a method
+        out["methods"] = len(p.method_order)
+    if step.method:
+        out["method_label"] = label(step.method)
+    if step.method and step.kind == step.method:
+        out["widget"] = widget(step.kind)  # how the page asks this kind's query
     if step.phase == "improve":
         out["last_round"] = step.number >= state.cfg.improve_max_iterations
     return out
@@ -130,8 +136,8 @@ def create_participant(state: StudyApp, body: bytes) -> dict[str, Any]:
     conn = state.connect()
     with sdb.transaction(conn):
         number = conn.execute("SELECT coalesce(max(number), 0) + 1 FROM participants").fetchone()[0]
-        # counterbalancing: odd arrivals start Study 2 with language, even ones with comparisons
-        order = METHODS if number % 2 == 1 else tuple(reversed(METHODS))
+        # counterbalancing: each arrival starts Study 2 one kind later (the paper's: odd ones language first)
+        order = method_order(state.cfg.kinds, number)
         conn.execute(
             "INSERT INTO participants (id, token_sha256, number, method_order, seed, created_at, "
             "resume_code) VALUES (?, ?, ?, ?, ?, ?, ?)",
@@ -198,10 +204,10 @@ def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[st
         step, row = state.current_step(conn, pid)
         data = decode_json(body)
         try:
-            ans = parse_answer(data, step)
+            ans = parse_answer(data, step, state.cfg.kinds)
         except AnswerError as exc:
             raise HttpError(exc.status, str(exc)) from None
-        if ans.kind == "language" and not state.engine.gate.score(ans.value.text).ok:
+        if isinstance(ans.value, LanguageAnswer) and not state.engine.gate.score(ans.value.text).ok:
             raise HttpError(400, NOT_FEEDBACK)
         if state.generated is not None and step.phase == "improve":
             try:
@@ -256,7 +262,7 @@ def _store(conn, p: Participant, step: Step, row: dict, ans, tr, received: float
         )
         for table, record in tr.records:
             record = {"participant_id": p.id, "seq": step.seq, **record, "answered_at": now}
-            if table in ("feedback", "comparisons"):
+            if "client_ms" in record:  # a feedback kind's answer: the server's time beside the page's
                 record["server_ms"] = server_ms
             if table == "survey_responses":
                 record.pop("seq")

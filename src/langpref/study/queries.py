@@ -37,7 +37,7 @@ from langpref.feedback.space import LatentSpace
 from langpref.reward import RewardConfig
 from langpref.reward.posterior import laplace_posterior
 from langpref.reward.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain, candidate_rows
-from langpref.study.config import METHODS, StudyConfig
+from langpref.study.config import StudyConfig
 
 ANSWER_MODEL_SAMPLES = 64
 """Draws of the answer-model learner's belief per active query (as `AnswerModelInfoGain` in `langpref.reward`)."""
@@ -71,7 +71,7 @@ class QueryChooser:
         self.answer_model = cfg.learner == "answer-model"
         # the stateless scorers, built once (the language one embeds the bank's feature axes); lal-infogain keeps a
         # record of the answers, so it is made per query; the answer-model learner scores with its own model
-        language, comparison = self.strategies["language"], self.strategies["comparison"]
+        language, comparison = self.strategies.get("language", "random"), self.strategies.get("comparison", "random")
         paper = not self.answer_model
         self._info = LanguageInfoGain(space, self.study, reward) if paper and language == "infogain" else None
         self._pairs = ComparisonActive(space, self.study, comparison) if paper and comparison != "random" else None
@@ -84,7 +84,7 @@ class QueryChooser:
         strategy = self.strategies[method]
         if strategy == "random":
             return self._random(method, number, rng)
-        gen = rng(5, METHODS.index(method), number)
+        gen = rng(5, self.cfg.kinds.index(method), number)
         if method == "language":
             past = history()
             seen = {int(a.query.shown) for a in past}

@@ -20,6 +20,7 @@ from typing import Any
 
 from langpref import __version__
 from langpref.errors import LangprefError
+from langpref.feedback.kind import get_kind
 from langpref.study import db as sdb
 from langpref.study.app import create_app
 from langpref.study.config import ServeConfig, StudyConfig
@@ -99,6 +100,7 @@ def build_state(
                 f"{cfg.db} belongs to a study run with another {what} ({stored.get(key[:-7])}); pass "
                 f"that {what} again, or a new --db for a new study"
             )
+    sdb.add_kind_tables(cfg.db, tuple(get_kind(k) for k in cfg.study.kinds))
     videos = VideoCache(cfg.data, cfg.videos or f"{cfg.db}.videos", cfg.video, engine.study, progress=progress)
     generated = None
     if generating:

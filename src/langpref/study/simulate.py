@@ -6,9 +6,10 @@ and `.comparison`): a random reward w over the normalised features, language fee
 phrasings, comparisons by Eq. 11, "satisfied" once the shown trajectory is within 10% of the best of the study set
 (`satisfied_at`), and ratings 1 + 4 x the normalised reward. It reads which trajectory a video shows from the
 video's name (`trajNNNNNN-...`, `genNNNNNN-...`), a shortcut only a simulation takes. Without the dataset it answers
-at random. The time per query it reports is the time it really took from receiving the step to sending the answer
-(its optional think time included). A participant's reward is fixed by the seed and its number: w =
-`sample_weights(D, np.random.default_rng([seed, number]))`.
+at random, and so it answers a kind beyond the paper's (`study serve --kinds`, the step's `widget`): a shown
+trajectory at random for a choice, "Move faster." for a text. The time per query it reports is the time it really
+took from receiving the step to sending the answer (its optional think time included). A participant's reward is
+fixed by the seed and its number: w = `sample_weights(D, np.random.default_rng([seed, number]))`.
 
 Study 1 with generated candidates (`study serve --improve-candidates generated`): the trajectories the server makes in
 the simulator are numbered from len(dataset) on (videos `genNNNNNN-...`). Given the server's database (`db`; the
@@ -245,6 +246,10 @@ class SimParticipant:
         if kind == "comparison":
             choice = self.comp.answer(ComparisonQuery(*shown)).choice if world else int(rng.integers(2))
             return {"choice": int(choice), "client_ms": round(client_ms, 1), "seq": step["seq"]}
+        widget = step.get("widget")
+        if widget is not None:  # a kind from a plugin, which no synthetic human here knows: a choice at random
+            value = int(rng.integers(len(step["videos"]))) if widget["type"] == "choice" else "Move faster."
+            return {widget["answer_key"]: value, "client_ms": round(client_ms, 1), "seq": step["seq"]}
         if kind == "confirm":  # asked what it meant: the robot's top reading
             return {"meaning": step["options"][0]["meaning"]}
         if kind == "satisfaction":

@@ -3,19 +3,25 @@
 A question is `{"id", "text", "type", "min", "max", "options"}` (the HTTP contract) plus `item` (its number in
 Appendix B), `required`, `labels` (the words at both ends of a Likert scale) and `method` (which Study-2 method a
 per-method question is about). The post-study preference-learning items about the methods (1, 3-6) are asked once
-per method, so that the export can put the two methods side by side as the paper does.
+per method, so that the export can put the two methods side by side as the paper does; a study of other kinds
+(`StudyConfig.kinds`) asks them about each of its kinds, by the kind's label (`survey_questions`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from functools import cache
 from typing import Any
 
 from langpref.errors import LangprefError
+from langpref.study.config import METHODS
+from langpref.study.kinds import label
 from langpref.tasks import get_task
 
 NONE_OF_THEM = "None of them"
 ASPECTS = ("Adaptability", "Time efficiency", "Convenience")
-METHOD_LABELS = {"language": "Language feedback", "comparison": "Pair-wise comparison"}
+METHOD_LABELS = {m: label(m) for m in METHODS}
+"""The paper's two methods as participants read them (their kinds' `StudyPage.label`)."""
 MAX_TEXT = 2000
 
 
@@ -157,14 +163,16 @@ PREF_LIKERT = [
 ]
 
 
-def _pref() -> list[dict[str, Any]]:
+def _pref(kinds: Sequence[str]) -> list[dict[str, Any]]:
+    """The preference-learning survey of a study of `kinds` (the paper's items 1 and 3-6 once per kind; item 7's
+    options the kinds in reverse order, as the paper lists its two: comparison first)."""
     qs = []
-    for m in ("language", "comparison"):
+    for m in kinds:
         qs.append(
             _q(
                 f"aspects_{m}",
                 1,
-                f"{METHOD_LABELS[m]}: what did you like about this method? Tick each aspect in "
+                f"{label(m)}: what did you like about this method? Tick each aspect in "
                 "which you found the method satisfactory.",
                 "multi",
                 options=[*ASPECTS, NONE_OF_THEM],
@@ -173,15 +181,15 @@ def _pref() -> list[dict[str, Any]]:
         )
     qs.append(_q("aspects_reasons", 2, "Could you explain the reasons?", "text", required=False))
     for stem, item, text, labels in PREF_LIKERT:
-        for m in ("language", "comparison"):
-            qs.append(_q(f"{stem}_{m}", item, f"{METHOD_LABELS[m]}: {text}", "likert", labels=labels, method=m))
+        for m in kinds:
+            qs.append(_q(f"{stem}_{m}", item, f"{label(m)}: {text}", "likert", labels=labels, method=m))
     qs.append(
         _q(
             "preferred",
             7,
             "Overall, which method do you prefer?",
             "choice",
-            options=[METHOD_LABELS["comparison"], METHOD_LABELS["language"]],
+            options=[label(m) for m in reversed(kinds)],
         )
     )
     qs.append(_q("preferred_why", 8, "Why do you prefer this method?", "text", required=False))
@@ -192,8 +200,9 @@ def _pref() -> list[dict[str, Any]]:
     return qs
 
 
-PREF = _pref()
+PREF = _pref(METHODS)
 SURVEYS: dict[str, list[dict[str, Any]]] = {"pre": PRE, "improve": IMPROVE, "pref": PREF}
+"""The questionnaires of the paper's study (its two kinds)."""
 SURVEY_TITLES = {
     "pre": "Before we begin",
     "improve": "About Experiment 1: improving a trajectory",
@@ -201,11 +210,22 @@ SURVEY_TITLES = {
 }
 
 
-def validate_answers(survey: str, answers: Any) -> dict[str, Any]:
-    """The checked answers of one survey (unknown ids, wrong types, missing required items: a LangprefError)."""
+@cache
+def _surveys(kinds: tuple[str, ...]) -> dict[str, list[dict[str, Any]]]:
+    return SURVEYS if kinds == METHODS else {"pre": PRE, "improve": IMPROVE, "pref": _pref(kinds)}
+
+
+def survey_questions(survey: str, kinds: Sequence[str] = METHODS) -> list[dict[str, Any]]:
+    """The questions of `survey` (`pre`, `improve`, `pref`) in a study of `kinds` (made once per kinds)."""
+    return _surveys(tuple(kinds))[survey]
+
+
+def validate_answers(survey: str, answers: Any, kinds: Sequence[str] = METHODS) -> dict[str, Any]:
+    """The checked answers of one survey of a study of `kinds` (unknown ids, wrong types, missing required items: a
+    LangprefError)."""
     if not isinstance(answers, dict):
         raise LangprefError("'answers' must be an object {question_id: value}")
-    questions = {q["id"]: q for q in SURVEYS[survey]}
+    questions = {q["id"]: q for q in survey_questions(survey, kinds)}
     unknown = sorted(set(answers) - set(questions))
     if unknown:
         raise LangprefError(f"unknown question id(s) {', '.join(map(str, unknown[:5]))} for this survey")

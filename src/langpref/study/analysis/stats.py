@@ -233,6 +233,8 @@ def ratings(tables: Tables) -> dict[str, Any]:
     points = sorted({int(r["after_queries"]) for r in tables["ratings"]})
     curves: dict[str, dict[str, dict[int, int]]] = {m: {} for m in METHODS}
     for r in tables["ratings"]:
+        if r["method"] not in curves:  # a kind beyond the paper's two, which these analyses compare
+            continue
         curves[r["method"]].setdefault(r["participant_id"], {})[int(r["after_queries"])] = int(r["rating"])
     out: dict[str, Any] = {"points": points}
     aucs: dict[str, dict[str, float]] = {m: {} for m in METHODS}

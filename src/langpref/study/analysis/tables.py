@@ -27,9 +27,10 @@ FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 
 def read_tables(conn) -> Tables:
-    """Every table as a list of rows (dicts), without the `PRIVATE` columns."""
+    """Every table as a list of rows (dicts), without the `PRIVATE` columns; the tables of kinds beyond the paper's
+    (`langpref.study.db.kind_tables`) after the schema's."""
     out = {}
-    for table in sdb.TABLES:
+    for table in (*sdb.TABLES, *sdb.kind_tables(conn)):
         rows = sdb.rows(conn, f"SELECT * FROM {table}")
         for r in rows:
             for col in PRIVATE.get(table, ()):

@@ -2,6 +2,9 @@
 // The participant's page: GET the current step, show it, POST the answer, show the step that comes back.
 // Everything shown is built with DOM calls and textContent (no HTML from data). The time per query runs from the
 // moment the step's videos play (or the step appears, when it has none) to the answer.
+// A Study-2 query of any feedback kind is drawn from its step's `widget` (the kind's StudyPage: a text box, or a
+// choice among the shown trajectories), so a kind from a plugin needs no edit here; Study 1 and the language queries
+// keep their own page (how the robot read the feedback).
 
 const MAX_FEEDBACK = 500;
 const PHASE_TITLES = {
@@ -9,7 +12,7 @@ const PHASE_TITLES = {
   improve: "Experiment 1: improve the robot's trajectory",
   improve_survey: "Experiment 1: survey",
   pref_language: "Experiment 2: teach the robot with language",
-  pref_comparison: "Experiment 2: teach the robot with comparisons",
+  pref_comparison: "Experiment 2: teach the robot with comparisons",  // other kinds: "Experiment 2: LABEL"
   pref_survey: "Experiment 2: survey",
   done: "Thank you",
 };
@@ -66,7 +69,8 @@ function meaning(u) {
 }
 
 function setHeader(step) {
-  document.getElementById("phase-title").textContent = PHASE_TITLES[step.phase] || step.phase;
+  document.getElementById("phase-title").textContent = PHASE_TITLES[step.phase]
+    || (step.method_label ? `Experiment 2: ${step.method_label}` : step.phase);
   const code = document.getElementById("resume-code-shown");
   if (step.resume_code) {
     code.textContent = `Resume code: ${step.resume_code}`;
@@ -77,7 +81,7 @@ function setHeader(step) {
   let text = "";
   if (step.phase === "improve") {
     text = step.kind === "language" ? `Round ${p.done + 1} of ${p.total}` : `Round ${p.done} of ${p.total}`;
-  } else if (step.kind === "language" || step.kind === "comparison" || step.kind === "confirm") {
+  } else if (step.kind === step.method || step.kind === "confirm") {  // a Study-2 query, of any kind
     text = `Query ${p.done + 1} of ${p.total}`;
   } else if (step.kind === "rating") {
     text = `After ${p.done} of ${p.total} queries`;
@@ -109,7 +113,7 @@ async function whenVideoFails(v, url, status) {
 }
 
 function videos(urls, labels) {
-  const box = el("div", {class: "videos" + (urls.length > 1 ? " two" : "")});
+  const box = el("div", {class: "videos" + (urls.length > 1 ? " two" : "") + (urls.length > 2 ? " many" : "")});
   const vids = [];
   urls.forEach((url, i) => {
     const v = el("video", {src: url, muted: true, autoplay: true, loop: true, playsinline: true, preload: "auto",
@@ -289,23 +293,48 @@ function renderLanguage(main, step) {
   box.focus({preventScroll: true});
 }
 
-function renderComparison(main, step) {
-  main.append(el("h1", {text: "Which trajectory do you prefer?"}));
-  main.append(el("p", {text: TOUCH ? "Watch both, then choose." : "Watch both, then choose (keys 1 and 2 work too)."}));
-  main.append(videos(step.videos, ["Trajectory 1", "Trajectory 2"]));
-  const b0 = el("button", {type: "button", text: "I prefer trajectory 1", "data-choice": 0});
-  const b1 = el("button", {type: "button", text: "I prefer trajectory 2", "data-choice": 1});
-  const choose = (c) => submit({choice: c, client_ms: clientMs()}, [b0, b1]);
-  b0.addEventListener("click", () => choose(0));
-  b1.addEventListener("click", () => choose(1));
-  main.append(el("div", {class: "choices sticky"}, b0, b1), errorLine(),
+// The `choice` widget (comparisons, and any kind whose answer is one of the shown trajectories): one button per
+// trajectory, its position (0-based) sent at the kind's answer field; keys 1..n choose too.
+function renderChoice(main, step) {
+  const w = step.widget, n = step.videos.length;
+  const names = step.videos.map((_, i) => `Trajectory ${i + 1}`);
+  main.append(el("h1", {text: w.prompt}));
+  const watch = n === 2 ? "Watch both, then choose" : "Watch them all, then choose";
+  const keys = n === 2 ? "keys 1 and 2" : `keys 1 to ${n}`;
+  main.append(el("p", {text: TOUCH ? `${watch}.` : `${watch} (${keys} work too).`}));
+  main.append(videos(step.videos, names));
+  const buttons = names.map((_, i) => el("button", {type: "button", text: w.option.replace("{n}", String(i + 1)),
+                                                    "data-choice": i}));
+  const choose = (c) => submit({[w.answer_key]: c, client_ms: clientMs()}, buttons);
+  buttons.forEach((b, i) => b.addEventListener("click", () => choose(i)));
+  main.append(el("div", {class: "choices sticky"}, ...buttons), errorLine(),
               el("p", {id: "status", class: "thinking", hidden: true}));
   keyHandler = (ev) => {
     if (ev.target.tagName === "TEXTAREA" || ev.target.tagName === "INPUT") return;
-    if (ev.key === "1") choose(0);
-    if (ev.key === "2") choose(1);
+    const c = parseInt(ev.key, 10) - 1;
+    if (c >= 0 && c < n) choose(c);
   };
 }
+
+// The `text` widget (a kind whose answer is a typed text, other than the paper's language with its own page).
+function renderText(main, step) {
+  const w = step.widget;
+  main.append(el("h1", {text: w.prompt}));
+  main.append(videos(step.videos, step.videos.map((_, i) => `Trajectory ${i + 1}`)));
+  const form = el("form", {class: "feedback"});
+  const box = el("textarea", {id: "feedback", name: w.answer_key, rows: 3, maxlength: MAX_FEEDBACK,
+                              autocomplete: "off", "aria-label": w.prompt});
+  const send = el("button", {type: "submit", text: "Send"});
+  form.addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    if (!box.value.trim()) { showError("Please type your answer before continuing."); box.focus(); return; }
+    submit({[w.answer_key]: box.value, client_ms: clientMs()}, [send]);
+  });
+  form.append(box, errorLine(), el("p", {id: "status", class: "thinking", hidden: true}), el("p", {}, send));
+  main.append(form);
+  box.focus({preventScroll: true});
+}
+const WIDGETS = {choice: renderChoice, text: renderText};
 
 // Asked when the robot is unsure how to read a typed answer: one click among its top readings, or none of them.
 function renderConfirm(main, step) {
@@ -370,23 +399,20 @@ const INTROS = {
   improve: ["Experiment 1: improve a trajectory",
             "The robot shows you a trajectory. Tell it in your own words how it should move differently; it then "
             + "shows you its improved trajectory beside the previous one and asks whether you are satisfied."],
-  language: ["Teaching with language",
-             "Each query shows one trajectory. Type how the robot should move differently, as in Experiment 1. "
-             + "The robot does not change this trajectory: it learns what you prefer."],
-  comparison: ["Teaching with comparisons",
-               "Each query shows two trajectories. Choose the one you prefer; the robot learns what you prefer "
-               + "from your choices."],
 };
+const ORDINALS = ["first", "second", "third", "fourth", "fifth", "sixth"];
+const COUNTS = ["no", "one way", "two ways", "three ways", "four ways", "five ways", "six ways"];
 
 function introFor(step) {
   if (step.phase === "improve" && step.kind === "language" && step.number === 0) return INTROS.improve;
-  if (step.method && step.kind === step.method && step.number === 1) {
-    const [title, text] = INTROS[step.method];
-    const part = step.method_position === 2 ? "Experiment 2, second method" : "Experiment 2, first method";
-    const lead = step.method_position === 2 ? "Now the robot learns your preferences again, another way. "
-      : "In this experiment the robot learns your preferences in two ways, one after the other, each with "
-        + `${step.progress.total} queries; after every few queries you rate its best trajectory so far. `;
-    return [`${part}: ${title.toLowerCase()}`, lead + text];
+  if (step.method && step.kind === step.method && step.number === 1) {  // a method's intro is its kind's own
+    const w = step.widget, k = step.method_position;
+    const part = `Experiment 2, ${ORDINALS[k - 1] || "next"} method`;
+    const lead = k > 1 ? "Now the robot learns your preferences again, another way. "
+      : `In this experiment the robot learns your preferences in ${COUNTS[step.methods] || "several ways"}, one after `
+        + `the other, each with ${step.progress.total} queries; after every few queries you rate its best `
+        + "trajectory so far. ";
+    return [`${part}: ${w.label.toLowerCase()}`, lead + w.intro];
   }
   return null;
 }
@@ -430,9 +456,10 @@ function render(step) {
   main.dataset.kind = step.kind;
   main.dataset.phase = step.phase;
   showStale(main);
-  ({survey: renderSurvey, language: renderLanguage, comparison: renderComparison, confirm: renderConfirm,
-    satisfaction: renderSatisfaction, rating: renderRating, done: renderDone})[step.kind](main, step);
-  if (step.kind !== "language") main.focus({preventScroll: true});
+  const own = {survey: renderSurvey, language: renderLanguage, confirm: renderConfirm,
+               satisfaction: renderSatisfaction, rating: renderRating, done: renderDone}[step.kind];
+  (own || WIDGETS[step.widget.type])(main, step);
+  if (!main.querySelector("textarea#feedback")) main.focus({preventScroll: true});
   window.scrollTo(0, 0);
   if (!step.videos.length) shownAt = renderedAt;
 }
