@@ -57,3 +57,17 @@ def test_saved_prototypes_are_the_banks_own_phrasings_not_the_proposals(tiny_dat
     trainer = Trainer(tiny_config(tiny_data, tmp_path / "m", augment_phrasings=8), *phrasings, progress=False)
     assert len(trainer.train_phr.texts) > len(trainer.bank_train_phr.texts)
     assert trainer.bank_train_phr is phrasings[0]
+
+
+def test_augmentation_is_on_by_default_for_a_small_bank_only(phrasings):
+    from langpref.language.pairs import phrasings_from_mapping
+    from langpref.model.keep import AUTO_AUGMENT, SMALL_BANK, resolve_augment
+
+    train, _ = phrasings
+    assert resolve_augment(None, train) == AUTO_AUGMENT  # a few phrasings per meaning
+    big = {
+        f: {d: [f"{f} {d} {i}" for i in range(SMALL_BANK)] for d in ("increase", "decrease")}
+        for f in train.feature_names
+    }
+    assert resolve_augment(None, phrasings_from_mapping(big, train.feature_names)) == 0
+    assert resolve_augment(0, train) == 0 and resolve_augment(5, train) == 5

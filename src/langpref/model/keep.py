@@ -73,6 +73,20 @@ class Anchor:
         return self.weight * sum(((p - p0) ** 2).sum() for p, p0 in zip(self.params, self.start, strict=True))
 
 
+SMALL_BANK = 40
+"""Train phrasings per meaning under which a bank counts as small: `augment_phrasings` is on by default there."""
+AUTO_AUGMENT = 48
+"""Proposals per meaning added by default to a small bank (chosen on val, docs/results.md)."""
+
+
+def resolve_augment(requested: int | None, train: Phrasings) -> int:
+    """`augment_phrasings` as given, or by default `AUTO_AUGMENT` for a bank whose smallest meaning has fewer than
+    `SMALL_BANK` train phrasings and 0 otherwise."""
+    if requested is not None:
+        return requested
+    return AUTO_AUGMENT if int(train.group_sizes().min()) < SMALL_BANK else 0
+
+
 def augmented(train: Phrasings, val: Phrasings, per_meaning: int) -> Phrasings:
     """The train phrasings plus up to `per_meaning` template proposals per meaning made from them; a proposal that
     repeats a val phrasing is dropped, so validation never scores a sentence that training saw."""
@@ -82,4 +96,4 @@ def augmented(train: Phrasings, val: Phrasings, per_meaning: int) -> Phrasings:
     return merge_phrasings(train, phrasings_from_mapping(extra, train.feature_names, require_all=False))
 
 
-__all__ = ["Anchor", "augmented", "layer_stack", "trainable_lm_params"]
+__all__ = ["AUTO_AUGMENT", "SMALL_BANK", "Anchor", "augmented", "layer_stack", "resolve_augment", "trainable_lm_params"]

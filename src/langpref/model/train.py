@@ -62,7 +62,7 @@ from langpref.model.config import ModelConfig, TrainConfig
 from langpref.model.encoders import freeze, normalisation_stats
 from langpref.model.evaluate import alignment_counts
 from langpref.model.inputs import dataset_input, resolve_observations, sees_images
-from langpref.model.keep import Anchor, augmented, trainable_lm_params
+from langpref.model.keep import Anchor, augmented, resolve_augment, trainable_lm_params
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import episode_contrastive_loss, latent_loss
 from langpref.model.windows import Segments, sample_windows, segment_steps, whole_episodes
@@ -206,6 +206,7 @@ class Trainer:
         # what training sees (with `augment_phrasings`, the bank's and template proposals); the prototypes saved
         # with the model are the means of the bank's own train phrasings
         self.bank_train_phr = train_phr
+        cfg = replace(cfg, augment_phrasings=resolve_augment(cfg.augment_phrasings, train_phr))
         self.train_phr, self.val_phr = augmented(train_phr, val_phr, cfg.augment_phrasings), val_phr
         self.rng = np.random.default_rng(cfg.seed)
         torch.manual_seed(cfg.seed)
