@@ -367,7 +367,7 @@ def test_paired_difference_on_hand_built_numbers():
 
 
 def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
-    from langpref.experiments.reward import PRIOR_METHODS, run_prior_experiment
+    from langpref.experiments.prior import PRIOR_METHODS, run_prior_experiment
 
     data = write_dataset(tmp_path / "d", "metaworld", n=40)
     cfg = LearnRewardConfig(queries=3, humans=1, seeds=1)

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.common import SweepConfig, figure_link
-from langpref.experiments.reward import _run_methods, _save, _table, paired_difference
+from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary
 from langpref.extras import pyplot
 from langpref.reward.cost import elapsed, on_time_grid, time_average
 
@@ -163,7 +163,7 @@ def run_active_experiment(
         name: replace(base, feedback=fb, query_selection=sel, learner=learner, confirm_margin=margin)
         for name, (fb, sel, learner, margin) in METHODS.items()
     }
-    results, runs, space, data, model, out = _run_methods(
+    results, runs, space, data, model, out = run_methods(
         "active", env, methods, data, model, out, perfect, force, progress, sweep
     )
     q = base.queries
@@ -218,7 +218,7 @@ def run_active_experiment(
         "per_run_auc": {m: auc[m][:, 0].tolist() for m in methods},
         "per_run_auc_per_second": {m: auc_s[m][:, 0].tolist() for m in methods},
     }
-    return _save("active", env, data, model, out, space, base, fields, _markdown, command)
+    return save_summary("active", env, data, model, out, space, base, fields, _markdown, command)
 
 
 def answer_model_targets(results: dict[str, dict], contrasts: dict[str, dict]) -> dict[str, bool]:
@@ -293,7 +293,7 @@ def _markdown(summary: dict[str, Any]) -> str:
         "curve over query counts 0..Q.",
         "",
     ]
-    lines += _table(summary["methods"], at)
+    lines += curves_table(summary["methods"], at)
     lines += ["", *_time_table(summary)]
     lines += [
         "",

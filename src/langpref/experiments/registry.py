@@ -128,7 +128,7 @@ for _experiment in (
     Experiment(
         "prior",
         "the L2 prior's strength per reward-learning method, chosen on the val split",
-        "langpref.experiments.reward:run_prior_experiment",
+        "langpref.experiments.prior:run_prior_experiment",
         _LEARN,
         _REWARD_FLAGS,
         default_out=_OUT.format(name="prior") + ", ENV-mlp",
