@@ -196,7 +196,7 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
     from dataclasses import replace
 
     from langpref import propose
-    from langpref.experiments import generate as experiment
+    from langpref.experiments import propose as experiment
     from langpref.reward import LearnRewardConfig
 
     small, real_open = ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2), propose.open_generation
@@ -206,9 +206,7 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
     monkeypatch.setattr(experiment, "REWARD_RUNS", {"humans": 1, "seeds": 4, "queries": 3})
     base = ImproveConfig(seeds=4, iterations=2)
     out = tmp_path / "out"
-    experiment.run_generate_experiment(
-        "metaworld", real_data.root, None, out, perfect=True, config=base, progress=False
-    )
+    experiment.run_propose_experiment("metaworld", real_data.root, None, out, perfect=True, config=base, progress=False)
     together = json.loads((out / "runs.json").read_text())["runs"]
 
     monkeypatch.setattr(propose, "_ENVS", {})  # a fresh simulator, as a new process has

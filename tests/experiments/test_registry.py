@@ -59,7 +59,7 @@ def test_flag_choices_come_from_the_literal_fields():
     from langpref.backends import BACKENDS
     from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, FEATURE_SCALES
     from langpref.feedback.space import PHRASING_SPLITS
-    from langpref.improve import OBJECTIVES, STRATEGIES
+    from langpref.improve import IMPROVE_STRATEGIES, OBJECTIVES
     from langpref.reward.answer_model import LEARNERS
     from langpref.reward.learner import LOSSES, MODELS, NEGATIVES
     from test_cli import parsers
@@ -73,7 +73,7 @@ def test_flag_choices_come_from_the_literal_fields():
     assert lr["--reward-model"].choices == MODELS and lr["--loss"].choices == LOSSES
     assert lr["--negatives"].choices == NEGATIVES and lr["--learner"].choices == LEARNERS
     assert lr["--query-split"].choices == lr["--eval-split"].choices == ("train", "val", "test")
-    assert imp["--strategy"].choices == STRATEGIES and imp["--objective"].choices == OBJECTIVES
+    assert imp["--strategy"].choices == IMPROVE_STRATEGIES and imp["--objective"].choices == OBJECTIVES
     assert imp["--candidates"].choices == ("train", "val", "test", "generated")
     assert imp["--base-split"].choices == ("train", "val", "test")
     assert ex["--backend"].choices == flags["generate"]["--backend"].choices == BACKENDS

@@ -6,8 +6,9 @@ import argparse
 import importlib
 from pathlib import Path
 
-from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, SPLITS, TASK, load
+from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, TASK, load
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
+from langpref.dataset.splits import SPLITS
 from langpref.experiments.registry import EXPERIMENTS
 from langpref.extras import require
 

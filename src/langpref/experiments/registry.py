@@ -148,7 +148,7 @@ for _experiment in (
         "generate",
         "issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "
         "best test trajectory (10 humans x 3 seeds, Q = 40)",
-        "langpref.experiments.generate:run_generate_experiment",
+        "langpref.experiments.propose:run_propose_experiment",
         _IMPROVE,
         ("iterations", "seeds"),
         default_out=_OUT.format(name="generate") + ", ENV-mlp",

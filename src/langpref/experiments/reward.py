@@ -25,7 +25,7 @@ import numpy as np
 from langpref.experiments.common import (
     RunCache,
     SweepConfig,
-    command_line,
+    base_command,
     default_paths,
     figure_link,
     phrasing_variant,
@@ -312,7 +312,7 @@ def save_summary(
         "seeds": base.seeds,
         "queries": base.queries,
         **fields,
-        "command": command or command_line(kind, env, data, model, out),
+        "command": command or base_command(kind, env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")

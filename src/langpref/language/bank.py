@@ -26,7 +26,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.tasks import get_task, task_names
 
-SPLITS: tuple[str, ...] = ("train", "val", "test")
+BANK_SPLITS: tuple[str, ...] = ("train", "val", "test")
 DIRECTIONS: tuple[str, ...] = ("increase", "decrease")
 VAGUE_FEEDBACK: tuple[str, ...] = (
     "Not quite.",
@@ -75,7 +75,7 @@ class Bank:
 
     def _check_split(self, split: str) -> None:
         if split not in self.phrasings:
-            raise LangprefError(f"unknown split {split!r}: choose one of {', '.join(SPLITS)}")
+            raise LangprefError(f"unknown split {split!r}: choose one of {', '.join(BANK_SPLITS)}")
 
     def get(self, split: str, feature: str, direction: str) -> tuple[str, ...]:
         self._check_split(split)
@@ -101,7 +101,7 @@ class Bank:
         """feature -> direction -> the phrasings of all splits (train, val, test order): DESIGN.md's schema."""
         return {
             feature: {
-                direction: [text for split in SPLITS for text in self.phrasings[split][feature][direction]]
+                direction: [text for split in BANK_SPLITS for text in self.phrasings[split][feature][direction]]
                 for direction in DIRECTIONS
             }
             for feature in self.features
@@ -117,6 +117,24 @@ def _type_name(value: Any) -> str:
     return {dict: "object", list: "list", str: "string", bool: "boolean", type(None): "null"}.get(
         type(value), type(value).__name__
     )
+
+
+def _parse_texts(texts: Any, where: str, key: str) -> tuple[str, ...]:
+    """Validate one list of phrasings at dotted location `key`: stripped, none empty, duplicates dropped."""
+    if not isinstance(texts, list):
+        raise LangprefError(f"{where}: {key} must be a list of strings, got {_type_name(texts)}")
+    if not texts:
+        raise LangprefError(f"{where}: {key} is an empty list; give at least one phrasing or drop the key")
+    kept: list[str] = []
+    for i, text in enumerate(texts):
+        if not isinstance(text, str):
+            raise LangprefError(f"{where}: {key}[{i}] must be a string, got {_type_name(text)}")
+        text = text.strip()
+        if not normalise(text):
+            raise LangprefError(f"{where}: {key}[{i}] is an empty phrasing")
+        if text not in kept:
+            kept.append(text)
+    return tuple(kept)
 
 
 def _parse_phrasings(
@@ -157,26 +175,10 @@ def _parse_phrasings(
                 )
         parsed: dict[str, tuple[str, ...]] = {}
         for direction in DIRECTIONS:
-            dkey = f"{fkey}.{direction}"
-            if direction not in dentries:
-                if require_all:
-                    raise LangprefError(f"{where}: {fkey} lacks direction {direction!r}")
-                continue
-            texts = dentries[direction]
-            if not isinstance(texts, list):
-                raise LangprefError(f"{where}: {dkey} must be a list of strings, got {_type_name(texts)}")
-            if not texts:
-                raise LangprefError(f"{where}: {dkey} is an empty list; give at least one phrasing or drop the key")
-            kept: list[str] = []
-            for i, text in enumerate(texts):
-                if not isinstance(text, str):
-                    raise LangprefError(f"{where}: {dkey}[{i}] must be a string, got {_type_name(text)}")
-                text = text.strip()
-                if not normalise(text):
-                    raise LangprefError(f"{where}: {dkey}[{i}] is an empty phrasing")
-                if text not in kept:
-                    kept.append(text)
-            parsed[direction] = tuple(kept)
+            if direction in dentries:
+                parsed[direction] = _parse_texts(dentries[direction], where, f"{fkey}.{direction}")
+            elif require_all:
+                raise LangprefError(f"{where}: {fkey} lacks direction {direction!r}")
         if parsed:
             out[feature] = parsed
     return out
@@ -239,16 +241,16 @@ def _parse_bank(data: Any, env: str, where: str, features: tuple[str, ...] | Non
         raise LangprefError(f"{where}: the top level must be an object of splits, got {_type_name(data)}")
     splits = _visible(data)
     for split in splits:
-        if split not in SPLITS:
-            raise LangprefError(f"{where}: unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
+        if split not in BANK_SPLITS:
+            raise LangprefError(f"{where}: unknown split {split!r}; valid splits: {', '.join(BANK_SPLITS)}")
     phrasings: dict[str, dict[str, dict[str, tuple[str, ...]]]] = {}
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         if split not in splits:
             raise LangprefError(f"{where}: the bank lacks split {split!r}")
         phrasings[split] = _parse_phrasings(splits[split], env, where, split, require_all=True, valid=features)
     # No phrasing twice in a task (after normalise), so no val/test phrasing equals a train one.
     seen: dict[str, str] = {}
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         for feature, by_direction in phrasings[split].items():
             for direction, texts in by_direction.items():
                 for text in texts:
@@ -292,16 +294,16 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
     if not isinstance(data, dict):
         raise LangprefError(f"{where}: the top level must be an object, got {_type_name(data)}")
     data = _visible(data)
-    if set(data) & set(SPLITS):
+    if set(data) & set(BANK_SPLITS):
         return data
-    out: dict[str, Any] = {split: {} for split in SPLITS}
+    out: dict[str, Any] = {split: {} for split in BANK_SPLITS}
     rng = np.random.default_rng([seed, 7])
     for feature in features:
         if feature not in data or not isinstance(data[feature], dict):
             raise LangprefError(
                 f"{where}: no phrasings for feature {feature!r} (the task's features: {', '.join(features)})"
             )
-        for split in SPLITS:
+        for split in BANK_SPLITS:
             out[split][feature] = {}
         for direction in DIRECTIONS:
             texts = data[feature].get(direction)
@@ -326,7 +328,7 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
                 "val": order[n_train : n_train + n_val],
                 "test": order[n_train + n_val :],
             }
-            for split in SPLITS:
+            for split in BANK_SPLITS:
                 out[split][feature][direction] = parts[split]
     unknown = sorted(set(data) - set(features))
     if unknown:
@@ -336,4 +338,13 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
     return out
 
 
-__all__ = ["DIRECTIONS", "SPLITS", "Bank", "load_bank", "load_user_utterances", "normalise", "check_bank", "split_bank"]
+__all__ = [
+    "DIRECTIONS",
+    "BANK_SPLITS",
+    "Bank",
+    "load_bank",
+    "load_user_utterances",
+    "normalise",
+    "check_bank",
+    "split_bank",
+]

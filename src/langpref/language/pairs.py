@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.language.bank import DIRECTIONS
 
-DIRECTIONS: tuple[str, ...] = ("increase", "decrease")
 INCREASE, DECREASE = 0, 1
 TIE_FRACTION = 0.05  # a feature "differs" between two trajectories when |delta| > TIE_FRACTION * std(train)
 

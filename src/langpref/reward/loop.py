@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from langpref.dataset.storage import Split
+from langpref.dataset.splits import Split
 from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.kind import MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query
