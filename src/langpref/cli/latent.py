@@ -88,7 +88,7 @@ def cmd_train(args: argparse.Namespace) -> None:
         path(
             "--utterances",
             default=None,
-            help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split",
+            help="utterance file (docs/design.md#utterance-files) instead of the bank's phrasings of --split",
         ),
         DEVICE,
         opt(

@@ -5,9 +5,9 @@ start from every original utterance of the paper's Appendix E (all in `train`) p
 Paraphrase families stay within one split, and no val/test phrasing equals a train phrasing after `normalise`.
 A recorded task's bank may come unsplit (`feature -> direction -> [phrasings]`); `split_bank` splits it by phrasing.
 
-A user file (`--utterances FILE`) uses the plain schema of DESIGN.md, without splits, keyed by task name:
-`{"metaworld": {"speed": {"increase": ["Move faster."], "decrease": ["Move slower."]}}}`. It may give only some
-features and directions; keys starting with `_` (at any level) are comments and are ignored.
+A user file (`--utterances FILE`) uses the plain schema of docs/design.md#utterance-files, without splits, keyed by
+task name: `{"metaworld": {"speed": {"increase": ["Move faster."], "decrease": ["Move slower."]}}}`. It may give only
+some features and directions; keys starting with `_` (at any level) are comments and are ignored.
 
 Every problem with a file raises `LangprefError` with a one-line message naming the file and the offending key.
 """
@@ -98,7 +98,8 @@ class Bank:
         ]
 
     def merged(self) -> dict[str, dict[str, list[str]]]:
-        """feature -> direction -> the phrasings of all splits (train, val, test order): DESIGN.md's schema."""
+        """feature -> direction -> the phrasings of all splits (train, val, test order), the schema of
+        docs/design.md#utterance-files."""
         return {
             feature: {
                 direction: [text for split in BANK_SPLITS for text in self.phrasings[split][feature][direction]]
@@ -202,11 +203,11 @@ def _check_top(data: Any, where: str) -> dict[str, Any]:
 def load_user_utterances(
     path: str | Path, env: str, features: tuple[str, ...] | None = None
 ) -> dict[str, dict[str, tuple[str, ...]]]:
-    """Read a user's utterance file (DESIGN.md schema, no splits) and return `feature -> direction -> phrasings`
-    for `env`: only the features and directions the file gives, in canonical order. Every section of a task known in
-    this process is validated, not only `env`'s; sections of other tasks (a shared file may cover tasks whose dataset
-    is not open here) are skipped, and named in the error if `env`'s own section is missing. `features` names the
-    features of a task not registered in this process (a task file not imported yet)."""
+    """Read a user's utterance file (docs/design.md#utterance-files, no splits) and return `feature -> direction ->
+    phrasings` for `env`: only the features and directions the file gives, in canonical order. Every section of a
+    task known in this process is validated, not only `env`'s; sections of other tasks (a shared file may cover tasks
+    whose dataset is not open here) are skipped, and named in the error if `env`'s own section is missing. `features`
+    names the features of a task not registered in this process (a task file not imported yet)."""
     if features is None:
         _features(env)
     path = Path(path)

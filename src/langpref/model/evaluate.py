@@ -1,4 +1,4 @@
-"""Alignment accuracy (paper Sec. 5.1, DESIGN.md) and how the model reads one free-form sentence.
+"""Alignment accuracy (paper Sec. 5.1, docs/design.md#the-command-line) and how the model reads one free-form sentence.
 
 Accuracy: over every ordered pair (tau_A, tau_B) of a split, every feature whose value differs between them (by more
 than the model's tie threshold), and every phrasing of that feature in the direction that takes tau_A to tau_B, the

@@ -260,7 +260,7 @@ def _answer_kind(body: Any, step: Step) -> str:
     """The kind of answer `body` holds, checked against the current step (its kind and, when sent, its `seq`)."""
     if not isinstance(body, dict):
         raise AnswerError("the body must be a JSON object")
-    # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in DESIGN.md's
+    # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in docs/design.md's
     # contract that outside clients follow; when it is sent, an old answer sent again is never taken for the current
     # step (our pages and simulated participants always send it)
     kinds = {ANSWER_KEYS[k] for k in body if k in ANSWER_KEYS}
