@@ -61,3 +61,12 @@ def test_every_written_exception_is_still_needed():
                 sizes[key] = max(sizes.get(key, 0), node.end_lineno - node.lineno + 1)
     stale = [name for name in LONG_FUNCTIONS if sizes.get(name, 0) <= MAX_FUNCTION_LINES]
     assert not stale, f"these are short now; drop them from LONG_FUNCTIONS: {stale}"
+
+
+def test_test_modules_have_unique_names():
+    """Test folders are not packages, so two test modules of one name cannot run in one session: keep names unique
+    (`tests/experiments/test_improve_experiment.py` beside `tests/test_improve.py`)."""
+    names: dict[str, list[str]] = {}
+    for path in (SRC.parents[1] / "tests").rglob("test_*.py"):
+        names.setdefault(path.name, []).append(str(path.relative_to(SRC.parents[1])))
+    assert not {n: p for n, p in names.items() if len(p) > 1}, "rename one of each"

@@ -68,7 +68,7 @@ def test_flag_choices_come_from_the_literal_fields():
     from langpref.improve import IMPROVE_STRATEGIES, OBJECTIVES
     from langpref.reward.answer_model import LEARNERS
     from langpref.reward.learner import LOSSES, MODELS, NEGATIVES
-    from test_cli import parsers
+    from tests.factories import parsers
 
     p = parsers()
     flags = {c: {a.option_strings[0]: a for a in p[c]._actions if a.option_strings} for c in p}

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from conftest import make_image_dataset, tiny_config
 from langpref.errors import LangprefError
 from langpref.experiments.observations import ObservationsConfig, run_observations_experiment
+from tests.factories import make_image_dataset, tiny_config
 
 
 def test_a_model_per_kind_with_time_and_memory(tmp_path):
