@@ -5,7 +5,7 @@ Measures, per env: raw `env.step` with random actions, the generator on one work
 speed-up of 2 workers over 1 (target >= 1.7x), Ray's overhead against local processes (target < 15%), the import
 rate (`benchmarks.throughput`); an experiment sweep's projected against measured wall time, the latency of a reward
 update and an improvement step, the feedback gate, a generation step, the training times (`benchmarks.latency`);
-the latency of choosing an active query (`langpref.reward.latency`); and (optionally) the wall time of a default
+the latency of choosing an active query (`benchmarks.selection`); and (optionally) the wall time of a default
 dataset. Not part of the tests: timings belong in benchmarks, not in unit tests that flake on shared machines.
 """
 
@@ -15,6 +15,7 @@ import argparse
 
 from benchmarks.common import RESULTS, today, use_egl, write_section
 from benchmarks.latency import gate_table, generation_table, sweep_table, training_table, uses_table
+from benchmarks.selection import selection_table
 from benchmarks.throughput import default_datasets_table, generator_table, import_table, ray_overhead_table
 
 
@@ -67,8 +68,6 @@ def main(argv: list[str] | None = None) -> None:
     if args.gate:
         write_section("feedback-gate", gate_table(args.envs, day))
     if args.selection:
-        from langpref.reward.latency import selection_table
-
         write_section("selection-latency", selection_table(args.envs, day))
     if args.generation:
         write_section("generation-latency", generation_table(args.envs, day))

@@ -1,4 +1,5 @@
-"""Shared test setup: headless rendering, one torch thread, and a tiny synthetic dataset without a simulator."""
+"""Shared test setup: headless rendering, one torch thread, and fixtures over `tests.factories` (test data without a
+simulator)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,12 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
 
-from dataclasses import asdict  # noqa: E402
+from functools import partial  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+
+from tests.factories import MW_FEATURES, TRAIN_TEXTS, VAL_TEXTS, make_image_dataset, tiny_config, write_dataset  # noqa: E402
 
 try:
     import torch
@@ -34,79 +36,63 @@ def pytest_runtest_makereport(item, call):
         report.outcome, report.longrepr = "failed", f"skipped under CI, which must run every test: {reason}"
 
 
-def write_synthetic_dataset(root: Path, n: int = 12, horizon: int = 20, env: str = "metaworld", seed: int = 0) -> Path:
-    """A dataset in the real on-disk format whose features are the means of the first observation dims."""
-    from langpref.dataset.generate import assign_splits
-    from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
-    from langpref.tasks import get_task
-
-    spec = get_task(env)
-    rng = np.random.default_rng(seed)
-    nf = len(spec.features)
-    feats = np.zeros((n, nf))
-    for i in range(n):
-        obs = rng.normal(size=(horizon, spec.obs_dim)).astype(np.float32) * 0.1 + rng.normal(size=spec.obs_dim)
-        step_features = obs[:, :nf].copy()
-        traj = Trajectory(
-            i,
-            obs,
-            rng.normal(size=(horizon, spec.action_dim)).astype(np.float32),
-            step_features,
-            np.zeros((horizon, 3)),
-            np.zeros((horizon, 3)),
-            bool(i % 2),
-            i,
-            {"i": i},
-        )
-        save_trajectory(root, traj)
-        feats[i] = traj.features
-    meta = DatasetMeta(
-        env,
-        horizon,
-        [asdict(f) for f in spec.obs_layout],
-        spec.action_dim,
-        list(spec.features),
-        assign_splits(env, n, seed),
-        n,
-    )
-    write_meta(root, meta, feats)
-    return root
-
-
 @pytest.fixture
 def synthetic_dataset(tmp_path: Path) -> Path:
-    return write_synthetic_dataset(tmp_path / "synthetic")
+    """12 trajectories of 20 steps shaped as Meta-World's (`tests.factories.write_dataset`)."""
+    return write_dataset(tmp_path / "synthetic", n=12, like_task=True)
 
 
 @pytest.fixture
 def make_synthetic_dataset():
-    """`write_synthetic_dataset` itself, for tests that need another size (`from conftest import` may find the
-    conftest of another test folder first)."""
-    return write_synthetic_dataset
-
-
-TRAIN_TEXTS = {
-    "height": {
-        "increase": ["Move higher.", "Go up more.", "Raise your arm."],
-        "decrease": ["Move lower.", "Go down more.", "Lower your arm."],
-    },
-    "speed": {
-        "increase": ["Move faster.", "Speed up.", "Go quicker."],
-        "decrease": ["Move slower.", "Slow down.", "Go more slowly."],
-    },
-    "distance_to_button": {
-        "increase": ["Stay away from the button.", "Move farther from the button."],
-        "decrease": ["Get closer to the button.", "Move nearer to the button."],
-    },
-}
-VAL_TEXTS = {
-    "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},
-    "speed": {"increase": ["Be quicker."], "decrease": ["Be slower."]},
-    "distance_to_button": {"increase": ["Keep further from the button."], "decrease": ["Approach the button."]},
-}
+    """`write_dataset` shaped as a task's (Meta-World's unless `env=`), 12 trajectories of 20 steps unless given."""
+    return partial(write_dataset, n=12, like_task=True)
 
 
 @pytest.fixture(scope="session")
 def tiny_texts() -> tuple[dict, dict]:
     """A few Meta-World train and val phrasings (utterance-file schema) for tiny training runs."""
     return TRAIN_TEXTS, VAL_TEXTS
+
+
+@pytest.fixture(scope="session")
+def image_data(tmp_path_factory) -> Path:
+    """The image encoder's toy dataset (`tests.factories.make_image_dataset`)."""
+    return make_image_dataset(tmp_path_factory.mktemp("data") / "squares")
+
+
+@pytest.fixture(scope="session")
+def tiny_data(tmp_path_factory) -> Path:
+    """The toy dataset the latent-space tests train on (`tests.factories.write_dataset`, 16 trajectories)."""
+    return write_dataset(tmp_path_factory.mktemp("data") / "tiny")
+
+
+@pytest.fixture(scope="session")
+def phrasings(tiny_texts):
+    """(train, val) phrasing tables of `tiny_texts` over Meta-World's features."""
+    from langpref.language.pairs import phrasings_from_mapping
+
+    train_texts, val_texts = tiny_texts
+    return (phrasings_from_mapping(train_texts, MW_FEATURES), phrasings_from_mapping(val_texts, MW_FEATURES))
+
+
+@pytest.fixture(scope="session")
+def trained(tiny_data, phrasings, tmp_path_factory):
+    """One small run of both stages, shared by the tests that only read a trained model: (result, stage-1 dir)."""
+    from langpref.model.train import train
+
+    root = tmp_path_factory.mktemp("models")
+    cfg = tiny_config(tiny_data, root / "cofinetuned")
+    return train(
+        cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False, stage1_out=root / "frozen"
+    )
+
+
+@pytest.fixture(scope="session")
+def real_data(tmp_path_factory):
+    """A tiny Meta-World dataset made by `langpref generate` in the simulator (30 rollouts of 30 steps)."""
+    from langpref.dataset.generate import GenerateConfig, generate
+    from langpref.dataset.storage import load_dataset
+
+    out = tmp_path_factory.mktemp("gen") / "mw"
+    generate(GenerateConfig(env="metaworld", out=out, num_trajectories=30, horizon=30, workers=1))
+    return load_dataset(out)

@@ -54,3 +54,12 @@ def test_every_benchmark_answers_help(name, capsys):
     with pytest.raises(SystemExit) as exc:
         module.main(["--help"])
     assert exc.value.code == 0 and "usage" in capsys.readouterr().out
+
+
+def test_selection_timings_measure_every_strategy_at_a_tiny_size():
+    """The active-query timing bench (moved out of `langpref.reward`) still runs against the package's API."""
+    from benchmarks.selection import selection_table
+
+    table = selection_table(["metaworld"], "today", answers=3, candidates=12, trials=2)
+    rows = [line for line in table.splitlines() if line.startswith("| metaworld |")]
+    assert len(rows) == 6 and "`benchmarks.selection`" in table

@@ -255,7 +255,7 @@ def test_improve_and_learn_reward_hand_the_direction_to_their_human(monkeypatch)
 
 def test_the_prior_experiment_speaks_val_phrasings_only(tmp_path, make_synthetic_dataset, monkeypatch):
     import langpref.reward as reward_module
-    from langpref.experiments.reward import run_prior_experiment
+    from langpref.experiments.prior import run_prior_experiment
 
     data = make_synthetic_dataset(tmp_path / "d", n=40)
     spoken = []

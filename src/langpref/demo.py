@@ -15,14 +15,39 @@ def _banner(text: str) -> None:
 
 
 def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100) -> dict:
-    from langpref.dataset.generate import GenerateConfig, generate
-    from langpref.dataset.inspect import describe, format_description
-    from langpref.dataset.render import render_trajectory
-
+    """Generate, inspect, render, train, evaluate, improve and learn rewards at small size under `out`; what it made
+    (name -> path or figure), also written with the numbers into `out/summary.json`."""
     start = time.time()
     out = Path(out)
     data = out / "data_metaworld"
     made: dict = {}
+    ds = _dataset_stages(out, data, made, workers, num_trajectories)
+    model_dir, accuracy = _latent_stage(out, data, ds, made)
+    space, improvement = _improvement_stage(out, data, model_dir, made)
+    rewards = _reward_stage(out, space, made)
+    (out / "summary.json").write_text(
+        json.dumps(
+            {
+                "made": made,
+                "accuracy": accuracy,
+                "improvement": {s: r["curve"] for s, r in improvement.items()},
+                "reward": {
+                    fb: {k: r[k] for k in ("cross_entropy", "true_reward_of_best")} for fb, r in rewards.items()
+                },
+            },
+            indent=2,
+        )
+    )
+    _goodbye(out, made, start)
+    return made
+
+
+def _dataset_stages(out: Path, data: Path, made: dict, workers: int | None, num_trajectories: int):
+    """Stages 1-3: generate (or reuse) the dataset, describe it, render a success and a failure; the dataset."""
+    from langpref.dataset.generate import GenerateConfig, generate
+    from langpref.dataset.inspect import describe, format_description
+    from langpref.dataset.render import render_trajectory
+    from langpref.dataset.storage import load_dataset
 
     _banner(f"1. Generating {num_trajectories} Meta-World button-press trajectories (T = 500) in the simulator")
     if (data / "meta.json").exists():
@@ -40,15 +65,17 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     made["inspect"] = str(out / "inspect.json")
 
     _banner("3. Rendering one successful and one failed trajectory to video (offscreen, EGL)")
-    from langpref.dataset.storage import load_dataset
-
     ds = load_dataset(data)
     for label, idx in (("success", int(ds.success.argmax())), ("failure", int((~ds.success).argmax()))):
         video = render_trajectory(data, idx, out / f"trajectory_{idx}_{label}.mp4", stride=2, fps=20)
         made[f"video_{label}"] = str(video)
         print(f"   {label}: trajectory {idx} -> {video}")
+    return ds
 
-    _banner("4. Learning the shared latent space: trajectory encoder + pretrained MiniLM, frozen then co-finetuned")
+
+def _latent_stage(out: Path, data: Path, ds, made: dict) -> tuple[Path, dict]:
+    """Stage 4: train (or reuse) the shared latent space and read unseen phrasings with it; the model's directory
+    and its test accuracy."""
     from dataclasses import replace
 
     from langpref.language.bank import load_bank
@@ -58,6 +85,7 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     from langpref.model.evaluate import evaluate_split
     from langpref.model.train import train
 
+    _banner("4. Learning the shared latent space: trajectory encoder + pretrained MiniLM, frozen then co-finetuned")
     model_dir = out / "model_metaworld"
     if (model_dir / "config.json").exists():
         print(f"   reusing {model_dir} (delete it to retrain)")
@@ -74,18 +102,27 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     curve = next((p for p in model_dir.glob("*.png")), None)
     if curve:
         made["training_curve"] = str(curve)
+    return model_dir, accuracy
 
-    _banner("5. Iterative improvement with a synthetic human (Eq. 4 vs the feedback-history strategy)")
-    from langpref.experiments.reward import plot_reward_curves
+
+def _improvement_stage(out: Path, data: Path, model_dir: Path, made: dict):
+    """Stage 5: iterative improvement, Eq. 4 against the feedback-history strategy; the latent space and results."""
     from langpref.feedback.space import load_space
     from langpref.improve import ImproveConfig, improve, plot_improvement
-    from langpref.reward import LearnRewardConfig, learn_reward
 
+    _banner("5. Iterative improvement with a synthetic human (Eq. 4 vs the feedback-history strategy)")
     space = load_space(data, model_dir, env="metaworld")
     results = {s: improve(space, ImproveConfig(seeds=30, strategy=s)) for s in ("paper", "history")}
     made["improvement_figure"] = str(plot_improvement(results, out / "improvement.png", "Iterative improvement"))
     for s, r in results.items():
         print(f"   {s:<8} normalised true reward: iteration 0 {r['curve'][0]:.2f} -> iteration 15 {r['curve'][-1]:.2f}")
+    return space, results
+
+
+def _reward_stage(out: Path, space, made: dict) -> dict:
+    """Stage 6: reward learning from language and from comparisons; each kind's `learn_reward` result."""
+    from langpref.experiments.reward import plot_reward_curves
+    from langpref.reward import LearnRewardConfig, learn_reward
 
     _banner("6. Reward learning: comparative language vs pairwise comparisons (2 humans x 2 seeds, 20 queries)")
     rewards = {
@@ -98,20 +135,11 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
             f"   {fb:<10} cross-entropy after 20 queries {r['cross_entropy'][-1]:.3f}, "
             f"true reward of the learned best {r['true_reward_of_best'][-1]:.2f}"
         )
-    (out / "summary.json").write_text(
-        json.dumps(
-            {
-                "made": made,
-                "accuracy": accuracy,
-                "improvement": {s: r["curve"] for s, r in results.items()},
-                "reward": {
-                    fb: {k: r[k] for k in ("cross_entropy", "true_reward_of_best")} for fb, r in rewards.items()
-                },
-            },
-            indent=2,
-        )
-    )
+    return rewards
 
+
+def _goodbye(out: Path, made: dict, start: float) -> None:
+    """What the demo made, and the commands that go further."""
     _banner(f"Done in {time.time() - start:.0f} s. What the demo made:")
     for key, value in made.items():
         print(f"   {key:<20} {value}")
@@ -127,4 +155,3 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
         "   langpref study serve --model models/metaworld --data data/metaworld   # a user study in the browser\n"
         "   langpref import REC --task task.toml --out data/mine         # your own robot: README, 'Your own robot'"
     )
-    return made

@@ -37,7 +37,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from langpref.dataset.storage import Split
+from langpref.dataset.splits import Split
 from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.language import LanguageHuman, LanguageQuery, language_pairs
@@ -49,7 +49,7 @@ Strategy = Literal["paper", "history"]
 Objective = Literal["cosine", "printed"]
 CandidateSplit = Literal["train", "val", "test", "generated"]
 """A dataset split, or `generated` (`langpref.propose.GENERATED`)."""
-STRATEGIES: tuple[str, ...] = get_args(Strategy)
+IMPROVE_STRATEGIES: tuple[str, ...] = get_args(Strategy)
 OBJECTIVES: tuple[str, ...] = get_args(Objective)
 
 
@@ -92,8 +92,8 @@ class ImproveConfig:
         return (self.base_split or "test") if self.generated else self.candidate_split
 
     def validate(self) -> None:
-        if self.strategy not in STRATEGIES:
-            raise LangprefError(f"unknown strategy {self.strategy!r}: choose one of {', '.join(STRATEGIES)}")
+        if self.strategy not in IMPROVE_STRATEGIES:
+            raise LangprefError(f"unknown strategy {self.strategy!r}: choose one of {', '.join(IMPROVE_STRATEGIES)}")
         if self.objective not in OBJECTIVES:
             raise LangprefError(f"unknown objective {self.objective!r}: choose one of {', '.join(OBJECTIVES)}")
         if self.iterations < 0 or self.seeds < 1:
@@ -147,6 +147,43 @@ class ImprovementRun:
     """Wall time of each generation step (candidates `generated`)."""
 
 
+def _objective(
+    cfg: ImproveConfig,
+    learner: RewardLearner | None,
+    view: LatentSpace,
+    phi_current: np.ndarray,
+    answer,
+    rng_neg: np.random.Generator,
+):
+    """What the next trajectory maximises after `answer`: Eq. 4 (or the printed objective) from the current
+    trajectory and the sentence, or, for the history strategy, the reward refit on every answer so far."""
+    if learner is None:
+        score = cosine_objective if cfg.objective == "cosine" else printed_objective
+        return partial(score, phi_current=phi_current, psi=view.psi_of(answer.text))
+    learner.add(language_pairs(view, answer, cfg.reward, rng_neg))
+    learner.fit()
+    return learner.predict
+
+
+def _with_room(space: LatentSpace, generation, cfg: ImproveConfig):
+    """phi, theta, controller units and a latent-space view with one empty row per iteration after the dataset's,
+    for candidates `generated`. Rows n.. hold the trajectories generated in a run, filled as they are shown: phi for
+    the method, theta for the human (and the score). The proposer sees only phi, through the objective. Otherwise the
+    dataset's own arrays."""
+    if cfg.generated and generation is None:
+        raise LangprefError(
+            "candidates `generated` need the simulator and the dataset's controller parameters "
+            "(langpref.propose.Generation)"
+        )
+    extra = cfg.iterations if cfg.generated else 0
+    if not extra:
+        return space.phi, space.theta, None, space
+    phi = np.concatenate([space.phi, np.zeros((extra, space.dim))])
+    theta = np.concatenate([space.theta, np.zeros((extra, space.theta.shape[1]))])
+    units = np.concatenate([generation.units, np.zeros((extra, generation.units.shape[1]))])
+    return phi, theta, units, replace(space, phi=phi, theta=theta)
+
+
 def run_improvement(
     space: LatentSpace, w: np.ndarray, cfg: ImproveConfig, run_seed: tuple[int, ...], generation=None, store=None
 ) -> ImprovementRun:
@@ -157,17 +194,7 @@ def run_improvement(
     R_split = true_reward(w, space.theta[cands])
     rng_start, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
     n, extra = len(space.phi), (cfg.iterations if cfg.generated else 0)
-    if cfg.generated and generation is None:
-        raise LangprefError(
-            "candidates `generated` need the simulator and the dataset's controller parameters "
-            "(langpref.propose.Generation)"
-        )
-    # Rows n.. hold the trajectories generated in this run, filled as they are shown: phi for the method, theta for
-    # the human (and the score). The proposer sees only phi, through the objective.
-    phi = np.concatenate([space.phi, np.zeros((extra, space.dim))]) if extra else space.phi
-    theta = np.concatenate([space.theta, np.zeros((extra, space.theta.shape[1]))]) if extra else space.theta
-    units = np.concatenate([generation.units, np.zeros((extra, generation.units.shape[1]))]) if extra else None
-    view = replace(space, phi=phi, theta=theta) if extra else space
+    phi, theta, units, view = _with_room(space, generation, cfg)
     human = LanguageHuman(
         w,
         theta,
@@ -186,13 +213,7 @@ def run_improvement(
     for it in range(cfg.iterations):
         answer = human.answer(LanguageQuery(cur))
         said.append(answer.text)
-        if learner is None:
-            score = cosine_objective if cfg.objective == "cosine" else printed_objective
-            objective = partial(score, phi_current=phi[cur], psi=view.psi_of(answer.text))
-        else:
-            learner.add(language_pairs(view, answer, cfg.reward, rng_neg))
-            learner.fit()
-            objective = learner.predict
+        objective = _objective(cfg, learner, view, phi[cur], answer, rng_neg)
         rows = np.array(pool)
         scores = objective(phi[rows])
         if learner is not None and cfg.exclude_shown and len(set(shown) & set(pool)) < len(pool):
@@ -222,7 +243,7 @@ def run_improvement(
     )
 
 
-def summarise(runs: list[ImprovementRun]) -> dict:
+def summarise_improvement(runs: list[ImprovementRun]) -> dict:
     curves = np.array([r.reward for r in runs])
     raw = np.array([r.raw_reward for r in runs])
     return {
@@ -261,7 +282,7 @@ def improve(space: LatentSpace, cfg: ImproveConfig, progress: bool = True, gener
         )
         for s in tqdm(range(cfg.seeds), desc=f"improve {cfg.strategy}", disable=not progress, file=sys.stderr)
     ]
-    out = {**summarise(runs), "strategy": cfg.strategy, "config": asdict(cfg), "space": space.description}
+    out = {**summarise_improvement(runs), "strategy": cfg.strategy, "config": asdict(cfg), "space": space.description}
     if cfg.generated:
         out.update(generation_stats(runs), generated_out=cfg.generated_out, propose=asdict(generation.cfg))
     return out

@@ -70,7 +70,7 @@ def test_schema_1_datasets_still_load(synthetic_dataset):
     ds = load_dataset(synthetic_dataset)
     assert ds.meta.schema_version == 1 and ds.lengths("train") is None and ds.video_path(0) is None
     traj = ds.load(3)
-    assert traj.seed == 3 and traj.qpos.shape == (20, 3) and traj.source is None
+    assert traj.seed == 3 and traj.qpos.shape == (20, 2) and traj.source is None
 
 
 def test_trajectories_of_different_lengths_pad_with_their_last_step(synthetic_dataset):

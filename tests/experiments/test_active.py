@@ -59,3 +59,23 @@ def test_active_experiment_reports_the_mixed_arm_per_query_and_per_second(tmp_pa
     md = (tmp_path / "a" / "active.md").read_text()
     assert "Over the person's time" in md and "AUC best per second" in md and f"| {MIXED} |" in md
     assert json.loads((tmp_path / "a" / "active.json").read_text())["costs"] == {"language": 0.887, "comparison": 1.0}
+
+
+def test_active_experiment_writes_curves_intervals_and_targets(tmp_path, make_synthetic_dataset):
+    import json
+
+    from langpref.experiments.active import ACTIVE_METHODS, run_active_experiment
+
+    data = make_synthetic_dataset(tmp_path / "d", n=40)
+    cfg = LearnRewardConfig(queries=3, candidates=10, reward=RewardConfig(num_negatives=3, max_iter=20))
+    res = run_active_experiment(
+        "metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=2, seeds=1, progress=False
+    )
+    assert set(res["methods"]) == set(ACTIVE_METHODS) and len(res["targets"]) == 11
+    assert all(len(r["true_reward_of_best"]) == 4 for r in res["methods"].values())
+    assert "language-infogain - language-lal-infogain" in res["contrasts"]
+    assert (tmp_path / "a" / "active.png").read_bytes()[:4] == b"\x89PNG"
+    assert "Paired differences" in (tmp_path / "a" / "active.md").read_text()
+    assert json.loads((tmp_path / "a" / "active.json").read_text())["command"].startswith(
+        "langpref experiment active --env metaworld"
+    )

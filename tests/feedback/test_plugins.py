@@ -41,8 +41,7 @@ def installed(monkeypatch):
 
 def test_an_installed_kind_is_a_learn_reward_choice_and_runs(installed, tmp_path, capsys):
     from langpref.cli import main
-    from test_cli import parsers
-    from test_improve import write_features_dataset
+    from tests.factories import parsers, write_dataset
 
     with pytest.warns(UserWarning) as record:
         names = kind_names()
@@ -53,7 +52,7 @@ def test_an_installed_kind_is_a_learn_reward_choice_and_runs(installed, tmp_path
     flags = {a.option_strings[0]: a for a in parsers()["learn-reward"]._actions if a.option_strings}
     assert flags["--feedback"].choices == (*names, "mixed")
 
-    data = write_features_dataset(tmp_path / "d")
+    data = write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True)
     argv = ["learn-reward", "--data", str(data), "--perfect-latent", "--feedback", "best_of_three"]
     assert main([*argv, "--queries", "2", "--humans", "1", "--seeds", "1", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -52,11 +52,10 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
     the language human says only those; a text the file and the bank file under different meanings is refused."""
     import json
 
-    from tests.test_improve import write_features_dataset
-
     from langpref.feedback import HumanConfig, LanguageHuman, LanguageQuery, load_space
+    from tests.factories import write_dataset
 
-    data = write_features_dataset(tmp_path / "d")
+    data = write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True)
     mine = {
         "speed": {"increase": ["Zoom zoom."], "decrease": ["Easy, tiger."]},
         "height": {"increase": ["Up you go."], "decrease": ["Get down."]},
@@ -87,11 +86,10 @@ def test_a_language_human_can_speak_from_an_utterance_file(tmp_path):
 
 def test_the_all_table_is_every_bank_split_in_order(tmp_path):
     """--phrasing-split all (the paper's human): train, val and test phrasings with their meanings and psi."""
-    from tests.test_improve import write_features_dataset
-
     from langpref.feedback import load_space
+    from tests.factories import write_dataset
 
-    space = load_space(write_features_dataset(tmp_path / "d"), perfect=True)
+    space = load_space(write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True), perfect=True)
     parts = [space.table(s) for s in ("train", "val", "test")]
     every = space.table("all")
     assert every.texts == parts[0].texts + parts[1].texts + parts[2].texts

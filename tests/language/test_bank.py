@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from langpref.errors import LangprefError
-from langpref.language.bank import DIRECTIONS, SPLITS, Bank, load_bank, load_user_utterances, normalise
+from langpref.language.bank import BANK_SPLITS, DIRECTIONS, Bank, load_bank, load_user_utterances, normalise
 from langpref.tasks import get_task
 
 # The paper's numbers (Sec. 5.1): total phrasings and train/val/test split sizes.
@@ -171,16 +171,16 @@ def test_features_are_the_design_contract():
         "metaworld": ("height", "speed", "distance_to_button"),
         "robosuite": ("height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success"),
     }
-    assert SPLITS == ("train", "val", "test")
+    assert BANK_SPLITS == ("train", "val", "test")
     assert DIRECTIONS == ("increase", "decrease")
 
 
 @pytest.mark.parametrize("env", ENVS)
 def test_sizes_at_least_the_papers(banks, env):
     bank = banks[env]
-    sizes = {split: len(bank.all_of_split(split)) for split in SPLITS}
+    sizes = {split: len(bank.all_of_split(split)) for split in BANK_SPLITS}
     assert sum(sizes.values()) >= PAPER_TOTAL[env]
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         assert sizes[split] >= PAPER_SPLITS[env][split], (split, sizes)
     # near the paper's proportions (74.5% / 12.7% / 12.7%); train is a little larger for its contrast phrasings
     total = sum(sizes.values())
@@ -191,8 +191,8 @@ def test_sizes_at_least_the_papers(banks, env):
 
 @pytest.mark.parametrize("env", ENVS)
 def test_every_feature_and_direction_in_every_split_balanced(raw_bank, banks, env):
-    assert set(raw_bank[env]) == set(SPLITS)
-    for split in SPLITS:
+    assert set(raw_bank[env]) == set(BANK_SPLITS)
+    for split in BANK_SPLITS:
         assert set(raw_bank[env][split]) == set(FEATURES[env])
         counts = []
         for feature in FEATURES[env]:
@@ -208,7 +208,7 @@ def test_every_feature_and_direction_in_every_split_balanced(raw_bank, banks, en
 @pytest.mark.parametrize("env", ENVS)
 def test_no_duplicates_and_no_leak_between_splits(raw_bank, env):
     seen: dict[str, tuple[str, str, str]] = {}
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         for feature in FEATURES[env]:
             for direction in DIRECTIONS:
                 for text in raw_bank[env][split][feature][direction]:
@@ -274,7 +274,7 @@ def test_merged_schema(banks, env):
         assert list(by_direction) == list(DIRECTIONS)
         for direction, texts in by_direction.items():
             assert isinstance(texts, list)
-            assert texts == [t for s in SPLITS for t in bank.get(s, feature, direction)]
+            assert texts == [t for s in BANK_SPLITS for t in bank.get(s, feature, direction)]
     # JSON-serialisable, and readable back as a user file
     assert json.loads(json.dumps(merged)) == merged
 

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import make_dataset
 from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
 from langpref.model.checkpoint import load_model, save_model
 from langpref.model.evaluate import embed_text, evaluate_split
+from tests.factories import write_dataset
 
 TEXTS = ["Move faster.", "Go lower, please", "Stay away from the button"]
 
@@ -54,13 +54,13 @@ def _pairs_fd(model, dataset):
 
 def test_mismatched_dataset_fails_with_one_line(trained, tmp_path):
     other_env = load_dataset(
-        make_dataset(
+        write_dataset(
             tmp_path / "rs",
             env="robosuite",
             feature_names=["height", "speed", "distance_to_cube", "distance_to_bottle", "lift_success"],
         )
     )
-    other_obs = load_dataset(make_dataset(tmp_path / "obs7", obs_dim=7))
+    other_obs = load_dataset(write_dataset(tmp_path / "obs7", obs_dim=7))
     for ds, match in ((other_env, "robosuite"), (other_obs, "observation layout")):
         with pytest.raises(LangprefError, match=match) as exc:
             load_model(trained.out, dataset=ds)

@@ -10,32 +10,7 @@ import subprocess
 import sys
 import textwrap
 
-
-def tiny_config(data, out, **overrides):
-    """tests/model/conftest.py's tiny config (copied: `from conftest import` may find another folder's conftest)."""
-    from langpref.model.config import ModelConfig, TrainConfig
-
-    return TrainConfig(
-        **{
-            **dict(
-                data=str(data),
-                out=str(out),
-                model=ModelConfig(latent_dim=16, max_length=12),
-                stage1_epochs=6,
-                stage1_batch_size=32,
-                stage1_lr=1e-2,
-                stage1_head_lr=1e-2,
-                stage2_epochs=1,
-                stage2_batch_size=128,
-                stage2_phrasings_per_step=6,
-                patience=0,
-                device="cpu",
-                seed=0,
-            ),
-            **overrides,
-        }
-    )
-
+from tests.factories import tiny_config
 
 SCRIPT = textwrap.dedent("""
     import hashlib, json, sys

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import make_image_dataset, tiny_config
 from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
 from langpref.model.checkpoint import load_model
 from langpref.model.evaluate import evaluate_split
 from langpref.model.inputs import dataset_input, resolve_observations, trajectories_input
 from langpref.model.vision import ImageTrajectoryEncoder
+from tests.factories import make_image_dataset, tiny_config
 
 
 def _train(data, out, phrasings, observations):

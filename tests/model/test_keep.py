@@ -2,10 +2,10 @@
 
 import torch
 
-from conftest import tiny_config
 from langpref.language.bank import normalise
 from langpref.model.keep import Anchor, augmented, layer_stack
 from langpref.model.train import Trainer
+from tests.factories import tiny_config
 
 
 def test_only_the_top_layers_move_and_the_lower_keep_their_pretrained_weights(tiny_data, phrasings, tmp_path):

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from langpref.language.pairs import Pairs, Phrasings
-from langpref.model.evaluate import alignment_counts, reading, summarise
+from langpref.model.evaluate import alignment_counts, reading, summarise_accuracy
 from langpref.model.loss import align_loss, latent_loss, norm_loss
 
 
@@ -46,7 +46,7 @@ def test_accuracy_on_hand_built_embeddings_with_known_answers():
     # pair (0,1) f0 up: phrasings 0 (right) and 2 (wrong); (1,0) down: phrasing 1 right; (2,1) down: right
     assert correct.tolist() == [3, 0]
     assert total.tolist() == [4, 1]
-    out = summarise(correct, total, ["a", "b"])
+    out = summarise_accuracy(correct, total, ["a", "b"])
     assert out == {"accuracy": 3 / 5, "per_feature": {"a": 0.75, "b": 0.0}, "num_samples": 5}
 
 

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import tiny_config
 from langpref.errors import LangprefError
 from langpref.model.encoders import transformer_state_fingerprint
 from langpref.model.train import Trainer, train
+from tests.factories import tiny_config
 
 
 def test_loss_falls_and_train_accuracy_rises_well_above_chance(trained):

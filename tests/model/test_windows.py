@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import tiny_config
 from langpref.errors import LangprefError
 from langpref.model.train import Trainer, train
 from langpref.model.windows import sample_windows, segment_steps, whole_episodes, window_features
+from tests.factories import tiny_config
 
 
 def test_window_features_are_the_time_mean_of_the_windows_steps():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -34,6 +33,7 @@ from langpref.reward import (
     reward_of_best,
     run_reward_learning,
 )
+from tests.factories import write_dataset
 
 torch.set_num_threads(1)
 
@@ -190,43 +190,8 @@ def test_bad_configs_are_one_line_errors(space):
 # ---- command line and experiments, on datasets written to disk ---------------------------------------------------
 
 
-def write_dataset(root: Path, env: str, n: int = 24, horizon: int = 8, seed: int = 0) -> Path:
-    """A dataset in the real on-disk format (real observation layout of `env`), split 50/25/25."""
-    from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
-    from langpref.tasks import get_task
-
-    spec = get_task(env)
-    rng = np.random.default_rng(seed)
-    nf = len(spec.features)
-    feats = []
-    for i in range(n):
-        obs = (rng.normal(size=spec.obs_dim) + 0.1 * rng.normal(size=(horizon, spec.obs_dim))).astype(np.float32)
-        traj = Trajectory(
-            i,
-            obs,
-            rng.normal(size=(horizon, spec.action_dim)).astype(np.float32),
-            obs[:, :nf].astype(np.float64),
-            np.zeros((horizon, 2)),
-            np.zeros((horizon, 2)),
-            bool(i % 2),
-            i,
-            {},
-        )
-        save_trajectory(root, traj)
-        feats.append(traj.features)
-    splits = {"train": list(range(n // 2)), "val": list(range(n // 2, 3 * n // 4)), "test": list(range(3 * n // 4, n))}
-    write_meta(
-        root,
-        DatasetMeta(
-            env, horizon, [asdict(f) for f in spec.obs_layout], spec.action_dim, list(spec.features), splits, n
-        ),
-        np.array(feats),
-    )
-    return root
-
-
 def test_cli_learn_reward_json(tmp_path, capsys):
-    data = write_dataset(tmp_path / "d", "metaworld")
+    data = write_dataset(tmp_path / "d", env="metaworld", n=24, horizon=8, like_task=True)
     for fb in ("language", "comparison"):
         assert (
             main(
@@ -299,7 +264,7 @@ def untrained_model(tmp_path_factory):
 
 
 def test_cli_with_a_real_model_and_mismatched_env(tmp_path, capsys, untrained_model):
-    data = write_dataset(tmp_path / "mw", "metaworld")
+    data = write_dataset(tmp_path / "mw", env="metaworld", n=24, horizon=8, like_task=True)
     assert (
         main(
             [
@@ -323,82 +288,8 @@ def test_cli_with_a_real_model_and_mismatched_env(tmp_path, capsys, untrained_mo
     )
     out = json.loads(capsys.readouterr().out)
     assert len(out["cross_entropy"]) == 3 and "model" in out["space"]
-    other = write_dataset(tmp_path / "rs", "robosuite")
+    other = write_dataset(tmp_path / "rs", env="robosuite", n=24, horizon=8, like_task=True)
     for argv in (["learn-reward", "--feedback", "comparison"], ["improve"]):
         assert main([*argv, "--model", str(untrained_model), "--data", str(other), "--seeds", "1"]) == 2
         err = capsys.readouterr().err
         assert err.startswith("error: ") and "trained on metaworld" in err and err.count("\n") == 1
-
-
-def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch):
-    import langpref.reward as reward_module
-    from langpref.experiments.reward import run_ablation_experiment, run_reward_experiment
-
-    data = write_dataset(tmp_path / "d", "metaworld", n=40)
-    cfg = LearnRewardConfig(queries=4, humans=2, seeds=1)
-    res = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
-    assert set(res["methods"]) == {"language", "comparison"} and len(res["targets"]) == 3
-    assert (
-        len(res["ce_difference"]["mean"]) == 5
-        and "paired by human and seed" in (tmp_path / "r" / "reward.md").read_text()
-    )
-    abl = run_ablation_experiment("metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, progress=False)
-    assert set(abl["methods"]) == {"both", "explicit", "implicit"}
-    for out, name in ((tmp_path / "r", "reward"), (tmp_path / "a", "ablation")):
-        assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
-        assert json.loads((out / f"{name}.json").read_text())["queries"] == 4
-        assert "Paper:" in (out / f"{name}.md").read_text()
-    monkeypatch.setattr(reward_module, "run_reward_learning", lambda *a, **k: pytest.fail("rerun"))
-    again = run_reward_experiment("metaworld", data, None, tmp_path / "r", perfect=True, config=cfg, progress=False)
-    assert again["methods"]["language"]["cross_entropy"] == res["methods"]["language"]["cross_entropy"]
-
-
-def test_paired_difference_on_hand_built_numbers():
-    from langpref.experiments.reward import paired_difference
-
-    b = np.zeros((3, 2))
-    a = np.array([[1.0, 0.5], [2.0, 0.5], [3.0, 0.5]])
-    d = paired_difference(a, b)
-    half = 4.302653 / np.sqrt(3)  # t(0.975, 2) * sd 1 / sqrt(3)
-    assert d["mean"] == pytest.approx([2.0, 0.5])
-    assert d["low"] == pytest.approx([2.0 - half, 0.5], rel=1e-6) and d["high"] == pytest.approx(
-        [2.0 + half, 0.5], rel=1e-6
-    )
-
-
-def test_prior_experiment_picks_each_methods_lowest_val_cross_entropy(tmp_path):
-    from langpref.experiments.reward import PRIOR_METHODS, run_prior_experiment
-
-    data = write_dataset(tmp_path / "d", "metaworld", n=40)
-    cfg = LearnRewardConfig(queries=3, humans=1, seeds=1)
-    res = run_prior_experiment(
-        "metaworld", data, None, tmp_path / "p", perfect=True, config=cfg, progress=False, grid=(0.1, 10.0)
-    )
-    assert res["eval_split"] == "val" and res["seed"] != LearnRewardConfig().seed
-    assert res["reward_model"] == "linear" and res["default"] == RewardConfig().weight_decay
-    assert set(res["picks"]) == set(PRIOR_METHODS)
-    for name, pick in res["picks"].items():
-        ce = {wd: np.mean(res["methods"][f"{name} wd={wd:g}"]["cross_entropy"][1:]) for wd in (0.1, 10.0)}
-        assert ce[pick] == min(ce.values())
-    assert (tmp_path / "p" / "prior.png").read_bytes()[:4] == b"\x89PNG"
-    assert "| language |" in (tmp_path / "p" / "prior.md").read_text()
-
-
-def test_experiment_records_the_command_that_ran_it(tmp_path, monkeypatch, capsys):
-    """From the command line, the command that ran it (without --json); from Python, its base command (the options
-    are in the summary's configs). Each setting has its own default output."""
-    from langpref.experiments.reward import run_reward_experiment
-
-    monkeypatch.chdir(tmp_path)
-    data = write_dataset(tmp_path / "d", "metaworld", n=40)
-    argv = ["experiment", "reward", "--env", "metaworld", "--data", str(data), "--perfect-latent"]
-    argv += ["--queries", "2", "--humans", "1", "--seeds", "1", "--reward-model", "mlp"]
-    assert main([*argv, "--json"]) == 0
-    res = json.loads(capsys.readouterr().out)
-    assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-mlp")  # not the linear model's runs
-    assert res["command"] == " ".join(["langpref", *argv])
-    cfg = LearnRewardConfig(queries=2, humans=1, seeds=1, human=HumanConfig(phrasing_split="all"))
-    res = run_reward_experiment("metaworld", data, None, None, perfect=True, config=cfg, progress=False)
-    assert Path(res["figure"]).parent == Path("results/reward/metaworld-perfect-bank-all")
-    assert res["command"].endswith("--perfect-latent --out results/reward/metaworld-perfect-bank-all")
-    assert res["methods"]["language"]["config"]["human"]["phrasing_split"] == "all"

@@ -1,4 +1,5 @@
-"""The HTTP contract of DESIGN.md, on the tiny real setup: shapes, a whole session, counterbalancing, persistence."""
+"""The HTTP contract of docs/design.md, on the tiny real setup: shapes, a whole session, counterbalancing,
+persistence."""
 
 from __future__ import annotations
 

@@ -182,7 +182,7 @@ def test_rating_points_and_progress():
         ({"feedback": "ok", "client_ms": -1, "seq": 3}, 400),
         ({"feedback": "ok", "client_ms": True, "seq": 3}, 400),
         ({"feedback": "ok", "client_ms": 3, "seq": 4}, 409),
-        # a seq that is not an integer (without one, DESIGN.md's clients, the answer is for the current step)
+        # a seq that is not an integer (without one, docs/design.md's clients, the answer is for the current step)
         ({"feedback": "Move faster.", "client_ms": 3, "seq": "3"}, 400),
         ({"feedback": "Move\x00 faster.", "client_ms": 3, "seq": 3}, 400),
         ({"feedback": "Move faster.", "client_ms": 10**400, "seq": 3}, 400),

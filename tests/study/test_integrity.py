@@ -96,7 +96,8 @@ def test_an_old_answer_sent_again_is_not_taken(client, h, study_state):
 
 
 def test_a_client_of_the_design_contract_needs_no_seq(client, h, study_state):
-    """DESIGN.md's answer bodies carry no `seq`: a client written from the contract alone answers the current step."""
+    """docs/design.md's answer bodies carry no `seq`: a client written from the contract alone answers the current
+    step."""
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "language")
     url = f"/api/participants/{pid}/answer"

@@ -5,6 +5,8 @@ from langpref.tasks import get_task, make_env
 from langpref.tasks.metaworld.controller import CONTROLLER_DIM, expert_unit, make_controller, params_from_unit
 from langpref.tasks.metaworld.env import step_features
 
+pytestmark = pytest.mark.slow  # runs the simulator (`pytest -m 'not slow'` leaves it out)
+
 
 def test_step_features_on_hand_built_states():
     prev = np.zeros(39)

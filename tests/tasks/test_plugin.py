@@ -92,11 +92,11 @@ def test_the_same_seed_gives_byte_identical_trajectories(dataset, tmp_path):
 
 
 def test_the_bank_loads_with_all_splits():
-    from langpref.language.bank import SPLITS, load_bank
+    from langpref.language.bank import BANK_SPLITS, load_bank
 
     bank = load_bank(TASK)  # validates: every feature and direction, no phrasing repeated across splits
     assert bank.features == tuple(FEATURES)
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         for text, _, _ in bank.all_of_split(split):
             assert text.strip()
         assert all(len(bank.get(split, f, d)) >= 5 for f in FEATURES for d in ("increase", "decrease"))

@@ -5,6 +5,8 @@ from langpref.dataset.generate import GenerateConfig, generate
 from langpref.dataset.render import render_trajectory
 from langpref.errors import LangprefError
 
+pytestmark = pytest.mark.slow  # runs the simulator (`pytest -m 'not slow'` leaves it out)
+
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):

@@ -22,6 +22,8 @@ from langpref.tasks.robosuite.env import (
     lift_success_value,
 )
 
+pytestmark = pytest.mark.slow  # runs the simulator (`pytest -m 'not slow'` leaves it out)
+
 FIELDS = {f.name: slice(f.start, f.stop) for f in OBS_LAYOUT}
 F = {name: i for i, name in enumerate(FEATURES)}
 

@@ -55,7 +55,8 @@ def _embedder(args: argparse.Namespace, task: str):
         path(
             "--utterances",
             default=None,
-            help="read this file's phrasings (DESIGN.md schema) against the bank's instead of leaving one out",
+            help="read this file's phrasings (docs/design.md#utterance-files) against the bank's instead of leaving "
+            "one out",
         ),
         opt(
             "--split",
@@ -126,7 +127,7 @@ def _human(result) -> str:
     "proposed extra phrasings per meaning, written for the lab to review (never into a bank)",
     [
         WHERE,
-        path("--out", required=True, help="JSON file to write (DESIGN.md schema, keyed by task name)"),
+        path("--out", required=True, help="JSON file to write (docs/design.md#utterance-files, keyed by task name)"),
         opt("--per-meaning", type=int, default=24, help="most proposals per meaning (default 24)"),
         opt("--force", action="store_true", help="overwrite --out if it exists (never the bank or task file)"),
         SEED,

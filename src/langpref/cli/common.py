@@ -7,7 +7,6 @@ import argparse
 from langpref.cli_config import opt, path
 
 TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
-SPLITS = ("train", "val", "test")
 DEVICES = ("auto", "cpu", "cuda")
 DEFAULT_DEVICE = "auto"
 """One default for every command that takes `--device` (`train`'s `TrainConfig.device`, `evaluate`): `auto` is

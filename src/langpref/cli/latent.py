@@ -6,8 +6,9 @@ import argparse
 import importlib
 from pathlib import Path
 
-from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, SPLITS, TASK, load
+from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, TASK, load
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
+from langpref.dataset.splits import SPLITS
 from langpref.experiments.registry import EXPERIMENTS
 from langpref.extras import require
 
@@ -87,7 +88,7 @@ def cmd_train(args: argparse.Namespace) -> None:
         path(
             "--utterances",
             default=None,
-            help="utterance file (DESIGN.md schema) instead of the bank's phrasings of --split",
+            help="utterance file (docs/design.md#utterance-files) instead of the bank's phrasings of --split",
         ),
         DEVICE,
         opt(

@@ -7,8 +7,9 @@ import importlib
 from pathlib import Path
 
 from langpref import cli_config as cc
-from langpref.cli.common import JSON, SPLITS
+from langpref.cli.common import JSON
 from langpref.cli_config import RERUN, command, config, emit, from_args, record
+from langpref.dataset.splits import SPLITS
 
 
 @command(

@@ -253,24 +253,10 @@ def _finished(cfg: GenerateConfig, index: int) -> tuple[np.ndarray, bool] | None
     return traj.features, traj.success
 
 
-def generate(cfg: GenerateConfig) -> dict[str, Any]:
-    """Generate and store a dataset; returns a summary. Interrupted runs resume where they stopped."""
-    cfg = cfg.resolved()
-    task = get_task(cfg.env)
-    spec = cfg.frame_spec
-    _prepare_out(cfg)
-    n = cfg.num_trajectories
-    units = controller_units(cfg.env, n, cfg.seed)
-    features = np.zeros((n, len(task.features)))
-    success = np.zeros(n, bool)
-    jobs = []
-    for i in range(n):
-        done = _finished(cfg, i)
-        if done is None:
-            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon, spec))
-        else:
-            features[i], success[i] = done
-    start = time.time()
+def _roll_out(cfg: GenerateConfig, jobs: list, features: np.ndarray, success: np.ndarray) -> None:
+    """Run the rollouts of `jobs` on the backend and store each trajectory as it arrives, filling its row of
+    `features` and `success`."""
+    n = len(success)
     bar = tqdm(total=n, initial=n - len(jobs), desc=f"generate {cfg.env}", unit="traj", dynamic_ncols=True)
     results = run_jobs(
         _rollout_job,
@@ -290,6 +276,27 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
         bar.update(1)
         bar.set_postfix(success=f"{success.sum() / bar.n:.0%}")
     bar.close()
+
+
+def generate(cfg: GenerateConfig) -> dict[str, Any]:
+    """Generate and store a dataset; returns a summary. Interrupted runs resume where they stopped."""
+    cfg = cfg.resolved()
+    task = get_task(cfg.env)
+    spec = cfg.frame_spec
+    _prepare_out(cfg)
+    n = cfg.num_trajectories
+    units = controller_units(cfg.env, n, cfg.seed)
+    features = np.zeros((n, len(task.features)))
+    success = np.zeros(n, bool)
+    jobs = []
+    for i in range(n):
+        done = _finished(cfg, i)
+        if done is None:
+            jobs.append((i, units[i], trajectory_seed(cfg.seed, i), cfg.horizon, spec))
+        else:
+            features[i], success[i] = done
+    start = time.time()
+    _roll_out(cfg, jobs, features, success)
     wall = time.time() - start
     meta = DatasetMeta(
         env=cfg.env,

@@ -165,6 +165,129 @@ def _prepare(cfg: ImportConfig) -> Path:
     return tmp
 
 
+@dataclass
+class _Episodes:
+    """What the import learnt of the episodes while storing them, in episode order."""
+
+    obs_dim: int | None = None
+    action_dim: int | None = None
+    lengths: list[int] = field(default_factory=list)
+    features: list[np.ndarray] = field(default_factory=list)
+    success: list[bool | None] = field(default_factory=list)
+    videos: list[Any] = field(default_factory=list)
+    wheres: list[str] = field(default_factory=list)
+    imaged: list[bool] = field(default_factory=list)
+    """Whose frames came from its still images (a LeRobotDataset's image column)."""
+
+
+def _store_episodes(tmp: Path, loaders: list[Any], task: TaskFile, spec: FrameSpec | None, progress: bool) -> _Episodes:
+    """Read every episode, check its shapes against the first, and store it (with its still frames, if any)."""
+    fn = task.step_features()
+    seen = _Episodes()
+    for i, load in enumerate(
+        tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress, dynamic_ncols=True)
+    ):
+        where, ep = load()
+        if len(ep.actions) < 2:
+            raise LangprefError(f"{where}: the episode has {len(ep.actions)} step(s); it needs at least 2")
+        if seen.obs_dim is None:
+            seen.obs_dim, seen.action_dim = ep.observations.shape[1], ep.actions.shape[1]
+        elif (ep.observations.shape[1], ep.actions.shape[1]) != (seen.obs_dim, seen.action_dim):
+            raise LangprefError(
+                f"{where}: observations/actions have {ep.observations.shape[1]}/"
+                f"{ep.actions.shape[1]} dims, earlier episodes {seen.obs_dim}/{seen.action_dim}"
+            )
+        traj = Trajectory(
+            index=i,
+            observations=ep.observations,
+            actions=ep.actions,
+            step_features=_step_features(ep, task, fn, where),
+            qpos=None,
+            qvel=None,
+            success=bool(ep.success),
+            seed=None,
+            source=ep.name,
+        )
+        save_trajectory(tmp, traj)
+        seen.imaged.append(spec is not None and ep.images is not None)
+        if spec is not None and ep.images is not None:
+            save_frames(tmp, i, _still_frames(ep.images, traj.horizon, spec))
+        seen.lengths.append(traj.horizon)
+        seen.features.append(traj.features)
+        seen.success.append(ep.success)
+        seen.videos.append(ep.video)
+        seen.wheres.append(where)
+    return seen
+
+
+def _check_videos(seen: _Episodes, spec: FrameSpec | None) -> FrameSpec | None:
+    """Refuse a recording where only some episodes have a video, or `--images` where an episode has no camera;
+    the frame spec as stored (its source the image column when an episode's frames came from there)."""
+    with_video = [v is not None for v in seen.videos]
+    if any(with_video) and not all(with_video):
+        missing = with_video.index(False)
+        raise LangprefError(
+            f"episode {seen.wheres[missing]} has no video while others have one; give every "
+            "episode its video (NAME.mp4 or NAME.webm) or none"
+        )
+    bare = [w for w, v, m in zip(seen.wheres, with_video, seen.imaged) if not (v or m)]
+    if spec is not None and bare:
+        raise LangprefError(
+            f"--images takes each episode's camera frames from its video (or a LeRobotDataset's image column), "
+            f"and {bare[0]} has none; give every episode its video (NAME.mp4 or NAME.webm) or import without "
+            "--images"
+        )
+    if spec is not None and any(seen.imaged):
+        spec = replace(spec, source="image")
+    return spec
+
+
+def _store_videos(tmp: Path, seen: _Episodes, spec: FrameSpec | None, progress: bool) -> None:
+    """Copy or transcode every episode's video, and decode its frames where they did not come from images."""
+    from langpref.dataset.video import decode_frames, write_clip  # the video extra: checked by _episodes
+
+    for i, clip in enumerate(tqdm(seen.videos, desc="videos", unit="video", disable=not progress, dynamic_ncols=True)):
+        write_clip(clip, video_path(tmp, i))
+        if spec is not None and not seen.imaged[i]:
+            frames = decode_frames(clip, seen.lengths[i], spec.stride, spec.width, spec.height)
+            save_frames(tmp, i, frames)
+
+
+def _meta(
+    cfg: ImportConfig,
+    task: TaskFile,
+    task_obj: Any,
+    layout: str,
+    splits: dict[str, list[int]],
+    seen: _Episodes,
+    with_video: bool,
+    spec: FrameSpec | None,
+) -> DatasetMeta:
+    """The imported dataset's meta.json: its task, shapes, splits, where it came from, lengths, videos and frames."""
+    horizon = max(seen.lengths)
+    return DatasetMeta(
+        env=task.name,
+        horizon=horizon,
+        obs_layout=[asdict(f) for f in task_obj.obs_layout],
+        action_dim=seen.action_dim,
+        feature_names=list(task.features),
+        splits=splits,
+        num_trajectories=len(seen.lengths),
+        config={
+            "source": str(cfg.src),
+            "layout": layout,
+            "task_file": str(task.path),
+            "seed": cfg.seed,
+            "splits": list(cfg.splits),
+            "features_from": task.features_from or "recording",
+            "success_known": all(s is not None for s in seen.success),
+        },
+        lengths=None if min(seen.lengths) == horizon else seen.lengths,
+        videos=with_video,
+        frames=None if spec is None else spec.to_dict(),
+    )
+
+
 def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """Import the recording `cfg.src` as a dataset of `task`, storing `bank` (split, checked) as its bank."""
     start = time.time()
@@ -174,95 +297,16 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         layout, loaders = _episodes(cfg)
         n = len(loaders)
         counts = split_counts(n, cfg.splits)
-        fn = task.step_features()
-        obs_dim = action_dim = None
-        lengths, features, success, videos, wheres = [], np.zeros((n, len(task.features))), [], [], []
-        imaged: list[bool] = []  # whose frames came from its still images (a LeRobotDataset's image column)
-        for i, load in enumerate(
-            tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress, dynamic_ncols=True)
-        ):
-            where, ep = load()
-            if len(ep.actions) < 2:
-                raise LangprefError(f"{where}: the episode has {len(ep.actions)} step(s); it needs at least 2")
-            if obs_dim is None:
-                obs_dim, action_dim = ep.observations.shape[1], ep.actions.shape[1]
-            elif (ep.observations.shape[1], ep.actions.shape[1]) != (obs_dim, action_dim):
-                raise LangprefError(
-                    f"{where}: observations/actions have {ep.observations.shape[1]}/"
-                    f"{ep.actions.shape[1]} dims, earlier episodes {obs_dim}/{action_dim}"
-                )
-            traj = Trajectory(
-                index=i,
-                observations=ep.observations,
-                actions=ep.actions,
-                step_features=_step_features(ep, task, fn, where),
-                qpos=None,
-                qvel=None,
-                success=bool(ep.success),
-                seed=None,
-                source=ep.name,
-            )
-            save_trajectory(tmp, traj)
-            imaged.append(spec is not None and ep.images is not None)
-            if spec is not None and ep.images is not None:
-                save_frames(tmp, i, _still_frames(ep.images, traj.horizon, spec))
-            lengths.append(traj.horizon)
-            features[i] = traj.features
-            success.append(ep.success)
-            videos.append(ep.video)
-            wheres.append(where)
-        with_video = [v is not None for v in videos]
-        if any(with_video) and not all(with_video):
-            missing = with_video.index(False)
-            raise LangprefError(
-                f"episode {wheres[missing]} has no video while others have one; give every "
-                "episode its video (NAME.mp4 or NAME.webm) or none"
-            )
-        bare = [w for w, v, m in zip(wheres, with_video, imaged) if not (v or m)]
-        if spec is not None and bare:
-            raise LangprefError(
-                f"--images takes each episode's camera frames from its video (or a LeRobotDataset's image column), "
-                f"and {bare[0]} has none; give every episode its video (NAME.mp4 or NAME.webm) or import without "
-                "--images"
-            )
-        if spec is not None and any(imaged):
-            spec = replace(spec, source="image")
-        if all(with_video):
-            from langpref.dataset.video import decode_frames, write_clip  # the video extra: checked by _episodes
-
-            for i, clip in enumerate(
-                tqdm(videos, desc="videos", unit="video", disable=not progress, dynamic_ncols=True)
-            ):
-                write_clip(clip, video_path(tmp, i))
-                if spec is not None and not imaged[i]:
-                    frames = decode_frames(clip, lengths[i], spec.stride, spec.width, spec.height)
-                    save_frames(tmp, i, frames)
+        seen = _store_episodes(tmp, loaders, task, spec, progress)
+        spec = _check_videos(seen, spec)
+        with_video = all(v is not None for v in seen.videos)
+        if with_video:
+            _store_videos(tmp, seen, spec, progress)
         splits = shuffle_into_splits(n, counts, cfg.seed)
-        task_obj = task.task(obs_dim, action_dim, tmp / "utterances.json")
+        task_obj = task.task(seen.obs_dim, seen.action_dim, tmp / "utterances.json")
         save_task(task_obj, tmp, bank)
-        horizon = max(lengths)
-        meta = DatasetMeta(
-            env=task.name,
-            horizon=horizon,
-            obs_layout=[asdict(f) for f in task_obj.obs_layout],
-            action_dim=action_dim,
-            feature_names=list(task.features),
-            splits=splits,
-            num_trajectories=n,
-            config={
-                "source": str(cfg.src),
-                "layout": layout,
-                "task_file": str(task.path),
-                "seed": cfg.seed,
-                "splits": list(cfg.splits),
-                "features_from": task.features_from or "recording",
-                "success_known": all(s is not None for s in success),
-            },
-            lengths=None if min(lengths) == horizon else lengths,
-            videos=all(with_video),
-            frames=None if spec is None else spec.to_dict(),
-        )
-        write_meta(tmp, meta, features)
+        meta = _meta(cfg, task, task_obj, layout, splits, seen, with_video, spec)
+        write_meta(tmp, meta, np.array(seen.features, dtype=np.float64).reshape(n, len(task.features)))
         out = Path(cfg.out)
         if out.exists():
             shutil.rmtree(out)
@@ -277,8 +321,8 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         "layout": layout,
         "num_trajectories": n,
         "splits": {k: len(v) for k, v in splits.items()},
-        "horizon": horizon,
-        "min_length": min(lengths),
+        "horizon": meta.horizon,
+        "min_length": min(seen.lengths),
         "videos": meta.videos,
         "frames": meta.frames,
         "features_from": meta.config["features_from"],

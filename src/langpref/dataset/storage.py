@@ -26,11 +26,12 @@ import zipfile
 from dataclasses import asdict, dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any
 
 import numpy as np
 
 from langpref.dataset.frames import FrameSpec, load_frames, stack_frames
+from langpref.dataset.splits import SPLITS
 from langpref.errors import LangprefError
 from langpref.tasks import register_task
 from langpref.tasks.taskfile import load_stored_task
@@ -38,9 +39,6 @@ from langpref.tasks.taskfile import load_stored_task
 SCHEMA_VERSION = 2
 FRAMES_SCHEMA_VERSION = 3
 READABLE_SCHEMAS = (1, 2, 3)
-Split = Literal["train", "val", "test"]
-"""A split of a dataset."""
-SPLITS: tuple[str, ...] = get_args(Split)
 _ARRAYS = ("observations", "actions", "step_features")
 _STATE = ("qpos", "qvel")
 

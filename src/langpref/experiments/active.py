@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.common import SweepConfig, figure_link
-from langpref.experiments.reward import _run_methods, _save, _table, paired_difference
+from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary
 from langpref.extras import pyplot
 from langpref.reward.cost import elapsed, on_time_grid, time_average
 
@@ -40,7 +40,7 @@ CONFIRM_MARGIN = 0.5
 Chosen on the val protocol of the drawer recording (margins 0.2, 0.3, 0.5, 0.7, 1.0: 0.5 is the smallest with the
 best AUC; docs/results.md)."""
 
-METHODS = {
+ACTIVE_METHODS = {
     "language-random": ("language", None, "paper", None),
     "language-lal-infogain": ("language", "lal-infogain", "paper", None),
     "language-infogain": ("language", "infogain", "paper", None),
@@ -153,56 +153,23 @@ def run_active_experiment(
     sweep: SweepConfig | None = None,
     command: str | None = None,
 ) -> dict[str, Any]:
-    """Every method of `METHODS` on `env` (`config`, a `LearnRewardConfig`, sets the rest: humans and seeds (default
-    10 x 3), queries, candidates, posterior samples, the human); writes active.json/.png/.md."""
+    """Every method of `ACTIVE_METHODS` on `env` (`config`, a `LearnRewardConfig`, sets the rest: humans and seeds
+    (default 10 x 3), queries, candidates, posterior samples, the human); writes active.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
 
     base = config or LearnRewardConfig(humans=10, seeds=3)
     base = replace(base, humans=base.humans if humans is None else humans, seeds=base.seeds if seeds is None else seeds)
     methods = {
         name: replace(base, feedback=fb, query_selection=sel, learner=learner, confirm_margin=margin)
-        for name, (fb, sel, learner, margin) in METHODS.items()
+        for name, (fb, sel, learner, margin) in ACTIVE_METHODS.items()
     }
-    results, runs, space, data, model, out = _run_methods(
+    results, runs, space, data, model, out = run_methods(
         "active", env, methods, data, model, out, perfect, force, progress, sweep
     )
-    q = base.queries
     keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
-    auc = {m: _per_run(runs, m, keys, "true_reward_of_best") for m in methods}
-    auc_ce = {m: _per_run(runs, m, keys, "cross_entropy") for m in methods}
     timed = per_second(runs, methods, keys)
-    auc_s = {m: np.array(timed["methods"][m]["per_run"]["true_reward_of_best"])[:, None] for m in methods}
-    auc_ce_s = {m: np.array(timed["methods"][m]["per_run"]["cross_entropy"])[:, None] for m in methods}
-    contrasts = {
-        f"{a} - {b}": {
-            "auc_true_reward": _interval(auc[a], auc[b]),
-            "auc_cross_entropy": _interval(auc_ce[a], auc_ce[b]),
-            "auc_true_reward_per_second": _interval(auc_s[a], auc_s[b]),
-            "auc_cross_entropy_per_second": _interval(auc_ce_s[a], auc_ce_s[b]),
-        }
-        for a, b in CONTRASTS
-    }
-    ours, rand = results[OURS], results[LANG_RANDOM]
-    half = q // 2
-    ours_auc_half = float(np.mean(ours["true_reward_of_best"][: half + 1]))
-    oq, rq = ours["queries_to_0.95"], rand["queries_to_0.95"]
-    best_comp = max(
-        (m for m in methods if m.startswith("comparison-") and m != "comparison-random"),
-        key=lambda m: results[m]["auc_true_reward"],
-    )
-    vs_lal = contrasts[f"{OURS} - {LAL}"]["auc_true_reward"]
-    targets = {
-        f"ours reaches random language's AUC at Q = {q} within {half} queries (ours' AUC over 0..{half}: "
-        f"{ours_auc_half:.3f}, random's over 0..{q}: {rand['auc_true_reward']:.3f})": ours_auc_half
-        >= rand["auc_true_reward"],
-        f"ours reaches 0.95 in at most half the queries random needs (ours {oq}, random {rq})": oq is not None
-        and (rq is None or oq <= rq / 2),
-        "ours beats lal-infogain on AUC, paired interval above 0": vs_lal["low"] > 0,
-        "ours not significantly worse than lal-infogain on AUC": vs_lal["high"] >= 0,
-        f"active language (ours) beats active comparisons ({best_comp}) on AUC": ours["auc_true_reward"]
-        > results[best_comp]["auc_true_reward"],
-        **answer_model_targets(results, contrasts),
-    }
+    auc, auc_s, contrasts = _contrasts(runs, methods, keys, timed)
+    targets = {**paper_learner_targets(results, contrasts, base.queries), **answer_model_targets(results, contrasts)}
     figure = plot_active(
         results, timed, out / "active.png", f"Active queries, {env}" + (" (perfect latent)" if model is None else "")
     )
@@ -218,7 +185,50 @@ def run_active_experiment(
         "per_run_auc": {m: auc[m][:, 0].tolist() for m in methods},
         "per_run_auc_per_second": {m: auc_s[m][:, 0].tolist() for m in methods},
     }
-    return _save("active", env, data, model, out, space, base, fields, _markdown, command)
+    return save_summary("active", env, data, model, out, space, base, fields, _markdown, command)
+
+
+def _contrasts(runs: dict[str, dict], methods: dict[str, Any], keys: list[str], timed: dict[str, Any]):
+    """Per method the per-run areas (true reward of the best, per query and per modelled second), and the paired
+    intervals of `CONTRASTS` on all four areas (cross-entropy too)."""
+    auc = {m: _per_run(runs, m, keys, "true_reward_of_best") for m in methods}
+    auc_ce = {m: _per_run(runs, m, keys, "cross_entropy") for m in methods}
+    auc_s = {m: np.array(timed["methods"][m]["per_run"]["true_reward_of_best"])[:, None] for m in methods}
+    auc_ce_s = {m: np.array(timed["methods"][m]["per_run"]["cross_entropy"])[:, None] for m in methods}
+    contrasts = {
+        f"{a} - {b}": {
+            "auc_true_reward": _interval(auc[a], auc[b]),
+            "auc_cross_entropy": _interval(auc_ce[a], auc_ce[b]),
+            "auc_true_reward_per_second": _interval(auc_s[a], auc_s[b]),
+            "auc_cross_entropy_per_second": _interval(auc_ce_s[a], auc_ce_s[b]),
+        }
+        for a, b in CONTRASTS
+    }
+    return auc, auc_s, contrasts
+
+
+def paper_learner_targets(results: dict[str, dict], contrasts: dict[str, dict], q: int) -> dict[str, bool]:
+    """The targets of active queries with the paper's learner, from the summaries and the paired intervals."""
+    ours, rand = results[OURS], results[LANG_RANDOM]
+    half = q // 2
+    ours_auc_half = float(np.mean(ours["true_reward_of_best"][: half + 1]))
+    oq, rq = ours["queries_to_0.95"], rand["queries_to_0.95"]
+    best_comp = max(
+        (m for m in results if m.startswith("comparison-") and m != "comparison-random"),
+        key=lambda m: results[m]["auc_true_reward"],
+    )
+    vs_lal = contrasts[f"{OURS} - {LAL}"]["auc_true_reward"]
+    return {
+        f"ours reaches random language's AUC at Q = {q} within {half} queries (ours' AUC over 0..{half}: "
+        f"{ours_auc_half:.3f}, random's over 0..{q}: {rand['auc_true_reward']:.3f})": ours_auc_half
+        >= rand["auc_true_reward"],
+        f"ours reaches 0.95 in at most half the queries random needs (ours {oq}, random {rq})": oq is not None
+        and (rq is None or oq <= rq / 2),
+        "ours beats lal-infogain on AUC, paired interval above 0": vs_lal["low"] > 0,
+        "ours not significantly worse than lal-infogain on AUC": vs_lal["high"] >= 0,
+        f"active language (ours) beats active comparisons ({best_comp}) on AUC": ours["auc_true_reward"]
+        > results[best_comp]["auc_true_reward"],
+    }
 
 
 def answer_model_targets(results: dict[str, dict], contrasts: dict[str, dict]) -> dict[str, bool]:
@@ -293,7 +303,7 @@ def _markdown(summary: dict[str, Any]) -> str:
         "curve over query counts 0..Q.",
         "",
     ]
-    lines += _table(summary["methods"], at)
+    lines += curves_table(summary["methods"], at)
     lines += ["", *_time_table(summary)]
     lines += [
         "",

@@ -137,7 +137,7 @@ def default_paths(
     return data, model, out
 
 
-def command_line(kind: str, env: str, data: Path, model: Path | None, out: Path) -> str:
+def base_command(kind: str, env: str, data: Path, model: Path | None, out: Path) -> str:
     """The base command of an experiment run from Python (its options are in the summary's configs); a run of
     `langpref experiment` records its own command line instead."""
     where = "--perfect-latent" if model is None else f"--model {model}"

@@ -18,7 +18,7 @@ from typing import Any
 from langpref.experiments.common import (
     RunCache,
     SweepConfig,
-    command_line,
+    base_command,
     default_paths,
     figure_link,
     phrasing_variant,
@@ -78,6 +78,37 @@ def improve_markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _run_curves(
+    cfgs: dict[str, Any],
+    space,
+    worker_args: tuple,
+    out: Path,
+    force: bool,
+    sweep: SweepConfig | None,
+    label: str,
+    progress: bool,
+) -> dict[str, dict]:
+    """Run every (curve, seed) not yet in out/runs.json; each curve's summary with its config."""
+    from langpref.improve import ImprovementRun, summarise_improvement
+
+    cache = RunCache(
+        out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}}, force=force
+    )
+    for cfg in cfgs.values():
+        cfg.validate()
+    todo = [
+        (f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds) if f"{name}/{s}" not in cache
+    ]
+    run_sweep(_improvement_job, todo, space, worker_args, cache, sweep or SweepConfig(), label, progress)
+    return {
+        name: {
+            **summarise_improvement([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
+            "config": asdict(cfg),
+        }
+        for name, cfg in cfgs.items()
+    }
+
+
 def run_improve_experiment(
     env: str,
     data: str | Path | None = None,
@@ -94,8 +125,7 @@ def run_improve_experiment(
     """Every curve of `CURVES` with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and
     markdown."""
     from langpref.feedback.space import load_space
-    from langpref.improve import ImproveConfig, ImprovementRun, plot_improvement
-    from langpref.improve import summarise as summarise_runs
+    from langpref.improve import ImproveConfig, plot_improvement
 
     base = config or ImproveConfig()
     phrasings = base.human.phrasings
@@ -104,31 +134,8 @@ def run_improve_experiment(
         data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=base.human.feature_scale
     )
     cfgs = {name: replace(base, **fields) for name, fields in CURVES.items()}
-    cache = RunCache(
-        out / "runs.json", {"space": space.description, **{s: asdict(c) for s, c in cfgs.items()}}, force=force
-    )
-    for cfg in cfgs.values():
-        cfg.validate()
-    todo = [
-        (f"{name}/{s}", cfg, s) for name, cfg in cfgs.items() for s in range(cfg.seeds) if f"{name}/{s}" not in cache
-    ]
-    run_sweep(
-        _improvement_job,
-        todo,
-        space,
-        (data, model, env, perfect, phrasings, base.human.feature_scale),
-        cache,
-        sweep or SweepConfig(),
-        f"improve {env}",
-        progress,
-    )
-    results = {
-        name: {
-            **summarise_runs([ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]),
-            "config": asdict(cfg),
-        }
-        for name, cfg in cfgs.items()
-    }
+    worker_args = (data, model, env, perfect, phrasings, base.human.feature_scale)
+    results = _run_curves(cfgs, space, worker_args, out, force, sweep, f"improve {env}", progress)
     figure = plot_improvement(
         {f"{n} ({CURVE_LABELS[n]})": r for n, r in results.items()},
         out / "improve.png",
@@ -146,7 +153,7 @@ def run_improve_experiment(
         "strategies": results,
         "figure": str(figure),
         "paper": PAPER_FIG4,
-        "command": command or command_line("improve", env, data, model, out),
+        "command": command or base_command("improve", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")

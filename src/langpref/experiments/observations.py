@@ -150,7 +150,7 @@ def run_observations_experiment(cfg: ObservationsConfig, *, train_config: TrainC
         "env": cfg.env,
         "data": str(data),
         "runs": {kind: cache.runs[kind] for kind in cfg.kinds},
-        "command": command_line(cfg, start),
+        "command": observations_command(cfg, start),
     }
     out.mkdir(parents=True, exist_ok=True)
     (out / "observations.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -158,7 +158,7 @@ def run_observations_experiment(cfg: ObservationsConfig, *, train_config: TrainC
     return summary
 
 
-def command_line(cfg: ObservationsConfig, train: TrainConfig | None = None) -> str:
+def observations_command(cfg: ObservationsConfig, train: TrainConfig | None = None) -> str:
     """The `langpref experiment observations` command that reproduces this run."""
     flags = f" --data {cfg.data} --out {cfg.out}"
     default = TrainConfig()

@@ -128,7 +128,7 @@ for _experiment in (
     Experiment(
         "prior",
         "the L2 prior's strength per reward-learning method, chosen on the val split",
-        "langpref.experiments.reward:run_prior_experiment",
+        "langpref.experiments.prior:run_prior_experiment",
         _LEARN,
         _REWARD_FLAGS,
         default_out=_OUT.format(name="prior") + ", ENV-mlp",
@@ -148,7 +148,7 @@ for _experiment in (
         "generate",
         "issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "
         "best test trajectory (10 humans x 3 seeds, Q = 40)",
-        "langpref.experiments.generate:run_generate_experiment",
+        "langpref.experiments.propose:run_propose_experiment",
         _IMPROVE,
         ("iterations", "seeds"),
         default_out=_OUT.format(name="generate") + ", ENV-mlp",

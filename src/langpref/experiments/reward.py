@@ -1,6 +1,6 @@
-"""`langpref experiment reward|ablation|prior --env ENV`: the paper's Fig. 5 (reward learning from language vs
-comparisons) and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic humans x 3 seeds, Q = 40 queries; and how
-the L2 prior's strength, which the paper does not have, was chosen (on the val split, with other humans).
+"""`langpref experiment reward|ablation --env ENV`: the paper's Fig. 5 (reward learning from language vs
+comparisons) and Fig. 6 (ablation of L_Explicit / L_Implicit), 3 synthetic humans x 3 seeds, Q = 40 queries. The
+methods' sweep (`run_methods`) and the summary file (`save_summary`) are shared with `experiments.prior`.
 
 Each writes into its output directory (default `results/reward/ENV`, `results/ablation/ENV`): `NAME.json` (curves
 per method, summaries, the targets checked, the config; per method also the mean cross-entropy over 1..Q, "queries
@@ -25,7 +25,7 @@ import numpy as np
 from langpref.experiments.common import (
     RunCache,
     SweepConfig,
-    command_line,
+    base_command,
     default_paths,
     figure_link,
     phrasing_variant,
@@ -70,7 +70,7 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
     return out
 
 
-def _run_methods(
+def run_methods(
     kind: str,
     env: str,
     methods: dict[str, Any],
@@ -139,13 +139,13 @@ def queries_to(curve, threshold: float = THRESHOLD) -> dict[str, int | None]:
 
 
 def _summary(runs: dict[str, dict], name: str, humans: int, seeds: int) -> dict[str, Any]:
-    """`langpref.reward.summarise` of one method's runs, plus the numbers the docs quote: the mean cross-entropy over
-    query counts 1..Q, "queries to 0.95" in both readings of `queries_to`, and the curves of each synthetic human (its
-    mean over seeds, keyed by the human's number)."""
-    from langpref.reward import Curves, summarise
+    """`langpref.reward.summarise_curves` of one method's runs, plus the numbers the docs quote: the mean
+    cross-entropy over query counts 1..Q, "queries to 0.95" in both readings of `queries_to`, and the curves of each
+    synthetic human (its mean over seeds, keyed by the human's number)."""
+    from langpref.reward import Curves, summarise_curves
 
     curves = {h: [Curves(**runs[f"{name}/{h}/{s}"]) for s in range(seeds)] for h in range(humans)}
-    out = summarise([c for h in range(humans) for c in curves[h]])
+    out = summarise_curves([c for h in range(humans) for c in curves[h]])
     reached = queries_to(out["true_reward_of_best"])
     out.update(
         {
@@ -212,7 +212,8 @@ def _ce_difference_line(diff: dict[str, list]) -> str:
     )
 
 
-def _table(results: dict[str, dict], at: list[int]) -> list[str]:
+def curves_table(results: dict[str, dict], at: list[int]) -> list[str]:
+    """Markdown rows of each method's curves at the query counts `at` (cross-entropy, true reward of the best)."""
     lines = [
         "| method | "
         + " | ".join(f"CE q={q}" for q in at)
@@ -226,10 +227,15 @@ def _table(results: dict[str, dict], at: list[int]) -> list[str]:
         ce = " | ".join(f"{r['cross_entropy'][q]:.3f}" for q in at)
         best = " | ".join(f"{r['true_reward_of_best'][q]:.3f}" for q in at)
         lines.append(
-            f"| {name} | {ce} | {_mean_ce(r):.3f} | {best} | {r['auc_true_reward']:.3f} | "
+            f"| {name} | {ce} | {mean_cross_entropy(r):.3f} | {best} | {r['auc_true_reward']:.3f} | "
             f"{_reached(r, 'first_touch')} | {_reached(r, 'stays')} |"
         )
     return lines
+
+
+def mean_cross_entropy(result: dict) -> float:
+    """A method's mean cross-entropy over queries 1..Q (query 0, before any answer, left out)."""
+    return float(np.mean(result["cross_entropy"][1:]))
 
 
 def _reached(r: dict, reading: str) -> str:
@@ -273,7 +279,7 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
         "(stays).",
         "",
     ]
-    lines += _table(summary["methods"], at)
+    lines += curves_table(summary["methods"], at)
     lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
     if "ce_language_lower" in summary:
         c = summary["ce_language_lower"]
@@ -290,7 +296,7 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _save(
+def save_summary(
     kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown, command: str | None
 ) -> dict[str, Any]:
     """The summary of an experiment (what every kind records, then `fields`), written as KIND.json and, through
@@ -306,7 +312,7 @@ def _save(
         "seeds": base.seeds,
         "queries": base.queries,
         **fields,
-        "command": command or command_line(kind, env, data, model, out),
+        "command": command or base_command(kind, env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -333,7 +339,7 @@ def _finish(
         results, out / f"{kind}.png", f"{title}, {env}" + title_suffix(model is None, base.human)
     )
     fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}
-    return _save(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper), command)
+    return save_summary(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper), command)
 
 
 def run_reward_experiment(
@@ -355,7 +361,7 @@ def run_reward_experiment(
 
     base = config or LearnRewardConfig()
     methods = {"language": replace(base, feedback="language"), "comparison": replace(base, feedback="comparison")}
-    results, runs, space, data, model, out = _run_methods(
+    results, runs, space, data, model, out = run_methods(
         "reward", env, methods, data, model, out, perfect, force, progress, sweep
     )
     lang, comp = results["language"], results["comparison"]
@@ -406,7 +412,7 @@ def run_ablation_experiment(
 
     base = replace(config or LearnRewardConfig(), feedback="language")
     methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit", "implicit")}
-    results, _, space, data, model, out = _run_methods(
+    results, _, space, data, model, out = run_methods(
         "ablation", env, methods, data, model, out, perfect, force, progress, sweep
     )
     b, e, i = results["both"], results["explicit"], results["implicit"]
@@ -430,125 +436,3 @@ def run_ablation_experiment(
         targets,
         command,
     )
-
-
-PRIOR_GRID = (0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
-PRIOR_SEED = 1
-"""Seed of the prior experiment's humans and runs: the reward and ablation experiments use seed 0."""
-PRIOR_METHODS = {
-    "language": ("language", "both"),
-    "comparison": ("comparison", "both"),
-    "explicit": ("language", "explicit"),
-    "implicit": ("language", "implicit"),
-}
-
-
-def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Path, title: str = "") -> Path:
-    """Mean cross-entropy over queries 1..Q (val split) against the weight decay, one line per method."""
-    from langpref.extras import pyplot
-
-    plt = pyplot("the prior figure")
-
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    for name in PRIOR_METHODS:
-        ax.plot(grid, [_mean_ce(results[_prior_key(name, wd)]) for wd in grid], marker="o", label=name)
-    ax.set_xscale("log")
-    ax.minorticks_off()
-    ax.set_xticks(grid, [f"{wd:g}" for wd in grid])
-    ax.set_xlabel("weight_decay (L2 prior strength)")
-    ax.set_ylabel("mean CE, queries 1..Q (val)")
-    ax.legend(fontsize=8)
-    ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
-
-
-def prior_human(human):
-    """The prior experiment's synthetic humans: the given ones, with the language human on the bank's val phrasings
-    (the test split's are for reporting only) unless they speak an utterance file."""
-    return human if human.phrasings else replace(human, phrasing_split="val")
-
-
-def _prior_key(name: str, wd: float) -> str:
-    return f"{name} wd={wd:g}"
-
-
-def _mean_ce(result: dict) -> float:
-    return float(np.mean(result["cross_entropy"][1:]))
-
-
-def run_prior_experiment(
-    env: str,
-    data=None,
-    model=None,
-    out=None,
-    *,
-    perfect: bool = False,
-    config=None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-    grid: tuple[float, ...] = PRIOR_GRID,
-) -> dict[str, Any]:
-    """Each method (language with both losses, comparisons, either language loss alone) at every weight decay of
-    `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet, and
-    whose language human speaks the bank's val phrasings (`prior_human`): nothing of the test split takes part in
-    the choice. Each method's pick is the weight decay of its lowest mean cross-entropy over queries 1..Q; writes
-    prior.json/.png/.md."""
-    from langpref.reward import DEFAULT_WEIGHT_DECAY, LearnRewardConfig
-
-    given = config or LearnRewardConfig()
-    base = replace(given, eval_split="val", seed=PRIOR_SEED, human=prior_human(given.human))
-    reward_model = base.reward.model
-    methods = {
-        _prior_key(name, wd): replace(base, feedback=fb, reward=replace(base.reward, loss=loss, weight_decay=wd))
-        for name, (fb, loss) in PRIOR_METHODS.items()
-        for wd in grid
-    }
-    results, _, space, data, model, out = _run_methods(
-        "prior", env, methods, data, model, out, perfect, force, progress, sweep, named_for=given.human
-    )
-    picks = {name: min(grid, key=lambda wd: _mean_ce(results[_prior_key(name, wd)])) for name in PRIOR_METHODS}
-    title = f"L2 prior strength, {env}, {reward_model} reward" + title_suffix(model is None, base.human)
-    figure = plot_prior(results, grid, out / "prior.png", title)
-    fields = {
-        "seed": PRIOR_SEED,
-        "eval_split": "val",
-        "phrasings": base.human.phrase_source,
-        "grid": list(grid),
-        "reward_model": reward_model,
-        "default": DEFAULT_WEIGHT_DECAY[reward_model],
-        "picks": picks,
-        "methods": results,
-        "figure": str(figure),
-    }
-    return _save("prior", env, data, model, out, space, base, fields, _prior_markdown, command)
-
-
-def _prior_markdown(summary: dict[str, Any]) -> str:
-    grid, results = summary["grid"], summary["methods"]
-    lines = [
-        f"### L2 prior strength, {summary['env']}"
-        + ("" if summary["reward_model"] == "linear" else f", {summary['reward_model']} reward")
-        + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
-        "",
-        f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-        f"{summary['seeds']} seeds of seed {summary['seed']}, other humans than the test experiments', the "
-        f"language human speaking {summary.get('phrasings', 'test')} phrasings; metrics on the val split). Mean "
-        "cross-entropy over queries 1..Q for each weight decay; the lowest of each method in bold. "
-        f"The default for the {summary['reward_model']} reward is {summary['default']:g}.",
-        "",
-        "| method | " + " | ".join(f"wd {wd:g}" for wd in grid) + " | pick |",
-        "|---|" + "---|" * (len(grid) + 1),
-    ]
-    for name, pick in summary["picks"].items():
-        cells = [f"{_mean_ce(results[_prior_key(name, wd)]):.3f}" for wd in grid]
-        cells = [f"**{c}**" if wd == pick else c for c, wd in zip(cells, grid)]
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {pick:g} |")
-    lines += ["", f"![L2 prior strength {summary['env']}]({figure_link(summary['figure'])})"]
-    return "\n".join(lines) + "\n"

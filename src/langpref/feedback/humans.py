@@ -84,7 +84,7 @@ class HumanConfig:
     """Bank split the language human draws its phrasings from (test: unseen by the model; `all`: every split, as the
     paper's human, which speaks "all language utterances of that feature")."""
     phrasings: str | None = None
-    """An utterance file (DESIGN.md schema) the language human draws from instead of the bank, e.g.
+    """An utterance file (docs/design.md#utterance-files) the language human draws from instead of the bank, e.g.
     heldout/utterances.json, phrasings written by people who never saw the bank."""
     rationality: float = 1.0
     """Of the comparison human, beta in sigmoid(beta (R_A - R_B)); 1 is Eq. 11, large is noiseless."""

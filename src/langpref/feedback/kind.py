@@ -98,7 +98,7 @@ class FeedbackKind:
     """(space, answer, reward config, rng) -> the answer's likelihood as weighted Bradley-Terry pairs of embeddings.
     The pairs read only phi and psi, never the synthetic human's ground truth."""
     answer_key: str
-    """The field of an HTTP answer body that holds this kind's answer (DESIGN.md's study contract)."""
+    """The field of an HTTP answer body that holds this kind's answer (docs/design.md#the-study-apps-http-contract)."""
     parse: Callable[[Any, Any], Any]
     """(the body's value at `answer_key`, the query shown) -> the answer; a one-line LangprefError for bad input."""
     value: Callable[[Any], Any]

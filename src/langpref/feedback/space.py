@@ -98,7 +98,8 @@ def phrase_table(bank: Bank, split: str, feature_names: Sequence[str], encode: E
 
 
 def file_entries(path: str | Path, env: str) -> list[tuple[str, str, str]]:
-    """(text, feature, direction) of every phrasing of `env` in a user utterance file (DESIGN.md schema)."""
+    """(text, feature, direction) of every phrasing of `env` in a user utterance file
+    (docs/design.md#utterance-files)."""
     mapping = load_user_utterances(path, env)
     return [(t, f, d) for f, by_dir in mapping.items() for d, texts in by_dir.items() for t in texts]
 

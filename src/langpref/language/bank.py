@@ -5,9 +5,9 @@ start from every original utterance of the paper's Appendix E (all in `train`) p
 Paraphrase families stay within one split, and no val/test phrasing equals a train phrasing after `normalise`.
 A recorded task's bank may come unsplit (`feature -> direction -> [phrasings]`); `split_bank` splits it by phrasing.
 
-A user file (`--utterances FILE`) uses the plain schema of DESIGN.md, without splits, keyed by task name:
-`{"metaworld": {"speed": {"increase": ["Move faster."], "decrease": ["Move slower."]}}}`. It may give only some
-features and directions; keys starting with `_` (at any level) are comments and are ignored.
+A user file (`--utterances FILE`) uses the plain schema of docs/design.md#utterance-files, without splits, keyed by
+task name: `{"metaworld": {"speed": {"increase": ["Move faster."], "decrease": ["Move slower."]}}}`. It may give only
+some features and directions; keys starting with `_` (at any level) are comments and are ignored.
 
 Every problem with a file raises `LangprefError` with a one-line message naming the file and the offending key.
 """
@@ -26,7 +26,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.tasks import get_task, task_names
 
-SPLITS: tuple[str, ...] = ("train", "val", "test")
+BANK_SPLITS: tuple[str, ...] = ("train", "val", "test")
 DIRECTIONS: tuple[str, ...] = ("increase", "decrease")
 VAGUE_FEEDBACK: tuple[str, ...] = (
     "Not quite.",
@@ -75,7 +75,7 @@ class Bank:
 
     def _check_split(self, split: str) -> None:
         if split not in self.phrasings:
-            raise LangprefError(f"unknown split {split!r}: choose one of {', '.join(SPLITS)}")
+            raise LangprefError(f"unknown split {split!r}: choose one of {', '.join(BANK_SPLITS)}")
 
     def get(self, split: str, feature: str, direction: str) -> tuple[str, ...]:
         self._check_split(split)
@@ -98,10 +98,11 @@ class Bank:
         ]
 
     def merged(self) -> dict[str, dict[str, list[str]]]:
-        """feature -> direction -> the phrasings of all splits (train, val, test order): DESIGN.md's schema."""
+        """feature -> direction -> the phrasings of all splits (train, val, test order), the schema of
+        docs/design.md#utterance-files."""
         return {
             feature: {
-                direction: [text for split in SPLITS for text in self.phrasings[split][feature][direction]]
+                direction: [text for split in BANK_SPLITS for text in self.phrasings[split][feature][direction]]
                 for direction in DIRECTIONS
             }
             for feature in self.features
@@ -117,6 +118,24 @@ def _type_name(value: Any) -> str:
     return {dict: "object", list: "list", str: "string", bool: "boolean", type(None): "null"}.get(
         type(value), type(value).__name__
     )
+
+
+def _parse_texts(texts: Any, where: str, key: str) -> tuple[str, ...]:
+    """Validate one list of phrasings at dotted location `key`: stripped, none empty, duplicates dropped."""
+    if not isinstance(texts, list):
+        raise LangprefError(f"{where}: {key} must be a list of strings, got {_type_name(texts)}")
+    if not texts:
+        raise LangprefError(f"{where}: {key} is an empty list; give at least one phrasing or drop the key")
+    kept: list[str] = []
+    for i, text in enumerate(texts):
+        if not isinstance(text, str):
+            raise LangprefError(f"{where}: {key}[{i}] must be a string, got {_type_name(text)}")
+        text = text.strip()
+        if not normalise(text):
+            raise LangprefError(f"{where}: {key}[{i}] is an empty phrasing")
+        if text not in kept:
+            kept.append(text)
+    return tuple(kept)
 
 
 def _parse_phrasings(
@@ -157,26 +176,10 @@ def _parse_phrasings(
                 )
         parsed: dict[str, tuple[str, ...]] = {}
         for direction in DIRECTIONS:
-            dkey = f"{fkey}.{direction}"
-            if direction not in dentries:
-                if require_all:
-                    raise LangprefError(f"{where}: {fkey} lacks direction {direction!r}")
-                continue
-            texts = dentries[direction]
-            if not isinstance(texts, list):
-                raise LangprefError(f"{where}: {dkey} must be a list of strings, got {_type_name(texts)}")
-            if not texts:
-                raise LangprefError(f"{where}: {dkey} is an empty list; give at least one phrasing or drop the key")
-            kept: list[str] = []
-            for i, text in enumerate(texts):
-                if not isinstance(text, str):
-                    raise LangprefError(f"{where}: {dkey}[{i}] must be a string, got {_type_name(text)}")
-                text = text.strip()
-                if not normalise(text):
-                    raise LangprefError(f"{where}: {dkey}[{i}] is an empty phrasing")
-                if text not in kept:
-                    kept.append(text)
-            parsed[direction] = tuple(kept)
+            if direction in dentries:
+                parsed[direction] = _parse_texts(dentries[direction], where, f"{fkey}.{direction}")
+            elif require_all:
+                raise LangprefError(f"{where}: {fkey} lacks direction {direction!r}")
         if parsed:
             out[feature] = parsed
     return out
@@ -200,11 +203,11 @@ def _check_top(data: Any, where: str) -> dict[str, Any]:
 def load_user_utterances(
     path: str | Path, env: str, features: tuple[str, ...] | None = None
 ) -> dict[str, dict[str, tuple[str, ...]]]:
-    """Read a user's utterance file (DESIGN.md schema, no splits) and return `feature -> direction -> phrasings`
-    for `env`: only the features and directions the file gives, in canonical order. Every section of a task known in
-    this process is validated, not only `env`'s; sections of other tasks (a shared file may cover tasks whose dataset
-    is not open here) are skipped, and named in the error if `env`'s own section is missing. `features` names the
-    features of a task not registered in this process (a task file not imported yet)."""
+    """Read a user's utterance file (docs/design.md#utterance-files, no splits) and return `feature -> direction ->
+    phrasings` for `env`: only the features and directions the file gives, in canonical order. Every section of a
+    task known in this process is validated, not only `env`'s; sections of other tasks (a shared file may cover tasks
+    whose dataset is not open here) are skipped, and named in the error if `env`'s own section is missing. `features`
+    names the features of a task not registered in this process (a task file not imported yet)."""
     if features is None:
         _features(env)
     path = Path(path)
@@ -239,16 +242,16 @@ def _parse_bank(data: Any, env: str, where: str, features: tuple[str, ...] | Non
         raise LangprefError(f"{where}: the top level must be an object of splits, got {_type_name(data)}")
     splits = _visible(data)
     for split in splits:
-        if split not in SPLITS:
-            raise LangprefError(f"{where}: unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
+        if split not in BANK_SPLITS:
+            raise LangprefError(f"{where}: unknown split {split!r}; valid splits: {', '.join(BANK_SPLITS)}")
     phrasings: dict[str, dict[str, dict[str, tuple[str, ...]]]] = {}
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         if split not in splits:
             raise LangprefError(f"{where}: the bank lacks split {split!r}")
         phrasings[split] = _parse_phrasings(splits[split], env, where, split, require_all=True, valid=features)
     # No phrasing twice in a task (after normalise), so no val/test phrasing equals a train one.
     seen: dict[str, str] = {}
-    for split in SPLITS:
+    for split in BANK_SPLITS:
         for feature, by_direction in phrasings[split].items():
             for direction, texts in by_direction.items():
                 for text in texts:
@@ -292,16 +295,16 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
     if not isinstance(data, dict):
         raise LangprefError(f"{where}: the top level must be an object, got {_type_name(data)}")
     data = _visible(data)
-    if set(data) & set(SPLITS):
+    if set(data) & set(BANK_SPLITS):
         return data
-    out: dict[str, Any] = {split: {} for split in SPLITS}
+    out: dict[str, Any] = {split: {} for split in BANK_SPLITS}
     rng = np.random.default_rng([seed, 7])
     for feature in features:
         if feature not in data or not isinstance(data[feature], dict):
             raise LangprefError(
                 f"{where}: no phrasings for feature {feature!r} (the task's features: {', '.join(features)})"
             )
-        for split in SPLITS:
+        for split in BANK_SPLITS:
             out[split][feature] = {}
         for direction in DIRECTIONS:
             texts = data[feature].get(direction)
@@ -326,7 +329,7 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
                 "val": order[n_train : n_train + n_val],
                 "test": order[n_train + n_val :],
             }
-            for split in SPLITS:
+            for split in BANK_SPLITS:
                 out[split][feature][direction] = parts[split]
     unknown = sorted(set(data) - set(features))
     if unknown:
@@ -336,4 +339,13 @@ def split_bank(path: Path, features: tuple[str, ...], seed: int = 0) -> dict[str
     return out
 
 
-__all__ = ["DIRECTIONS", "SPLITS", "Bank", "load_bank", "load_user_utterances", "normalise", "check_bank", "split_bank"]
+__all__ = [
+    "DIRECTIONS",
+    "BANK_SPLITS",
+    "Bank",
+    "load_bank",
+    "load_user_utterances",
+    "normalise",
+    "check_bank",
+    "split_bank",
+]

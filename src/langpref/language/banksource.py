@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from langpref.errors import LangprefError
-from langpref.language.bank import DIRECTIONS, SPLITS
+from langpref.language.bank import BANK_SPLITS, DIRECTIONS
 
 Phrasings = dict[str, dict[str, list[str]]]
 """feature -> direction -> phrasings."""
@@ -51,7 +51,7 @@ def _fill(raw: dict, features: tuple[str, ...]) -> dict[str, Phrasings]:
             f: {d: [str(t).strip() for t in raw.get(split, {}).get(f, {}).get(d, [])] for d in DIRECTIONS}
             for f in features
         }
-        for split in SPLITS
+        for split in BANK_SPLITS
     }
 
 
@@ -96,7 +96,7 @@ def open_bank(where: str | Path, seed: int = 0) -> BankSource:
     else:
         name, origin = str(where), f"task {where}"
     bank = load_bank(name)
-    raw = {s: {f: {d: list(bank.phrasings[s][f][d]) for d in DIRECTIONS} for f in bank.features} for s in SPLITS}
+    raw = {s: {f: {d: list(bank.phrasings[s][f][d]) for d in DIRECTIONS} for f in bank.features} for s in BANK_SPLITS}
     file = _as_path(get_task(name).utterances)
     return BankSource(name, bank.features, _filled(raw, bank.features), (file,) if file else (), origin)
 

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.language.bank import DIRECTIONS
 
-DIRECTIONS: tuple[str, ...] = ("increase", "decrease")
 INCREASE, DECREASE = 0, 1
 TIE_FRACTION = 0.05  # a feature "differs" between two trajectories when |delta| > TIE_FRACTION * std(train)
 
@@ -109,7 +109,7 @@ class Phrasings:
         return np.array([len(ids) for ids in self.group_ids], dtype=np.int64)
 
     def as_mapping(self) -> dict[str, dict[str, list[str]]]:
-        """The DESIGN.md utterance schema for one env: {feature: {direction: [texts]}}."""
+        """The utterance schema (docs/design.md#utterance-files) for one env: {feature: {direction: [texts]}}."""
         out: dict[str, dict[str, list[str]]] = {f: {} for f in self.feature_names}
         for g, ids in enumerate(self.group_ids):
             f, d = self.group_name(g)

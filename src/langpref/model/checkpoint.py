@@ -93,6 +93,43 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def _config_record(model: LatentModel, model_cfg: ModelConfig, lang_finetuned: bool) -> dict[str, Any]:
+    """The head of a checkpoint's config.json: its format, the architecture, the language model and the data it
+    was trained on (what `load_model` needs to rebuild it)."""
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "langpref_version": __version__,
+        "model": {
+            **model_cfg.__dict__,
+            "traj_hidden": list(model_cfg.traj_hidden),
+            "frame_channels": list(model_cfg.frame_channels),
+            "lang_hidden": model.lang.hidden_size,
+        },
+        "lang_model": model.lang_model_name,
+        "lang_model_info": lang_model_info(model.lang_model_name, model.lang.transformer),
+        "lang_finetuned": lang_finetuned,
+        "data": model.info.to_dict(),
+        "normalisation": {"mean": model.traj.mean.cpu().tolist(), "std": model.traj.std.cpu().tolist()},
+        "meanings": [f"{f}/{d}" for f, d in model.meanings],
+    }
+
+
+def _swap_in(tmp: Path, out: Path) -> None:
+    """Make the finished checkpoint `tmp` readable by all and put it in place of `out` (an old `out` is moved
+    aside first and removed only after, so a failure never leaves neither)."""
+    for p in tmp.rglob("*"):  # some writers create 0600 files; a model is meant to be shared
+        p.chmod(0o755 if p.is_dir() else 0o644)
+    tmp.chmod(0o755)
+    if out.exists():
+        old = out.parent / f".{out.name}.old-{os.getpid()}"
+        out.rename(old)
+        tmp.rename(out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(out)
+
+
 def save_model(
     model: LatentModel,
     out: str | Path,
@@ -128,37 +165,14 @@ def save_model(
             if p.is_file()
         }
         config = {
-            "format": FORMAT,
-            "format_version": FORMAT_VERSION,
-            "langpref_version": __version__,
-            "model": {
-                **model_cfg.__dict__,
-                "traj_hidden": list(model_cfg.traj_hidden),
-                "frame_channels": list(model_cfg.frame_channels),
-                "lang_hidden": model.lang.hidden_size,
-            },
-            "lang_model": model.lang_model_name,
-            "lang_model_info": lang_model_info(model.lang_model_name, model.lang.transformer),
-            "lang_finetuned": lang_finetuned,
-            "data": model.info.to_dict(),
-            "normalisation": {"mean": model.traj.mean.cpu().tolist(), "std": model.traj.std.cpu().tolist()},
-            "meanings": [f"{f}/{d}" for f, d in model.meanings],
+            **_config_record(model, model_cfg, lang_finetuned),
             "train_config": train_config or {},
             "history": history or [],
             "results": results or {},
             "files": files,
         }
         (tmp / CONFIG).write_text(json.dumps(config, indent=2) + "\n")
-        for p in tmp.rglob("*"):  # some writers create 0600 files; a model is meant to be shared
-            p.chmod(0o755 if p.is_dir() else 0o644)
-        tmp.chmod(0o755)
-        if out.exists():
-            old = out.parent / f".{out.name}.old-{os.getpid()}"
-            out.rename(old)
-            tmp.rename(out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(out)
+        _swap_in(tmp, out)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

@@ -1,4 +1,4 @@
-"""Alignment accuracy (paper Sec. 5.1, DESIGN.md) and how the model reads one free-form sentence.
+"""Alignment accuracy (paper Sec. 5.1, docs/design.md#the-command-line) and how the model reads one free-form sentence.
 
 Accuracy: over every ordered pair (tau_A, tau_B) of a split, every feature whose value differs between them (by more
 than the model's tie threshold), and every phrasing of that feature in the direction that takes tau_A to tau_B, the
@@ -24,7 +24,8 @@ import numpy as np
 import torch
 
 from langpref.errors import LangprefError
-from langpref.language.pairs import DIRECTIONS, Pairs, Phrasings, build_pairs
+from langpref.language.bank import DIRECTIONS
+from langpref.language.pairs import Pairs, Phrasings, build_pairs
 
 CONFIDENCE_TEMPERATURE = 0.1  # softmax temperature over the cosines of `embed_text`
 
@@ -102,7 +103,7 @@ def per_phrasing(correct: np.ndarray, total: np.ndarray, phrasings: Phrasings) -
     return out
 
 
-def summarise(correct: np.ndarray, total: np.ndarray, feature_names: Sequence[str]) -> dict:
+def summarise_accuracy(correct: np.ndarray, total: np.ndarray, feature_names: Sequence[str]) -> dict:
     """{"accuracy", "per_feature", "num_samples"}; features without samples are left out of per_feature."""
     n = int(total.sum())
     return {
@@ -149,7 +150,7 @@ def evaluate_split(model, dataset, split: str, phrasings: Phrasings) -> dict:
     psi = model.encode_texts(phrasings.texts).double().cpu()
     pairs = build_pairs(dataset.features[idx], np.asarray(model.info.tie_thresholds))
     correct, total = alignment_counts(phi, psi, pairs, phrasings.group_ids, len(model.feature_names))
-    out = summarise(correct, total, model.feature_names)
+    out = summarise_accuracy(correct, total, model.feature_names)
     out.update(split=split, num_trajectories=len(idx), num_phrasings=len(phrasings.texts), num_pairs=len(pairs))
     out.update(_with_ties(phi, psi, dataset.features[idx], phrasings, correct, total, len(model.feature_names)))
     out["per_phrasing"] = per_phrasing(

@@ -21,7 +21,7 @@ import torch
 from torch import nn
 
 from langpref.errors import LangprefError
-from langpref.language.pairs import DIRECTIONS
+from langpref.language.bank import DIRECTIONS
 from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder
 from langpref.model.inputs import EncoderInput, dataset_input, sees_images, trajectories_input
 from langpref.model.vision import ImageTrajectoryEncoder

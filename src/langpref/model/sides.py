@@ -24,7 +24,7 @@ import torch
 
 from langpref.errors import LangprefError
 from langpref.language.pairs import Phrasings, build_pairs
-from langpref.model.evaluate import alignment_counts, summarise
+from langpref.model.evaluate import alignment_counts, summarise_accuracy
 
 ORACLE_SIDES = ("trajectory", "language")
 
@@ -64,7 +64,7 @@ def evaluate_with_oracle(model, dataset, split: str, phrasings: Phrasings, side:
         psi = model.prototypes.double().cpu()[torch.as_tensor(group)]
         what = "the model's trajectory side x an oracle reading (the prototype of each phrasing's true meaning)"
     correct, total = alignment_counts(phi, psi, pairs, phrasings.group_ids, num_features)
-    out = summarise(correct, total, model.feature_names)
+    out = summarise_accuracy(correct, total, model.feature_names)
     out.update(
         split=split,
         oracle=side,

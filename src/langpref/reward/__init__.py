@@ -15,6 +15,7 @@ the saved reward other tools train on.
 """
 
 from langpref.reward.api import Reward, load
+from langpref.reward.curves import Curves, summarise_curves
 from langpref.reward.learner import (
     DEFAULT_WEIGHT_DECAY,
     LOSSES,
@@ -26,15 +27,7 @@ from langpref.reward.learner import (
     RewardLearner,
     RewardModel,
 )
-from langpref.reward.loop import (
-    Curves,
-    LearnRewardConfig,
-    feedback_choices,
-    human_weights,
-    learn_reward,
-    run_reward_learning,
-    summarise,
-)
+from langpref.reward.loop import LearnRewardConfig, feedback_choices, human_weights, learn_reward, run_reward_learning
 from langpref.reward.metrics import cross_entropy, epic_distance, kendall_tau, reward_of_best, value_order_correlation
 
 __all__ = [
@@ -59,6 +52,6 @@ __all__ = [
     "load",
     "reward_of_best",
     "run_reward_learning",
-    "summarise",
+    "summarise_curves",
     "value_order_correlation",
 ]

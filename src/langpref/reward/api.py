@@ -36,13 +36,13 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.reward.learner import MODELS
 from langpref.reward.steps import StepEncoder, prefix_means
 
 FORMAT = "langpref-reward"
 FORMAT_VERSION = 1
 """The reward file version this langpref writes and the newest it reads."""
 DEFAULT_NAME = "reward.json"
-KINDS = ("linear", "mlp")
 REQUIRED = ("task", "kind", "params", "model", "obs_dim", "action_dim")
 
 
@@ -72,8 +72,8 @@ def read_reward_file(path: str | Path) -> tuple[Path, dict[str, Any]]:
     missing = [k for k in REQUIRED if k not in doc]
     if missing:
         raise LangprefError(f"{path} is an incomplete langpref reward (no {', '.join(missing)}); save it again")
-    if doc["kind"] not in KINDS:
-        raise LangprefError(f"{path} holds a reward model {doc['kind']!r} this langpref does not know ({KINDS})")
+    if doc["kind"] not in MODELS:
+        raise LangprefError(f"{path} holds a reward model {doc['kind']!r} this langpref does not know ({MODELS})")
     return path, doc
 
 

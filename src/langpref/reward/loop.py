@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from langpref.dataset.storage import Split
+from langpref.dataset.splits import Split
 from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
 from langpref.feedback.kind import MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query
@@ -46,8 +46,9 @@ from langpref.reward.answer_model import (
     confirm,
 )
 from langpref.reward.cost import query_costs
+from langpref.reward.curves import Curves, summarise_curves
 from langpref.reward.learner import RewardConfig, RewardLearner
-from langpref.reward.metrics import cross_entropy, epic_distance, kendall_tau, reward_of_best, value_order_correlation
+from langpref.reward.metrics import value_order_correlation
 from langpref.reward.steps import SuccessEpisodes
 
 
@@ -55,51 +56,6 @@ def feedback_choices() -> tuple[str, ...]:
     """Every `feedback` a learner takes: each registered kind (an installed plugin's too), and `mixed` (language and
     comparisons, chosen per query)."""
     return (*kind_names(), MIXED)
-
-
-@dataclass
-class Curves:
-    """Metrics after 0, 1, ..., Q queries."""
-
-    cross_entropy: list[float] = field(default_factory=list)
-    true_reward_of_best: list[float] = field(default_factory=list)
-    optimized_true_reward: float | None = None
-    """With generation: the normalised true reward of r_xi's generated optimum after the last query."""
-    kinds: list[str] = field(default_factory=list)
-    """The kind of feedback asked at queries 1..Q."""
-    seconds: list[float] = field(default_factory=list)
-    """Modelled seconds of the person's time after 0, 1, ..., Q queries (`langpref.reward.cost`)."""
-    credible: bool | None = None
-    """Answer-model learner: whether the true weights' direction lies in the belief's 90% credible region of
-    directions after the last query (a calibration check; read by the metrics only)."""
-    confirmed: list[int] = field(default_factory=list)
-    """With `confirm_margin`, per language answer: -1 not asked, -2 "none of these", else the meaning clicked."""
-    kendall_tau: list[float] = field(default_factory=list)
-    """Kendall's tau-b between the true and the learned ranking of the evaluation split, after 0..Q queries."""
-    epic_distance: list[float] = field(default_factory=list)
-    """EPIC distance between the true and the learned reward over every trajectory of the dataset, after 0..Q
-    queries."""
-    value_order: float | None = None
-    """With successful episodes step by step: the value-order correlation of r_xi through them after the last
-    query."""
-    value_order_true: float | None = None
-    """The same of the synthetic human's true reward: what a reward that matched it exactly would score (a reward
-    of preferences need not rise through a successful episode, as a reward of task progress does)."""
-
-    def record(
-        self,
-        learner: RewardLearner,
-        space: LatentSpace,
-        eval_rows: np.ndarray,
-        R_eval: np.ndarray,
-        rationality: float,
-        R_all: np.ndarray,
-    ) -> None:
-        r = learner.predict(space.phi[eval_rows])
-        self.cross_entropy.append(cross_entropy(R_eval, r, rationality))
-        self.true_reward_of_best.append(reward_of_best(R_eval, r))
-        self.kendall_tau.append(kendall_tau(R_eval, r))
-        self.epic_distance.append(epic_distance(R_all, learner.predict(space.phi)))
 
 
 # ---- simulated sessions (`langpref learn-reward`) -----------------------------------------------------------------
@@ -260,22 +216,13 @@ def run_reward_learning(
     R_all = true_reward(w, space.theta)
     rng_query, rng_human, rng_neg = (np.random.default_rng([*run_seed, k]) for k in (1, 2, 3))
     learner_seed = int(np.random.default_rng([*run_seed, 4]).integers(2**31))
-    if cfg.learner == "answer-model":
-        learner = AnswerModelLearner(space, pool, cfg.answer_model, cfg.reward.negative_split, seed=learner_seed)
-    else:
-        learner = RewardLearner(space.dim, cfg.reward, seed=learner_seed)
+    learner = _make_learner(cfg, space, pool, learner_seed)
     selector = _selector(cfg, space, pool)
     rng_select = np.random.default_rng([*run_seed, 5])
     costs = cfg.costs
     curves = Curves(seconds=[0.0])
     curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
-    if cfg.feedback == MIXED:  # each kind's human on the stream of that kind's own runs (common random numbers)
-        humans = {
-            name: get_kind(name).make_human(w, space, pool, cfg.human, np.random.default_rng([*run_seed, 2]))
-            for name in MIXED_KINDS
-        }
-    else:
-        humans = {cfg.feedback: get_kind(cfg.feedback).make_human(w, space, pool, cfg.human, rng_human)}
+    humans = _make_humans(cfg, w, space, pool, run_seed, rng_human)
     while len(curves.kinds) < cfg.queries:
         size = min(cfg.batch, cfg.queries - len(curves.kinds))
         batch = (
@@ -291,21 +238,80 @@ def run_reward_learning(
             if record is not None:
                 record.append((chosen, answer))
             seconds = costs.get(kind.name, 1.0)
-            if cfg.learner == "answer-model":
-                asked, meaning = False, None
-                if cfg.confirm_margin is not None and kind.name == "language":
-                    asked, meaning = confirm(learner, answer, cfg.confirm_margin)
-                    curves.confirmed.append(-1 if not asked else (meaning if meaning is not None else -2))
-                    seconds += cfg.confirm_seconds if asked else 0.0
-                if not (asked and meaning is None):  # "none of these": stored, not learned from
-                    learner.observe(kind.name, answer, meaning if asked else None)
-            else:
-                learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
+            seconds += _learn_from(learner, kind, answer, cfg, space, rng_neg, curves)
             if n == len(batch):
                 learner.fit()
             curves.kinds.append(kind.name)
             curves.seconds.append(curves.seconds[-1] + seconds)
             curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
+    _score_final(curves, learner, w, cfg, R_eval, run_seed, generation, episodes)
+    if learners is not None:
+        learners.append(learner)
+    return curves
+
+
+def _make_learner(
+    cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray, seed: int
+) -> RewardLearner | AnswerModelLearner:
+    """The learner of `cfg.learner`: the paper's (Eq. 9) or the answer-model learner."""
+    if cfg.learner == "answer-model":
+        return AnswerModelLearner(space, pool, cfg.answer_model, cfg.reward.negative_split, seed=seed)
+    return RewardLearner(space.dim, cfg.reward, seed=seed)
+
+
+def _make_humans(
+    cfg: LearnRewardConfig,
+    w: np.ndarray,
+    space: LatentSpace,
+    pool: np.ndarray,
+    run_seed: tuple[int, ...],
+    rng_human: np.random.Generator,
+) -> dict:
+    """kind name -> the synthetic human with weights `w` who answers queries of that kind. `mixed` puts each kind's
+    human on the stream of that kind's own runs (common random numbers)."""
+    if cfg.feedback == MIXED:
+        return {
+            name: get_kind(name).make_human(w, space, pool, cfg.human, np.random.default_rng([*run_seed, 2]))
+            for name in MIXED_KINDS
+        }
+    return {cfg.feedback: get_kind(cfg.feedback).make_human(w, space, pool, cfg.human, rng_human)}
+
+
+def _learn_from(
+    learner: RewardLearner | AnswerModelLearner,
+    kind: FeedbackKind,
+    answer,
+    cfg: LearnRewardConfig,
+    space: LatentSpace,
+    rng_neg: np.random.Generator,
+    curves: Curves,
+) -> float:
+    """Give `answer` to the learner (not fit yet); the extra modelled seconds it cost (a confirmation asked of the
+    person, answer-model learner with `confirm_margin` only)."""
+    if cfg.learner != "answer-model":
+        learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
+        return 0.0
+    asked, meaning = False, None
+    if cfg.confirm_margin is not None and kind.name == "language":
+        asked, meaning = confirm(learner, answer, cfg.confirm_margin)
+        curves.confirmed.append(-1 if not asked else (meaning if meaning is not None else -2))
+    if not (asked and meaning is None):  # "none of these": stored, not learned from
+        learner.observe(kind.name, answer, meaning if asked else None)
+    return cfg.confirm_seconds if asked else 0.0
+
+
+def _score_final(
+    curves: Curves,
+    learner: RewardLearner | AnswerModelLearner,
+    w: np.ndarray,
+    cfg: LearnRewardConfig,
+    R_eval: np.ndarray,
+    run_seed: tuple[int, ...],
+    generation,
+    episodes: SuccessEpisodes | None,
+) -> None:
+    """What is scored once, after the last query: the answer-model belief's calibration, r_xi's generated optimum
+    (with `generation`) and the value-order correlations through successful episodes (with `episodes`)."""
     if cfg.learner == "answer-model":
         curves.credible = learner.credible(np.asarray(w)[learner.features])  # the experimenter's check
     if generation is not None:
@@ -316,9 +322,6 @@ def run_reward_learning(
         order = value_order_correlation([learner.predict(np.ascontiguousarray(p)) for p in episodes.phi])
         truth = value_order_correlation([true_reward(w, t) for t in episodes.theta])
         curves.value_order, curves.value_order_true = (None if np.isnan(v) else v for v in (order, truth))
-    if learners is not None:
-        learners.append(learner)
-    return curves
 
 
 def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
@@ -354,98 +357,11 @@ def optimize_reward(generation, learner: RewardLearner, run_seed: tuple[int, ...
     return generation.proposer(key=(*run_seed, 31337)).optimise(learner.predict, start)
 
 
-def summarise(runs: list[Curves], threshold: float = 0.95) -> dict:
-    """Mean and std per query count over runs, the area under the mean true-reward curve (its mean over query
-    counts 0..Q), the first query count whose mean true reward reaches `threshold` (None if never), and what the
-    queries cost (`kinds_summary`)."""
-    ce = np.array([c.cross_entropy for c in runs])
-    best = np.array([c.true_reward_of_best for c in runs])
-    mean_best = best.mean(axis=0)
-    reached = np.flatnonzero(mean_best >= threshold)
-    return {
-        "cross_entropy": ce.mean(axis=0).tolist(),
-        "cross_entropy_std": ce.std(axis=0).tolist(),
-        "true_reward_of_best": mean_best.tolist(),
-        "true_reward_of_best_std": best.std(axis=0).tolist(),
-        "auc_true_reward": float(mean_best.mean()),
-        "auc_cross_entropy": float(ce.mean(axis=0).mean()),
-        f"queries_to_{threshold:g}": int(reached[0]) if len(reached) else None,
-        "num_runs": len(runs),
-        **kinds_summary(runs),
-        **optimized_summary(runs),
-        **confirm_summary(runs),
-        **standard_summary(runs),
-    }
+def _save_run_reward(learner, directory: str, env: str, model: str | None, name: str, default: bool) -> str:
+    """Write one run's r_xi into `directory` (`langpref.reward.saved`); its path."""
+    from langpref.reward.saved import save_learned_reward
 
-
-def standard_summary(runs: list[Curves]) -> dict:
-    """Mean and std over runs, per query count, of `kendall_tau` and `epic_distance`, and of runs scored on
-    successful episodes the mean `value_order` correlation (with its std, the per-run values, and the mean of the
-    true reward's, `value_order_correlation_true_reward`). Empty for runs
-    recorded before these were kept (an older experiment cache)."""
-    out: dict = {}
-    for name in ("kendall_tau", "epic_distance"):
-        curves = [getattr(c, name) for c in runs]
-        if runs and all(curves) and len({len(c) for c in curves}) == 1:
-            values = np.array(curves)
-            out[name] = values.mean(axis=0).tolist()
-            out[f"{name}_std"] = values.std(axis=0).tolist()
-    orders = [c.value_order for c in runs]
-    if runs and all(v is not None for v in orders):
-        out["value_order_correlation"] = float(np.mean(orders))
-        out["value_order_correlation_std"] = float(np.std(orders))
-        out["value_order_correlation_runs"] = [float(v) for v in orders]
-        truth = [c.value_order_true for c in runs]
-        if all(v is not None for v in truth):
-            out["value_order_correlation_true_reward"] = float(np.mean(truth))
-    return out
-
-
-def confirm_summary(runs: list[Curves]) -> dict:
-    """Of answer-model runs, `credible_90`: the share whose true direction lies in the belief's 90% credible region
-    (calibrated: about 0.9). Of runs that asked people to confirm their sentences: the share of language answers
-    confirmed, and of those the share answered "none of these". Empty for the paper's learner."""
-    out = {}
-    credible = [c.credible for c in runs if c.credible is not None]
-    if credible:
-        out["credible_90"] = float(np.mean(credible))
-    marks = np.array([m for c in runs for m in c.confirmed])
-    if len(marks):
-        asked = marks != -1
-        out["confirm_asked"] = float(asked.mean())
-        out["confirm_none"] = float((marks == -2).sum() / max(int(asked.sum()), 1))
-    return out
-
-
-def kinds_summary(runs: list[Curves]) -> dict:
-    """Which kind was asked and the person's modelled time: `kinds_asked` (per run, the kind of queries 1..Q),
-    `kind_share` ({kind: share of runs asking it at each query 1..Q}) and `modelled_seconds` (mean over runs after
-    0..Q queries, with `modelled_seconds_std`). Empty for runs recorded before these were kept."""
-    if not runs or any(not c.kinds or len(c.seconds) != len(c.kinds) + 1 for c in runs):
-        return {}
-    asked = np.array([c.kinds for c in runs])
-    seconds = np.array([c.seconds for c in runs])
-    return {
-        "kinds_asked": asked.tolist(),
-        "kind_share": {k: (asked == k).mean(axis=0).tolist() for k in sorted(set(asked.ravel()))},
-        "modelled_seconds": seconds.mean(axis=0).tolist(),
-        "modelled_seconds_std": seconds.std(axis=0).tolist(),
-    }
-
-
-def optimized_summary(runs: list[Curves]) -> dict:
-    """Of runs with a generated optimum: `optimized_true_reward` (one per run), its mean, and the shares of runs where
-    it beats the eval split's best trajectory (> 1) and the split's trajectory r_xi ranks first."""
-    if not runs or any(c.optimized_true_reward is None for c in runs):
-        return {}
-    opt = np.array([c.optimized_true_reward for c in runs])
-    picked = np.array([c.true_reward_of_best[-1] for c in runs])
-    return {
-        "optimized_true_reward": opt.tolist(),
-        "optimized_true_reward_mean": float(opt.mean()),
-        "optimized_beats_best_of_split": float((opt > 1.0).mean()),
-        "optimized_beats_true_reward_of_best": float((opt > picked).mean()),
-    }
+    return str(save_learned_reward(learner, directory, env=env, model=model, name=name, default=default))
 
 
 def learn_reward(
@@ -457,7 +373,7 @@ def learn_reward(
     model: str | None = None,
     episodes: SuccessEpisodes | None = None,
 ) -> dict:
-    """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise` plus the config. With `generation`
+    """cfg.humans x cfg.seeds runs on `space`; the summary of `summarise_curves` plus the config. With `generation`
     (`langpref.propose.Generation`), each run also generates r_xi's optimum (`optimized_true_reward`, one per run);
     with `save_reward` (a directory), each run's r_xi is written there for `langpref.reward.saved.LearnedReward`, beside
     a reference to the checkpoint `model` whose trajectory encoder it reads. With `episodes` (the evaluation split's
@@ -487,26 +403,13 @@ def learn_reward(
                     )
                 )
                 if save_reward:
-                    from langpref.reward.saved import save_learned_reward
-
-                    saved.append(
-                        str(
-                            save_learned_reward(
-                                learners[0],
-                                save_reward,
-                                env=space.env,
-                                model=model,
-                                name=f"h{h}-s{s}",
-                                default=not saved,
-                            )
-                        )
-                    )
+                    saved.append(_save_run_reward(learners[0], save_reward, space.env, model, f"h{h}-s{s}", not saved))
                 bar.update()
     extra = {"saved_rewards": saved} if saved else {}
     if generation is not None:
         extra["propose"] = asdict(generation.cfg)
     return {
-        **summarise(runs),
+        **summarise_curves(runs),
         "feedback": cfg.feedback,
         "loss": cfg.reward.loss,
         "query_selection": cfg.selection,

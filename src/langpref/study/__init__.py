@@ -8,7 +8,7 @@ queries.py   which trajectories each Study-2 query shows (random, or an active s
 generated.py Study 1's new trajectories made in the simulator, in the background (`--improve-candidates generated`)
 db.py        SQLite schema (WAL, versioned) and transactions
 videos.py    render cache with background pre-rendering
-serving, the HTTP contract (DESIGN.md):
+serving, the HTTP contract (docs/design.md):
   state.py         StudyApp: what every request shares (database, engine, videos, locks, rate limits)
   participants.py  the participants' router: join, resume, step, answer, videos
   admin.py         the lab's router: dashboard data, exclusions, export, status (admin token)

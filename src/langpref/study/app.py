@@ -1,4 +1,4 @@
-"""The study web app: the HTTP contract of DESIGN.md ("Study web app") over the database, the flow and the engine.
+"""The study web app: the HTTP contract of docs/design.md over the database, the flow and the engine.
 
     app = create_app(StudyApp(db_path, engine, videos, admin_token))
 

@@ -257,7 +257,7 @@ def _answer_key(body: Any, step: Step, keys: dict[str, tuple[str, ...]]) -> str:
     and, when sent, its `seq`)."""
     if not isinstance(body, dict):
         raise AnswerError("the body must be a JSON object")
-    # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in DESIGN.md's
+    # only the contract's fields are read and stored. `seq` (the step answered) is optional, as in docs/design.md's
     # contract that outside clients follow; when it is sent, an old answer sent again is never taken for the current
     # step (our pages and simulated participants always send it)
     found = [k for k in body if k in keys]

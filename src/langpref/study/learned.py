@@ -111,7 +111,7 @@ def confirmations_html(c: dict[str, Any], fmt: Callable[[Any], str]) -> str:
 
 
 def bank_additions(tables: Tables, env: str, excluded: Collection[str] = ()) -> tuple[dict[str, Any], int]:
-    """The phrasings participants confirmed (text -> the meaning they chose) as a bank file for `env` (DESIGN.md
+    """The phrasings participants confirmed (text -> the meaning they chose) as a bank file for `env` (docs/design.md,
     schema, `{TASK: {feature: {increase: [...], decrease: [...]}}}`) for the lab to review before adding any to its
     bank; "none of these" and `excluded` participants are left out. (The file's content, its number of phrasings.)"""
     section: dict[str, dict[str, list[str]]] = {}

@@ -1,4 +1,4 @@
-"""The participants' side of the HTTP contract (DESIGN.md, "Study web app"): joining, resuming, the current step,
+"""The participants' side of the HTTP contract (docs/design.md): joining, resuming, the current step,
 answers, and the videos the steps show.
 
 `POST /api/participants`, `POST /api/participants/resume`, `GET /api/participants/ID/step`,

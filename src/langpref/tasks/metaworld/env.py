@@ -1,4 +1,5 @@
-"""Meta-World Sawyer button press (`button-press-v3`) with the paper's features, and its scripted controller.
+"""Meta-World Sawyer button press (`button-press-v3`) with the paper's features. Its scripted controller is
+`langpref.tasks.metaworld.controller`.
 
 Features per step (paper Appendix A), in metres and metres per second:
   height              end-effector (hand) z

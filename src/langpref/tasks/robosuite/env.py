@@ -1,4 +1,5 @@
-"""robosuite Jaco Lift with a cube AND a bottle on the table, the paper's features, and its scripted controller.
+"""robosuite Jaco Lift with a cube AND a bottle on the table, with the paper's features. Its scripted controller
+is `langpref.tasks.robosuite.controller`.
 
 The scene is robosuite's `Lift` (Jaco arm, three-finger gripper, a small red cube; task: lift the cube) with a
 `BottleObject` added by us, placed at random beside the cube and observed like the cube. Control is 4-dim:

@@ -1,10 +1,12 @@
-"""Tiny synthetic datasets (no simulator) and small phrasing tables for the latent-space tests.
+"""Test data without a simulator, shared by every test folder: one dataset factory (`write_dataset`), the image
+dataset of the frame encoder's toy task, a few phrasings, the tiny training config, and the CLI's parsers. A module
+rather than a conftest, so a test imports it by one name (`from tests.factories import ...`) whichever folders run
+together.
 
-Each trajectory wanders around its own random level per observation dimension; the three features are the means of
-observation dimensions 0, 1, 2, so a per-step MLP averaged over time can learn them exactly.
-
-`make_image_dataset` is the toy task of the image encoder: the answer is only in the pixels (a coloured square's
-position and brightness in 32x32 frames), the observations and actions are noise.
+`write_dataset` writes the real on-disk format. Each trajectory wanders around its own random level per observation
+dimension; the features are the means of the first observation dimensions, so a per-step MLP averaged over time can
+learn them exactly. `make_image_dataset` is the toy task of the image encoder: the answer is only in the pixels (a
+coloured square's position and brightness in 32x32 frames), the observations and actions are noise.
 """
 
 from __future__ import annotations
@@ -12,18 +14,23 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
-import torch
 
 from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
-from langpref.language.pairs import phrasings_from_mapping
-
-torch.set_num_threads(1)
 
 MW_FEATURES = ["height", "speed", "distance_to_button"]
 
 
-def make_dataset(
+def _toy_splits(n: int) -> dict[str, list[int]]:
+    """train 62.5%, then val and test halves of the rest, in index order."""
+    n_train, n_val = int(n * 0.625), (n - int(n * 0.625)) // 2
+    return {
+        "train": list(range(n_train)),
+        "val": list(range(n_train, n_train + n_val)),
+        "test": list(range(n_train + n_val, n)),
+    }
+
+
+def write_dataset(
     root: Path,
     *,
     env: str = "metaworld",
@@ -33,10 +40,25 @@ def make_dataset(
     action_dim: int = 2,
     seed: int = 0,
     feature_names: list[str] | None = None,
+    like_task: bool = False,
 ) -> Path:
+    """A dataset of `n` trajectories of `horizon` steps at `root`. By default a toy one (`obs_dim` observations,
+    `action_dim` actions, Meta-World's feature names or `feature_names`, 62.5% train). `like_task`: shaped as
+    `env`'s generated datasets are (its observation and action sizes, layout, features and split rule, and
+    controller parameters per trajectory), for tests of code that reads a task's data."""
     rng = np.random.default_rng(seed)
-    names = feature_names or MW_FEATURES
-    layout = [{"name": "hand", "start": 0, "stop": 3}, {"name": "rest", "start": 3, "stop": obs_dim}]
+    if like_task:
+        from langpref.dataset.generate import assign_splits
+        from langpref.tasks import get_task
+
+        task = get_task(env)
+        obs_dim, action_dim, names = task.obs_dim, task.action_dim, list(task.features)
+        layout = [{"name": f.name, "start": f.start, "stop": f.stop} for f in task.obs_layout]
+        splits = assign_splits(env, n, seed)
+    else:
+        names = feature_names or MW_FEATURES
+        layout = [{"name": "hand", "start": 0, "stop": 3}, {"name": "rest", "start": 3, "stop": obs_dim}]
+        splits = _toy_splits(n)
     feats = []
     for i in range(n):
         level = rng.uniform(-1, 1, size=obs_dim)
@@ -54,15 +76,10 @@ def make_dataset(
             qvel=np.zeros((horizon, 2)),
             success=bool(i % 2),
             seed=i,
+            controller_params={"i": i} if like_task else {},
         )
         save_trajectory(root, traj)
         feats.append(traj.features)
-    n_train, n_val = int(n * 0.625), (n - int(n * 0.625)) // 2
-    splits = {
-        "train": list(range(n_train)),
-        "val": list(range(n_train, n_train + n_val)),
-        "test": list(range(n_train + n_val, n)),
-    }
     meta = DatasetMeta(
         env=env,
         horizon=horizon,
@@ -115,18 +132,13 @@ def make_image_dataset(
         )
         save_trajectory(root, traj)
         feats.append(traj.features)
-    n_train, n_val = int(n * 0.625), (n - int(n * 0.625)) // 2
     meta = DatasetMeta(
         env="metaworld",
         horizon=horizon,
         obs_layout=[{"name": "noise", "start": 0, "stop": 4}],
         action_dim=2,
         feature_names=MW_FEATURES,
-        splits={
-            "train": list(range(n_train)),
-            "val": list(range(n_train, n_train + n_val)),
-            "test": list(range(n_train + n_val, n)),
-        },
+        splits=_toy_splits(n),
         num_trajectories=n,
         frames=spec.to_dict(),
     )
@@ -134,20 +146,25 @@ def make_image_dataset(
     return root
 
 
-@pytest.fixture(scope="session")
-def image_data(tmp_path_factory) -> Path:
-    return make_image_dataset(tmp_path_factory.mktemp("data") / "squares")
-
-
-@pytest.fixture(scope="session")
-def tiny_data(tmp_path_factory) -> Path:
-    return make_dataset(tmp_path_factory.mktemp("data") / "tiny")
-
-
-@pytest.fixture(scope="session")
-def phrasings(tiny_texts):
-    train_texts, val_texts = tiny_texts
-    return (phrasings_from_mapping(train_texts, MW_FEATURES), phrasings_from_mapping(val_texts, MW_FEATURES))
+TRAIN_TEXTS = {
+    "height": {
+        "increase": ["Move higher.", "Go up more.", "Raise your arm."],
+        "decrease": ["Move lower.", "Go down more.", "Lower your arm."],
+    },
+    "speed": {
+        "increase": ["Move faster.", "Speed up.", "Go quicker."],
+        "decrease": ["Move slower.", "Slow down.", "Go more slowly."],
+    },
+    "distance_to_button": {
+        "increase": ["Stay away from the button.", "Move farther from the button."],
+        "decrease": ["Get closer to the button.", "Move nearer to the button."],
+    },
+}
+VAL_TEXTS = {
+    "height": {"increase": ["Lift up higher."], "decrease": ["Drop lower down."]},
+    "speed": {"increase": ["Be quicker."], "decrease": ["Be slower."]},
+    "distance_to_button": {"increase": ["Keep further from the button."], "decrease": ["Approach the button."]},
+}
 
 
 def tiny_config(data: Path, out: Path, **overrides):
@@ -174,14 +191,20 @@ def tiny_config(data: Path, out: Path, **overrides):
     return cfg
 
 
-@pytest.fixture(scope="session")
-def trained(tiny_data, phrasings, tmp_path_factory):
-    """One small run of both stages, shared by the tests that only read a trained model: (result, stage-1 dir)."""
-    from langpref.model.train import train
+def parsers():
+    """{"train": its parser, "experiment improve": ..., ...} with every command's options built."""
+    import argparse
 
-    root = tmp_path_factory.mktemp("models")
-    cfg = tiny_config(tiny_data, root / "cofinetuned")
-    result = train(
-        cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False, stage1_out=root / "frozen"
-    )
-    return result
+    from langpref.cli import build_parser
+
+    out = {}
+
+    def walk(p, path):
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    out[" ".join([*path, name])] = sub
+                    walk(sub, [*path, name])
+
+    walk(build_parser(), [])
+    return out

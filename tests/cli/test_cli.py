@@ -5,6 +5,7 @@ import sys
 import pytest
 
 from langpref.cli import main
+from tests.factories import parsers, write_dataset
 
 
 def run(*args):
@@ -68,25 +69,6 @@ for _name in ("reward", "ablation", "prior"):
     LEGACY_FLAGS[f"experiment {_name}"] = LEGACY_FLAGS["experiment improve"].replace(
         "--iterations", "--humans --queries --reward-model"
     )
-
-
-def parsers():
-    """{"train": its parser, "experiment improve": ..., ...} with every command's options built."""
-    import argparse
-
-    from langpref.cli import build_parser
-
-    out = {}
-
-    def walk(p, path):
-        for action in p._actions:
-            if isinstance(action, argparse._SubParsersAction):
-                for name, sub in action.choices.items():
-                    out[" ".join([*path, name])] = sub
-                    walk(sub, [*path, name])
-
-    walk(build_parser(), [])
-    return out
 
 
 def test_every_legacy_flag_is_still_there_and_every_option_has_help():
@@ -188,9 +170,8 @@ def test_the_study_server_does_not_import_the_cli():
 
 
 def test_improve_and_experiments_write_their_resolved_config(tmp_path, capsys):
-    from test_improve import write_features_dataset
 
-    data = write_features_dataset(tmp_path / "d")
+    data = write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True)
     figure = tmp_path / "figs" / "curve.png"
     assert (
         main(
@@ -260,10 +241,9 @@ def _learn_reward(data, *extra):
 
 
 def test_config_reruns_a_recorded_command_to_identical_output(tmp_path, capsys, monkeypatch):
-    from test_improve import write_features_dataset
 
     monkeypatch.chdir(tmp_path)
-    data = write_features_dataset(tmp_path / "d")
+    data = write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True)
     first = _learn_reward(data, "--queries", "3", "--humans", "1", "--seeds", "1", "--rationality", "2")
     assert main([*first, "--figure", "a.png", "--json"]) == 0
     recorded = json.loads(capsys.readouterr().out)

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from conftest import make_image_dataset, tiny_config
 from langpref.errors import LangprefError
 from langpref.experiments.observations import ObservationsConfig, run_observations_experiment
+from tests.factories import make_image_dataset, tiny_config
 
 
 def test_a_model_per_kind_with_time_and_memory(tmp_path):
@@ -32,10 +32,10 @@ def test_a_model_per_kind_with_time_and_memory(tmp_path):
 
 
 def test_the_reproducing_command_carries_the_frame_loss_settings():
-    from langpref.experiments.observations import command_line
+    from langpref.experiments.observations import observations_command
     from langpref.model.config import TrainConfig
 
     cfg = ObservationsConfig(env="metaworld", data="d", out="o", kinds=("images",))
-    assert "--frame" not in command_line(cfg, TrainConfig())
-    line = command_line(cfg, TrainConfig(frame_contrastive=1.0, frame_pretrain_steps=1500))
+    assert "--frame" not in observations_command(cfg, TrainConfig())
+    line = observations_command(cfg, TrainConfig(frame_contrastive=1.0, frame_pretrain_steps=1500))
     assert line.endswith("--frame-contrastive 1 --frame-pretrain-steps 1500 --kinds images")

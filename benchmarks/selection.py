@@ -1,5 +1,6 @@
 """How long a person waits for the next active query: the learner's update and the choice of the next query, at
-study sizes (`make bench` writes the table into docs/results.md through `langpref.bench`)."""
+study sizes (`python -m benchmarks.pipeline` writes the table into docs/results.md). Benchmark code: outside the
+package, so the wheel holds none of it."""
 
 from __future__ import annotations
 
@@ -81,18 +82,19 @@ def answer_model_timings(space, pool, kind_name: str, history: list, human, rng,
     return out
 
 
-def selection_table(envs: list[str], today: str, answers: int = 40, candidates: int = 300) -> str:
+def selection_table(envs: list[str], today: str, answers: int = 40, candidates: int = 300, trials: int = 30) -> str:
+    """The markdown table of `selection_timings` per env (`trials` per strategy), with how it was measured."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     lines = [
-        f"Measured {today} with `python -m langpref.bench` (`selection_timings`), {cores} CPU cores, 30 trials: "
-        f"choosing the next query with {answers} answers so far and {candidates} candidate trajectories "
-        f"(comparisons: all {candidates * (candidates - 1) // 2} pairs), D = 128, 64 posterior draws "
+        f"Measured {today} with `python -m benchmarks.pipeline` (`benchmarks.selection`), {cores} CPU cores, "
+        f"{trials} trials: choosing the next query with {answers} answers so far and {candidates} candidate "
+        f"trajectories (comparisons: all {candidates * (candidates - 1) // 2} pairs), D = 128, 64 posterior draws "
         "(lal-infogain: its own 10 x 100), one BLAS thread as the study server runs it. Includes the Laplace "
         "posterior at the fit; not the refit itself (see the reward update above). Target: p95 < 100 ms.\n",
         "| env | strategy | median (ms) | p95 (ms) |",
         "|---|---|---|---|",
     ]
     for env_name in envs:
-        for what, (med, p95) in selection_timings(env_name, answers, candidates).items():
+        for what, (med, p95) in selection_timings(env_name, answers, candidates, trials).items():
             lines.append(f"| {env_name} | {what} | {med:.1f} | {p95:.1f} |")
     return "\n".join(lines)
