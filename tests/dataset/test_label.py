@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from benchmarks.lerobot_check import write_random_reward
 
+from benchmarks.lerobot_check import write_random_reward
 from langpref.cli import main
 from langpref.dataset.label import COLUMNS, EPISODE, PROGRESS, RECORD, SHARE, LabelConfig, label_dataset
 from langpref.dataset.recording import plain_episode_files, read_plain_episode

@@ -12,8 +12,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from benchmarks.lerobot_check import write_random_reward
 
+from benchmarks.lerobot_check import write_random_reward
 from langpref.dataset.label import COLUMNS, EPISODE, PROGRESS, SHARE, LabelConfig, label_dataset
 from langpref.dataset.lerobot import read_lerobot
 from langpref.errors import LangprefError

@@ -170,7 +170,7 @@ def plugin_client(plugin_state):
 
 def test_an_installed_kind_is_a_study_kind_and_a_serve_flag(installed):
     from langpref.study.config import StudyConfig
-    from test_cli import parsers
+    from tests.factories import parsers
 
     cfg = StudyConfig(kinds=["verdict", "best_of_three"])
     cfg.validate()
