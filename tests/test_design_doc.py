@@ -29,9 +29,7 @@ def test_every_cited_section_of_the_design_page_exists():
 
 def test_no_docstring_points_to_a_design_file_outside_the_repository():
     stale = [str(p.relative_to(ROOT)) for p in (ROOT / "src").rglob("*.py") if "DESIGN.md" in p.read_text()]
-    # the lead's file while issue 28 is in progress: cite the page there when it lands
-    allowed = {"src/langpref/model/config.py"}
-    assert set(stale) <= allowed, f"these cite a DESIGN.md the repository does not hold: {sorted(set(stale) - allowed)}"
+    assert not stale, f"these cite a DESIGN.md the repository does not hold: {sorted(stale)}"
 
 
 def test_the_design_page_is_in_the_site():

@@ -80,7 +80,7 @@ class TrainConfig:
     """Checkpoint directory to create."""
     model: ModelConfig = field(default_factory=ModelConfig)
     utterances: str | None = None
-    """A user utterance file (DESIGN.md schema) for training; by default the bank's train split."""
+    """A user utterance file (docs/design.md#utterance-files) for training; by default the bank's train split."""
     extend_bank: bool = False
     """With `utterances`: add the file's phrasings to the bank's train split instead of replacing it."""
     freeze_language: bool = False

@@ -30,7 +30,7 @@ STUDY1 = "language"
 STEP_KINDS = ("survey", "confirm", "satisfaction", "rating", "done")
 """The study's own kinds of step, which ask no feedback kind (no kind may take these names)."""
 OWN_KEYS = {"answers": "survey", "meaning": "confirm", "satisfied": "satisfaction", "rating": "rating"}
-"""Answer fields of the study's own steps (DESIGN.md's HTTP contract)."""
+"""Answer fields of the study's own steps (docs/design.md#the-study-apps-http-contract)."""
 RESERVED_KEYS = frozenset({*OWN_KEYS, "seq", "client_ms"})
 """Fields a kind's `answer_key` cannot be: the study's own."""
 KIND_TABLES = ("feedback", "comparisons")
