@@ -163,7 +163,7 @@ class TrainConfig:
     lm_anchor: float = 0.0
     """Weight of an L2 pull of the fine-tuned transformer weights toward their pretrained values in stage 2 (L2-SP;
     0 = none, the paper's)."""
-    augment_phrasings: int | None = 0  # TEMP: None once the grid is done
+    augment_phrasings: int | None = None
     """Extend the train phrasings, for training only, by up to N of `langpref bank augment`'s template proposals
     per meaning (negations of the opposite direction, intensified and indirect forms); the bank and the
     checkpoint's prototypes keep the bank's own phrasings. Default: 48 for a bank of the size a lab writes (fewer
