@@ -71,7 +71,7 @@ def test_the_policy_is_paid_the_learned_reward_not_the_envs(tmp_path, make_synth
     store = RunFiles(tmp_path / "runs", cfg.key())
     judge = judges(data, space, cfg)
     learn_rewards(space, cfg, _checkpoint(tmp_path, space.dim), tmp_path, store, judge, None)
-    (job,) = policy_jobs(space, cfg, store, judge)
+    (job,) = policy_jobs(space, cfg, store, judge, tmp_path)
     assert job.reward_path and job.scale > 0 and job.scale != 1.0  # normalised by its spread over the dataset
     recorder = _recorder()
     result = train_policy(job, cfg, (recorder,))

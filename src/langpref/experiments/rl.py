@@ -190,7 +190,7 @@ def learn_rewards(space, cfg: RLConfig, model: Path, out: Path, store: RunFiles,
             for s in range(cfg.seeds):
                 name = f"reward-{kind}-h{h}-s{s}"
                 known = store.get(name)
-                if known is None or not Path(known["path"]).is_file():
+                if known is None or not (out / known["file"]).is_file():
                     store.put(name, learn_one(space, cfg, kind, (h, s), model, out, judge[h], generation))
 
 
@@ -207,7 +207,7 @@ def learn_one(space, cfg: RLConfig, kind: str, run: tuple[int, int], model: Path
     learner = learners[0]
     path = save_learned_reward(learner, out / "rewards", env=space.env, model=model, name=f"{kind}-h{h}-s{s}")
     record = {
-        "path": str(path),
+        "file": path.relative_to(out).as_posix(),
         "scale": float(np.std(learner.predict(space.phi))) if cfg.normalise else 1.0,
         "true_reward_of_best": curves.true_reward_of_best[-1],
         "kendall_tau": curves.kendall_tau[-1],
@@ -218,8 +218,8 @@ def learn_one(space, cfg: RLConfig, kind: str, run: tuple[int, int], model: Path
     return record
 
 
-def policy_jobs(space, cfg: RLConfig, store: RunFiles, judge: list[Judge]) -> list[PolicyJob]:
-    """One job per source x human x seed, in that order."""
+def policy_jobs(space, cfg: RLConfig, store: RunFiles, judge: list[Judge], out: Path) -> list[PolicyJob]:
+    """One job per source x human x seed, in that order (learned rewards read from under `out`)."""
     jobs = []
     for source in cfg.sources:
         for h in range(cfg.humans):
@@ -227,7 +227,7 @@ def policy_jobs(space, cfg: RLConfig, store: RunFiles, judge: list[Judge]) -> li
             for s in range(cfg.seeds):
                 reward = store.get(f"reward-{source}-h{h}-s{s}") if source in LEARNED else None
                 scale = reward["scale"] if reward else (true_scale if source == "true" else 1.0)
-                path = reward["path"] if reward else None
+                path = str(out / reward["file"]) if reward else None
                 seed = int(np.random.SeedSequence([cfg.seed, h, s, 4099]).generate_state(1)[0] % 2**31)
                 jobs.append(PolicyJob(f"policy-{source}-h{h}-s{s}", space.env, source, h, seed, judge[h], scale, path))
     return jobs
@@ -274,7 +274,7 @@ def run_rl_experiment(
         generation = open_generation(data, model, space)
     if learned:
         learn_rewards(space, cfg, Path(model), out, store, judge, generation)
-    jobs = policy_jobs(space, cfg, store, judge)
+    jobs = policy_jobs(space, cfg, store, judge, out)
     todo = [(job, cfg) for job in jobs if job.name not in store]
     sweep = sweep or SweepConfig()
     if callbacks:
