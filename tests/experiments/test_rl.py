@@ -167,3 +167,23 @@ def test_the_cli_builds_the_config_from_its_flags():
     args = p.parse_args(["--env", "metaworld", "--sources", "true,success", "--steps", "500", "--no-cmaes"])
     cfg = from_args(RLConfig, args)
     assert cfg.sources == ("true", "success") and cfg.steps == 500 and not cfg.cmaes and cfg.horizon == 150
+
+
+def test_the_command_runs_records_its_config_and_prints_one_json(tmp_path, make_synthetic_dataset, capsys):
+    import json
+
+    from langpref.cli import main
+
+    data = make_synthetic_dataset(tmp_path / "d", n=24)
+    out = tmp_path / "o"
+    argv = ["experiment", "rl", "--env", "metaworld", "--data", str(data), "--perfect-latent", "--out", str(out)]
+    flags = ["--sources", "true", "--seeds", "1", "--steps", "16", "--horizon", "8", "--eval-every", "16"]
+    assert main([*argv, *flags, "--eval-episodes", "1", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert list(printed["sources"]) == ["true"] and printed["sources"]["true"]["steps"] == [0, 16]
+    saved = json.loads((out / "rl.config.json").read_text())
+    assert (
+        saved["command"].startswith("langpref experiment rl --env metaworld")
+        and saved["config"]["config"]["steps"] == 16
+    )
+    assert "--json" not in printed["command"] and printed["command"] in (out / "rl.md").read_text()
