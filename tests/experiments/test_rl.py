@@ -187,3 +187,14 @@ def test_the_command_runs_records_its_config_and_prints_one_json(tmp_path, make_
         and saved["config"]["config"]["steps"] == 16
     )
     assert "--json" not in printed["command"] and printed["command"] in (out / "rl.md").read_text()
+
+
+def test_paired_intervals_and_targets():
+    from langpref.experiments.rl_report import _interval, paired, targets
+
+    d = paired([1.0, 2.0, 3.0], [0.0, 1.0, 1.0])
+    assert d["mean"] == pytest.approx(4 / 3) and d["low"] < d["mean"] < d["high"]
+    one = paired([1.0], [0.5])
+    assert one == {"mean": 0.5, "low": None, "high": None} and "no interval" in _interval(one)
+    met = targets({s: {"final_true_reward": v} for s, v in (("language", 0.85), ("comparison", 0.9), ("true", 1.0))})
+    assert list(met.values()) == [True, False]

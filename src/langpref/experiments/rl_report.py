@@ -49,12 +49,12 @@ def source_summary(runs: dict[str, dict], source: str, cfg) -> dict[str, Any]:
     return out
 
 
-def paired(a: list[float], b: list[float]) -> dict[str, float]:
-    """Mean of a - b over paired runs (same human and seed) with its two-sided 95% t-interval."""
+def paired(a: list[float], b: list[float]) -> dict[str, float | None]:
+    """Mean of a - b over paired runs (same human and seed) with its two-sided 95% t-interval (None from one run)."""
     from langpref.experiments.reward import paired_difference
 
     d = paired_difference(np.array(a)[:, None], np.array(b)[:, None])
-    return {k: float(v[0]) for k, v in d.items()}
+    return {k: float(v[0]) if np.isfinite(v[0]) else None for k, v in d.items()}  # None: one run, no interval
 
 
 def reward_summary(rewards: dict[str, dict], cfg) -> dict[str, Any]:
@@ -166,12 +166,19 @@ def markdown(summary: dict[str, Any]) -> str:
         lines += ["", "Paired differences of the final evaluation (same human and seed), 95% t-intervals:", ""]
         lines += ["| contrast | true reward | success |", "|---|---|---|"]
         for name, c in summary["contrasts"].items():
-            cells = [f"{c[k]['mean']:+.3f} ({c[k]['low']:+.3f} to {c[k]['high']:+.3f})" for k in METRICS]
+            cells = [_interval(c[k]) for k in METRICS]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
     if summary["targets"]:
         lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
     lines += ["", f"![Policies on the learned reward, {summary['env']}]({figure_link(summary['figure'])})"]
     return "\n".join(lines) + "\n"
+
+
+def _interval(d: dict[str, float | None]) -> str:
+    """A paired difference with its interval (none from a single run)."""
+    if d["low"] is None:
+        return f"{d['mean']:+.3f} (one run: no interval)"
+    return f"{d['mean']:+.3f} ({d['low']:+.3f} to {d['high']:+.3f})"
 
 
 def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, command: str | None) -> dict[str, Any]:
