@@ -189,9 +189,14 @@ def learn_rewards(space, cfg: RLConfig, model: Path, out: Path, store: RunFiles,
         for h in range(cfg.humans):
             for s in range(cfg.seeds):
                 name = f"reward-{kind}-h{h}-s{s}"
-                known = store.get(name)
-                if known is None or not (out / known["file"]).is_file():
+                if not _have_reward(store, out, name):
                     store.put(name, learn_one(space, cfg, kind, (h, s), model, out, judge[h], generation))
+
+
+def _have_reward(store: RunFiles, out: Path, name: str) -> bool:
+    """Whether the learned reward `name` has finished and its file is still there."""
+    known = store.get(name)
+    return known is not None and (out / known["file"]).is_file()
 
 
 def learn_one(space, cfg: RLConfig, kind: str, run: tuple[int, int], model: Path, out: Path, judge: Judge, generation):
@@ -268,7 +273,7 @@ def run_rl_experiment(
     store = RunFiles(out / "runs", {**cfg.key(), "data": str(data), "model": str(model)}, force)
     judge = judges(data, space, cfg)
     generation = None
-    if learned and cfg.cmaes:
+    if cfg.cmaes and not all(_have_reward(store, out, name) for name in _reward_names(cfg)):  # only if needed
         from langpref.propose import open_generation
 
         generation = open_generation(data, model, space)

@@ -125,6 +125,8 @@ def plot_rl(summary: dict[str, Any], out: Path, title: str) -> Path:
             if cmaes is not None:
                 ax.axhline(cmaes, ls="--", lw=1, color=line.get_color(), label=f"{name}: CMA-ES optimum")
         ax.set_xlabel("environment steps")
+        if key == "success":
+            ax.set_ylim(-0.05, 1.05)
         ax.set_title(
             "(a) true reward of the policy's rollouts (0..1: test split)" if k == 0 else "(b) success rate", fontsize=10
         )
