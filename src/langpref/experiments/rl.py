@@ -254,10 +254,9 @@ def run_rl_experiment(
     progress: bool = True,
     sweep: SweepConfig | None = None,
     command: str | None = None,
-    callbacks: tuple = (),
 ) -> dict[str, Any]:
     """Every source x human x seed of `config` on `env` (see the module docstring); writes rl.json/.png/.md and
-    returns the summary. `callbacks` (SB3 callbacks, in-process runs only) join every policy's training."""
+    returns the summary."""
     from langpref.experiments.rl_report import write_report
     from langpref.feedback.space import load_space
 
@@ -282,13 +281,7 @@ def run_rl_experiment(
     jobs = policy_jobs(space, cfg, store, judge, out)
     todo = [(job, cfg) for job in jobs if job.name not in store]
     sweep = sweep or SweepConfig()
-    if callbacks:
-        for job, c in todo:
-            from langpref.experiments.rl_policy import train_policy
-
-            store.put(job.name, train_policy(job, c, callbacks))
-    else:
-        run_sweep(policy_job, todo, None, (), store, sweep, f"rl {cfg.algorithm}", progress, setup=_no_setup)
+    run_sweep(policy_job, todo, None, (), store, sweep, f"rl {cfg.algorithm}", progress, setup=_no_setup)
     runs = {job.name: store.get(job.name) for job in jobs}
     rewards = {name: store.get(name) for name in _reward_names(cfg)}
     return write_report(env, data, model, out, space, cfg, runs, rewards, command)
