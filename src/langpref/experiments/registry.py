@@ -153,5 +153,28 @@ for _experiment in (
         ("iterations", "seeds"),
         default_out=_OUT.format(name="generate") + ", ENV-mlp",
     ),
+    Experiment(
+        "rl",
+        "issue 33: policies (SAC) trained on the reward learned from language, from comparisons, the true reward "
+        "and the task's success, judged by the true reward (1 human x 3 seeds, Q = 40)",
+        "langpref.experiments.rl:run_rl_experiment",
+        "langpref.experiments.rl:RLConfig",
+        (
+            "algorithm",
+            "steps",
+            "horizon",
+            "eval_every",
+            "eval_episodes",
+            "sources",
+            "queries",
+            "humans",
+            "seeds",
+            "seed",
+            "cmaes",
+            "threads",
+            "reward.model",
+        ),
+        default_out="results/rl/ENV",
+    ),
 ):
     register_experiment(_experiment)

@@ -1,0 +1,207 @@
+"""What `langpref experiment rl` reports: per reward source the learning curves and final evaluation (means over
+humans x seeds), paired 95% intervals between sources, the learned rewards' CMA-ES optima, the issue's targets, the
+figure and the section for docs/results.md."""
+
+from __future__ import annotations
+
+import datetime
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from langpref.experiments.common import figure_link
+from langpref.experiments.rl_policy import LEARNED
+
+CONTRASTS = (
+    ("language", "comparison"),
+    ("language", "true"),
+    ("comparison", "true"),
+    ("true", "success"),
+    ("language", "success"),
+)
+"""Paired differences reported (first minus second), where both sources ran."""
+TARGET_SHARE = 0.8
+"""Issue 33: the language policy reaches at least this share of the true-reward policy's true return."""
+METRICS = ("true_reward", "success")
+
+
+def _pairs(cfg) -> list[str]:
+    return [f"h{h}-s{s}" for h in range(cfg.humans) for s in range(cfg.seeds)]
+
+
+def source_summary(runs: dict[str, dict], source: str, cfg) -> dict[str, Any]:
+    """Mean and std over runs of each curve (per evaluation) and of the final evaluation, the per-run finals and the
+    mean wall time."""
+    mine = [runs[f"policy-{source}-{p}"] for p in _pairs(cfg)]
+    out: dict[str, Any] = {"steps": mine[0]["curve"]["steps"], "num_runs": len(mine)}
+    for key in mine[0]["final"]:
+        curves = np.array([r["curve"][key] for r in mine], dtype=np.float64)
+        finals = np.array([r["final"][key] for r in mine], dtype=np.float64)
+        out[key] = curves.mean(axis=0).tolist()
+        out[f"{key}_std"] = curves.std(axis=0).tolist()
+        out[f"final_{key}"] = float(finals.mean())
+        out[f"final_{key}_std"] = float(finals.std())
+        out[f"final_{key}_runs"] = finals.tolist()
+    out["wall_s"] = float(np.mean([r["wall_s"] for r in mine]))
+    return out
+
+
+def paired(a: list[float], b: list[float]) -> dict[str, float | None]:
+    """Mean of a - b over paired runs (same human and seed) with its two-sided 95% t-interval (None from one run)."""
+    from langpref.experiments.reward import paired_difference
+
+    d = paired_difference(np.array(a)[:, None], np.array(b)[:, None])
+    return {k: float(v[0]) if np.isfinite(v[0]) else None for k, v in d.items()}  # None: one run, no interval
+
+
+def reward_summary(rewards: dict[str, dict], cfg) -> dict[str, Any]:
+    """Per learned kind: the reward-learning metrics after Q answers and, where made, the CMA-ES optimum's true
+    reward and success (means over runs, and per run)."""
+    out = {}
+    for kind in (s for s in cfg.sources if s in LEARNED):
+        mine = [rewards[f"reward-{kind}-{p}"] for p in _pairs(cfg)]
+        res = {
+            "true_reward_of_best": float(np.mean([r["true_reward_of_best"] for r in mine])),
+            "kendall_tau": float(np.mean([r["kendall_tau"] for r in mine])),
+        }
+        if all("cmaes" in r for r in mine):
+            for key in METRICS:
+                res[f"cmaes_{key}_runs"] = [float(r["cmaes"][key]) for r in mine]
+                res[f"cmaes_{key}"] = float(np.mean(res[f"cmaes_{key}_runs"]))
+        out[kind] = res
+    return out
+
+
+def targets(sources: dict[str, dict]) -> dict[str, bool]:
+    """Issue 33's Meta-World targets where the sources they compare ran."""
+    if not {"language", "true"} <= set(sources):
+        return {}
+    lang, true = sources["language"]["final_true_reward"], sources["true"]["final_true_reward"]
+    out = {
+        f"language reaches {TARGET_SHARE:.0%} of the true-reward policy's true reward ({lang:.3f} vs {true:.3f})": bool(
+            true > 0 and lang >= TARGET_SHARE * true
+        )
+    }
+    if "comparison" in sources:
+        comp = sources["comparison"]["final_true_reward"]
+        out[f"language above comparisons ({lang:.3f} vs {comp:.3f})"] = bool(lang > comp)
+    return out
+
+
+def summarise(runs: dict[str, dict], rewards: dict[str, dict], cfg) -> dict[str, Any]:
+    """The experiment's results: per source, paired contrasts, the learned rewards, the targets."""
+    sources = {s: source_summary(runs, s, cfg) for s in cfg.sources}
+    contrasts = {
+        f"{a} - {b}": {key: paired(sources[a][f"final_{key}_runs"], sources[b][f"final_{key}_runs"]) for key in METRICS}
+        for a, b in CONTRASTS
+        if a in sources and b in sources
+    }
+    return {
+        "sources": sources,
+        "contrasts": contrasts,
+        "learned_rewards": reward_summary(rewards, cfg),
+        "targets": targets(sources),
+    }
+
+
+def plot_rl(summary: dict[str, Any], out: Path, title: str) -> Path:
+    """Two panels over environment steps: the policies' true reward (0..1 on the test split's scale) and success
+    rate, mean with a +-std band per source; the learned rewards' CMA-ES optima as dashed lines."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the rl figure")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for k, key in enumerate(METRICS):
+        ax = axes[k]
+        for name, res in summary["sources"].items():
+            x, mean, std = (np.array(res[f]) for f in ("steps", key, f"{key}_std"))
+            (line,) = ax.plot(x, mean, label=f"{name} reward")
+            ax.fill_between(x, mean - std, mean + std, alpha=0.15, color=line.get_color())
+            cmaes = summary["learned_rewards"].get(name, {}).get(f"cmaes_{key}")
+            if cmaes is not None:
+                ax.axhline(cmaes, ls="--", lw=1, color=line.get_color(), label=f"{name}: CMA-ES optimum")
+        ax.set_xlabel("environment steps")
+        if key == "success":
+            ax.set_ylim(-0.05, 1.05)
+        ax.set_title(
+            "(a) true reward of the policy's rollouts (0..1: test split)" if k == 0 else "(b) success rate", fontsize=10
+        )
+    axes[0].legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def markdown(summary: dict[str, Any]) -> str:
+    """The section for docs/results.md."""
+    cfg = summary["config"]
+    lines = [
+        f"### Policies trained on the learned reward, {summary['env']}",
+        "",
+        f"`{summary['command']}` ({summary['date']}; {summary['space']}; {cfg['algorithm'].upper()}, "
+        f"{cfg['steps']} steps of {cfg['horizon']}-step episodes; {summary['humans']} humans x {summary['seeds']} "
+        f"seeds; Q = {cfg['queries']}). True reward: of the policy's deterministic rollouts from "
+        f"{cfg['eval_episodes']} fixed scenes, 0 = the test split's worst trajectory, 1 its best; success at the last "
+        "step.",
+        "",
+        "| trained on | true reward (final) | success (final) | its own learned reward | minutes per run |",
+        "|---|---|---|---|---|",
+    ]
+    for name, res in summary["sources"].items():
+        own = f"{res['final_own_reward']:.3f}" if "final_own_reward" in res else "n/a"
+        lines.append(
+            f"| {name} | {res['final_true_reward']:.3f} +- {res['final_true_reward_std']:.3f} | "
+            f"{res['final_success']:.2f} | {own} | {res['wall_s'] / 60:.1f} |"
+        )
+    for kind, res in summary["learned_rewards"].items():
+        if "cmaes_true_reward" in res:
+            lines.append(
+                f"| {kind}: CMA-ES optimum, no RL | {res['cmaes_true_reward']:.3f} | {res['cmaes_success']:.2f} | | |"
+            )
+    if summary["contrasts"]:
+        lines += ["", "Paired differences of the final evaluation (same human and seed), 95% t-intervals:", ""]
+        lines += ["| contrast | true reward | success |", "|---|---|---|"]
+        for name, c in summary["contrasts"].items():
+            cells = [_interval(c[k]) for k in METRICS]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if summary["targets"]:
+        lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
+    lines += ["", f"![Policies on the learned reward, {summary['env']}]({figure_link(summary['figure'])})"]
+    return "\n".join(lines) + "\n"
+
+
+def _interval(d: dict[str, float | None]) -> str:
+    """A paired difference with its interval (none from a single run)."""
+    if d["low"] is None:
+        return f"{d['mean']:+.3f} (one run: no interval)"
+    return f"{d['mean']:+.3f} ({d['low']:+.3f} to {d['high']:+.3f})"
+
+
+def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, command: str | None) -> dict[str, Any]:
+    """Summarise, draw and write rl.json, rl.png and rl.md into `out`; the summary."""
+    from langpref.experiments.common import command_line
+
+    summary = {
+        "env": env,
+        "data": str(data),
+        "model": str(model) if model else None,
+        "perfect": model is None,
+        "space": space.description,
+        "humans": cfg.humans,
+        "seeds": cfg.seeds,
+        "queries": cfg.queries,
+        **summarise(runs, rewards, cfg),
+        "config": {**asdict(cfg), "hidden": list(cfg.hidden), "sources": list(cfg.sources)},
+        "command": command or command_line("rl", env, data, model, out),
+        "date": datetime.date.today().isoformat(),
+    }
+    summary["figure"] = str(plot_rl(summary, out / "rl.png", f"Policies on the learned reward, {env}"))
+    (out / "rl.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "rl.md").write_text(markdown(summary))
+    return summary
