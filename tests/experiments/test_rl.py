@@ -161,7 +161,7 @@ def test_the_config_refuses_what_cannot_run_in_one_line(change, message):
 
 def test_the_cli_builds_the_config_from_its_flags():
     from langpref.cli_config import from_args
-    from test_cli import parsers
+    from tests.factories import parsers
 
     p = parsers()["experiment rl"]
     args = p.parse_args(["--env", "metaworld", "--sources", "true,success", "--steps", "500", "--no-cmaes"])
