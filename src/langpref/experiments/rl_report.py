@@ -185,7 +185,7 @@ def _interval(d: dict[str, float | None]) -> str:
 
 def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, command: str | None) -> dict[str, Any]:
     """Summarise, draw and write rl.json, rl.png and rl.md into `out`; the summary."""
-    from langpref.experiments.common import command_line
+    from langpref.experiments.common import base_command
 
     summary = {
         "env": env,
@@ -198,7 +198,7 @@ def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, co
         "queries": cfg.queries,
         **summarise(runs, rewards, cfg),
         "config": {**asdict(cfg), "hidden": list(cfg.hidden), "sources": list(cfg.sources)},
-        "command": command or command_line("rl", env, data, model, out),
+        "command": command or base_command("rl", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     summary["figure"] = str(plot_rl(summary, out / "rl.png", f"Policies on the learned reward, {env}"))
