@@ -64,8 +64,10 @@ def test_the_page_asks_plugin_kinds_by_their_widgets(installed, browser, engine,
             page.fill("#feedback", "maybe")  # the kind's own check, as one line
             page.click("form.feedback button[type=submit]")
             page.wait_for_function("() => document.getElementById('answer-error').textContent.includes('good or bad')")
+            before = page.evaluate("current.seq")
             page.fill("#feedback", "Bad")
             page.click("form.feedback button[type=submit]")
+            page.wait_for_function(f"() => current.seq > {before}")  # the next query, not the one still shown
             wait_kind(page, "verdict", "pref_verdict")
             page.fill("#feedback", "good")
             page.click("form.feedback button[type=submit]")
