@@ -80,7 +80,7 @@ def test_comparisons_enter_the_same_belief(space):
         learner.observe("comparison", ComparisonAnswer(ComparisonQuery(a, b), choice))
     learner.fit()
     assert learner.mean()[0] > before[0] + 0.3
-    with pytest.raises(Exception, match="language and comparisons"):
+    with pytest.raises(Exception, match="language and comparison"):
         learner.observe("rating", object())
 
 

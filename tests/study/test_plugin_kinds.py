@@ -194,7 +194,7 @@ def test_an_installed_kind_is_a_study_kind_and_a_serve_flag(installed):
         StudyConfig(kinds=()).validate()
     with pytest.raises(LangprefError, match="not defined for verdict"):
         StudyConfig(kinds=("verdict",), query_selection="infogain").validate()
-    with pytest.raises(LangprefError, match="answer-model reads language and comparisons only"):
+    with pytest.raises(LangprefError, match="answer-model reads language and comparison only"):
         StudyConfig(kinds=("best_of_three",), learner="answer-model").validate()
 
 

@@ -43,7 +43,7 @@ worth less); for a comparison, over the binary choice; for `--feedback mixed`, b
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
@@ -245,13 +245,7 @@ class AnswerModelLearner:
 
     def _log_likelihood(self, v: np.ndarray, best: np.ndarray, answer: tuple) -> np.ndarray:
         """(n,) log-likelihood of one recorded answer under each particle."""
-        if answer[0] == "language":
-            _, shown, reading = answer
-            p = self.meaning_probabilities(v, best, np.array([shown]))[:, 0, :]
-            return np.log(np.maximum(p @ reading, 1e-300))
-        _, winner, loser = answer
-        margin = self.cfg.comparison_rationality * (v @ (self.z[winner] - self.z[loser]))
-        return -np.logaddexp(0.0, -margin)
+        return ANSWER_KINDS[answer[0]].log_likelihood(self, v, best, answer)
 
     def _total_log_likelihood(self, v: np.ndarray, best: np.ndarray) -> np.ndarray:
         total = np.zeros(len(v))
@@ -273,21 +267,12 @@ class AnswerModelLearner:
         return 2 * int(position[0]) + int(direction)
 
     def observe(self, kind: str, answer: Any, meaning: int | None = None) -> None:
-        """Record an answer of `kind` (`language` or `comparison`); `fit` folds it into the belief. For language,
-        `meaning` (`meaning_index`), when the person confirmed what they meant, replaces the model's reading."""
-        if kind == "language":
-            if meaning is None:
-                reading = self.reading(answer.text)
-            else:
-                reading = np.zeros(2 * self.num_features)
-                reading[int(meaning)] = 1.0
-            self._pending.append(("language", int(answer.query.shown), reading))
-        elif kind == "comparison":
-            q = answer.query
-            loser = q.a if answer.preferred == q.b else q.b
-            self._pending.append(("comparison", int(answer.preferred), int(loser)))
-        else:
-            raise LangprefError(f"the answer-model learner takes language and comparisons, not {kind!r} feedback")
+        """Record an answer of `kind` (a kind of `ANSWER_KINDS`); `fit` folds it into the belief. For a kind that
+        can be confirmed, `meaning` (`meaning_index`), when the person confirmed what they meant, replaces the
+        model's reading."""
+        if kind not in ANSWER_KINDS:
+            raise LangprefError(f"the answer-model learner takes {' and '.join(ANSWER_KINDS)} feedback, not {kind!r}")
+        self._pending.append((kind, *ANSWER_KINDS[kind].record(self, answer, meaning)))
 
     def fit(self) -> None:
         """Reweight the particles by every answer observed since the last fit; resample and move them when the
@@ -391,9 +376,9 @@ class AnswerModelInfoGain(Selector):
         candidates: int | None = None,
         samples: int = 64,
     ):
-        unknown = [k for k in kinds if k not in ("language", "comparison")]
+        unknown = [k for k in kinds if k not in ANSWER_KINDS]
         if unknown:
-            raise LangprefError(f"the answer-model learner asks language and comparisons, not {', '.join(unknown)}")
+            raise LangprefError(f"the answer-model learner asks {' and '.join(ANSWER_KINDS)}, not {', '.join(unknown)}")
         self.space = space
         self.pool = np.asarray(pool, dtype=np.int64)
         self.kinds = tuple(kinds)
@@ -405,10 +390,66 @@ class AnswerModelInfoGain(Selector):
         rows = candidate_rows(self.pool, self.candidates, rng)
         v, best = learner.draw(self.samples, rng)
         phi = self.space.phi[rows]
-        parts = []
-        if "language" in self.kinds:
-            star = self.space.phi[learner.pool[best]].mean(axis=0)
-            parts.append(language_candidates(rows, learner.language_gains(v, best, rows), phi, star))
-        if "comparison" in self.kinds:
-            parts.append(comparison_candidates(rows, *learner.comparison_gains(v, rows), phi))
+        parts = [m.candidates(learner, v, best, rows, phi) for k, m in ANSWER_KINDS.items() if k in self.kinds]
         return parts[0] if len(parts) == 1 else join(parts, self.costs)
+
+
+# ---- how the learner reads each kind of feedback ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AnswerKind:
+    """How the answer-model learner reads one kind of feedback: what it keeps of an answer (`record`, after the
+    kind's name), the log-likelihood of what it kept under each particle, and the candidate queries it scores."""
+
+    record: Callable[[AnswerModelLearner, Any, int | None], tuple]
+    log_likelihood: Callable[[AnswerModelLearner, np.ndarray, np.ndarray, tuple], np.ndarray]
+    candidates: Callable[[AnswerModelLearner, np.ndarray, np.ndarray, np.ndarray, np.ndarray], Scored]
+    confirmable: bool = False
+    """Whether the person can be asked to confirm the learner's reading of an answer (`confirm`)."""
+
+
+def _record_language(learner: AnswerModelLearner, answer: Any, meaning: int | None) -> tuple:
+    """(shown trajectory, P(m | sentence)); a confirmed meaning replaces the reading."""
+    if meaning is None:
+        reading = learner.reading(answer.text)
+    else:
+        reading = np.zeros(2 * learner.num_features)
+        reading[int(meaning)] = 1.0
+    return int(answer.query.shown), reading
+
+
+def _language_log_likelihood(learner: AnswerModelLearner, v: np.ndarray, best: np.ndarray, rec: tuple) -> np.ndarray:
+    """log sum_m P(m | l) P(m | v, tau): the sentence about the shown trajectory, under each particle."""
+    _, shown, reading = rec
+    p = learner.meaning_probabilities(v, best, np.array([shown]))[:, 0, :]
+    return np.log(np.maximum(p @ reading, 1e-300))
+
+
+def _language_candidates(learner: AnswerModelLearner, v, best, rows, phi) -> Scored:
+    star = learner.space.phi[learner.pool[best]].mean(axis=0)
+    return language_candidates(rows, learner.language_gains(v, best, rows), phi, star)
+
+
+def _record_comparison(learner: AnswerModelLearner, answer: Any, meaning: int | None) -> tuple:
+    """(winner, loser)."""
+    q = answer.query
+    return int(answer.preferred), int(q.a if answer.preferred == q.b else q.b)
+
+
+def _comparison_log_likelihood(learner: AnswerModelLearner, v: np.ndarray, best: np.ndarray, rec: tuple) -> np.ndarray:
+    """Bradley-Terry: log sigmoid(beta v . (z_winner - z_loser))."""
+    _, winner, loser = rec
+    margin = learner.cfg.comparison_rationality * (v @ (learner.z[winner] - learner.z[loser]))
+    return -np.logaddexp(0.0, -margin)
+
+
+def _comparison_candidates(learner: AnswerModelLearner, v, best, rows, phi) -> Scored:
+    return comparison_candidates(rows, *learner.comparison_gains(v, rows), phi)
+
+
+ANSWER_KINDS: dict[str, AnswerKind] = {
+    "language": AnswerKind(_record_language, _language_log_likelihood, _language_candidates, confirmable=True),
+    "comparison": AnswerKind(_record_comparison, _comparison_log_likelihood, _comparison_candidates),
+}
+"""The kinds the answer-model learner reads, by `FeedbackKind.name`, in the order its selection scores them."""

@@ -38,6 +38,7 @@ from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weig
 from langpref.feedback.kind import MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query
 from langpref.feedback.space import LatentSpace
 from langpref.reward.answer_model import (
+    ANSWER_KINDS,
     LEARNERS,
     AnswerModelConfig,
     AnswerModelInfoGain,
@@ -292,7 +293,7 @@ def _learn_from(
         learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
         return 0.0
     asked, meaning = False, None
-    if cfg.confirm_margin is not None and kind.name == "language":
+    if cfg.confirm_margin is not None and ANSWER_KINDS[kind.name].confirmable:
         asked, meaning = confirm(learner, answer, cfg.confirm_margin)
         curves.confirmed.append(-1 if not asked else (meaning if meaning is not None else -2))
     if not (asked and meaning is None):  # "none of these": stored, not learned from

@@ -81,7 +81,7 @@ class StudyConfig:
             isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 <= margin <= 1
         ):
             raise LangprefError(f"--confirm-margin must be a number from 0 to 1 (or unset: never ask), got {margin!r}")
-        from langpref.reward.answer_model import LEARNERS
+        from langpref.reward.answer_model import ANSWER_KINDS, LEARNERS
 
         if self.learner not in LEARNERS:
             raise LangprefError(f"--learner must be {' or '.join(LEARNERS)}, got {self.learner!r}")
@@ -90,8 +90,10 @@ class StudyConfig:
         self.kinds = check_kinds(self.kinds)
         selections = self.selections()
         others = sorted(k for k in self.kinds if k not in METHODS)
-        if others and self.learner == "answer-model":
-            raise LangprefError(f"--learner answer-model reads language and comparisons only, not {', '.join(others)}")
+        unread = sorted(k for k in self.kinds if k not in ANSWER_KINDS)
+        if unread and self.learner == "answer-model":
+            read = " and ".join(ANSWER_KINDS)
+            raise LangprefError(f"--learner answer-model reads {read} only, not {', '.join(unread)}")
         if any(selections[k] != "random" for k in others):
             raise LangprefError(f"--query-selection: the study asks {', '.join(others)} at random only")
         if self.learner == "answer-model":
