@@ -23,6 +23,7 @@ from torch import nn
 from langpref.errors import LangprefError
 from langpref.language.augment import propose
 from langpref.language.pairs import Phrasings, merge_phrasings, phrasings_from_mapping
+from langpref.model.encoders import freeze
 
 
 def layer_stack(transformer: nn.Module) -> nn.ModuleList:
@@ -38,24 +39,19 @@ def trainable_lm_params(transformer: nn.Module, top_layers: int, finetune_embedd
     """Set which transformer weights stage 2 trains, and return them: the top `top_layers` blocks and what sits
     above the stack (a final layer norm), or every weight when `top_layers` is 0; the token embedding table only with
     `finetune_embeddings`."""
-    for p in transformer.parameters():
-        p.requires_grad_(True)
+    freeze(transformer, False)
     if top_layers:
         stack = layer_stack(transformer)
         if top_layers > len(stack):
             raise LangprefError(f"--finetune-layers {top_layers}: the language model has {len(stack)} layers")
         for block in stack[: len(stack) - top_layers]:
-            for p in block.parameters():
-                p.requires_grad_(False)
+            freeze(block)
         for module in transformer.modules():  # below the stack: embeddings (token, position, type) and their norm
             if "embedding" in type(module).__name__.lower():
-                for p in module.parameters():
-                    p.requires_grad_(False)
-    if not finetune_embeddings:
-        emb = transformer.get_input_embeddings()
-        if emb is not None:
-            for p in emb.parameters():
-                p.requires_grad_(False)
+                freeze(module)
+    emb = transformer.get_input_embeddings()
+    if emb is not None and not finetune_embeddings:
+        freeze(emb)
     return [p for p in transformer.parameters() if p.requires_grad]
 
 
