@@ -134,3 +134,45 @@ def test_utterances_prints_the_bank(capsys):
     bank = json.loads(out)
     assert set(bank) == {"height", "speed", "distance_to_button"}
     assert "Move faster." in bank["speed"]["increase"]
+
+
+def test_evaluate_summary_names_no_phrasing_and_counts_near_copies(trained, tiny_data, tmp_path, capsys):
+    from langpref.language.bank import load_bank
+
+    copied = load_bank("metaworld").phrasings["train"]["speed"]["increase"][0]
+    typo = copied.rstrip(".!") + "!!"
+    user = tmp_path / "apart.json"
+    user.write_text(json.dumps({"metaworld": {"speed": {"increase": [typo, "Pick up the pace, would you."]}}}))
+    argv = ["evaluate", "--model", str(trained.out), "--data", str(tiny_data), "--utterances", str(user), "--json"]
+    code, out, err = run(capsys, *argv)
+    assert code == 0, err
+    full = json.loads(out)
+    assert full["near_copies"]["num"] == 1 and full["near_copies"]["texts"] == {typo: copied}
+    assert full["near_copies"]["without"]["num_phrasings"] == 1
+    assert (
+        full["near_copies"]["without"]["accuracy"] == full["per_phrasing"]["Pick up the pace, would you."]["accuracy"]
+    )
+    code, out, err = run(capsys, *argv, "--summary")
+    assert code == 0, err
+    assert typo not in out and "Pick up the pace" not in out
+    assert json.loads(out)["near_copies"]["without"] == full["near_copies"]["without"]
+    code, out, err = run(capsys, *argv[:-1], "--summary")
+    assert code == 0 and "near-copies of a train phrasing" in out and "Pick up" not in out, err
+
+
+def test_bank_gate_counts_without_printing_a_text(tmp_path, capsys):
+    feedback = tmp_path / "feedback.json"
+    feedback.write_text(json.dumps({"metaworld": {"speed": {"increase": ["Could you hurry it along a bit?"]}}}))
+    junk = tmp_path / "junk.json"
+    junk.write_text(json.dumps({"texts": ["asdfgh", "What time is lunch?", "Move a little faster."]}))
+    code, out, err = run(
+        capsys, "bank", "gate", "metaworld", "--feedback", str(feedback), "--not-feedback", str(junk), "--json"
+    )
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["feedback"] == {"num": 1, "let_through": 1, "lowest_score": report["feedback"]["lowest_score"]}
+    assert report["not_feedback"]["num"] == 3 and report["not_feedback"]["refused"] == 2  # the last is feedback
+    assert "asdfgh" not in out and "lunch" not in out
+    junk.write_text("{not json")
+    code, out, err = run(capsys, "bank", "gate", "metaworld", "--not-feedback", str(junk))
+    assert code == 2 and "cannot be read as JSON" in err and err.count("\n") == 1

@@ -1,5 +1,5 @@
-"""`langpref bank check | bank augment | lang-models`: a task's bank before a study, and the language models to read it
-with."""
+"""`langpref bank check | bank augment | bank gate | lang-models`: a task's bank before a study, and the language
+models to read it with."""
 
 from __future__ import annotations
 
@@ -174,6 +174,65 @@ def cmd_bank_augment(args: argparse.Namespace) -> None:
         args.json,
         lambda o: f"wrote {sum(counts.values())} proposed phrasings for {o['task']} to {o['out']} (for review)",
     )
+
+
+def _texts(file: str) -> list[str]:
+    """The texts of a not-feedback file: {"texts": [...]} or a JSON list of strings."""
+    try:
+        doc = json.loads(Path(file).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise LangprefError(f"--not-feedback {file} cannot be read as JSON ({exc})") from None
+    texts = doc.get("texts") if isinstance(doc, dict) else doc
+    if not isinstance(texts, list) or not all(isinstance(t, str) for t in texts):
+        raise LangprefError(f'--not-feedback {file} must hold {{"texts": [strings]}} or a list of strings')
+    return texts
+
+
+@command(
+    "bank gate",
+    "how the feedback gate treats texts: feedback it must let through, other text it should refuse",
+    [
+        WHERE,
+        path("--feedback", default=None, help="an utterance file (docs/design.md#utterance-files) of real feedback"),
+        path("--not-feedback", default=None, help='JSON {"texts": [...]} of texts that are not feedback'),
+        SEED,
+        JSON,
+    ],
+    "Scores each text against the task's bank in the pretrained sentence space (langpref.language.relevance) and "
+    "prints counts only: feedback let through and its lowest score, other texts refused and the highest score of "
+    "those let through. No text is printed, so a reporting-only set can be reported without being read.",
+)
+def cmd_bank_gate(args: argparse.Namespace) -> None:
+    from langpref.language.bank import load_user_utterances
+    from langpref.language.banksource import open_bank
+    from langpref.language.relevance import FeedbackGate, gate_report
+
+    if not args.feedback and not args.not_feedback:
+        raise LangprefError("give --feedback FILE, --not-feedback FILE or both")
+    source = open_bank(args.where, seed=args.seed)
+    feedback = []
+    if args.feedback:
+        mapping = load_user_utterances(args.feedback, source.task)
+        feedback = [t for by in mapping.values() for ts in by.values() for t in ts]
+    not_feedback = _texts(args.not_feedback) if args.not_feedback else []
+    bank = [t for split in source.splits.values() for by in split.values() for ts in by.values() for t in ts]
+    out = gate_report(FeedbackGate(source.task, bank), feedback, not_feedback)
+    emit(out, args.json, _gate_text)
+
+
+def _gate_text(o: dict) -> str:
+    lines = [f"feedback gate of {o['env']} (floor {o['floor']}, {o['unknown_words_floor']} without a known word)"]
+    if "feedback" in o:
+        f = o["feedback"]
+        lines.append(f"feedback let through: {f['let_through']} of {f['num']} (lowest score {f['lowest_score']:.3f})")
+    if "not_feedback" in o:
+        n = o["not_feedback"]
+        high = n["highest_score_let_through"]
+        lines.append(
+            f"not feedback refused: {n['refused']} of {n['num']}"
+            + (f" (highest score let through {high:.3f})" if high is not None else "")
+        )
+    return "\n".join(lines)
 
 
 @command(

@@ -11,6 +11,7 @@ from langpref.cli_config import RERUN, beside, command, config, emit, from_args,
 from langpref.dataset.splits import SPLITS
 from langpref.experiments.registry import EXPERIMENTS
 from langpref.extras import require
+from langpref.language.near_copies import NEAR_COPY_RATIO
 
 
 @command(
@@ -99,6 +100,19 @@ def cmd_train(args: argparse.Namespace) -> None:
             "model's reading of each phrasing; language: psi = the prototype of each phrasing's true meaning, phi "
             "the model's), to see which side fails",
         ),
+        opt(
+            "--near-copy-ratio",
+            type=float,
+            default=NEAR_COPY_RATIO,
+            help="with --utterances: a phrasing whose similarity to a train phrasing of its own meaning is at least "
+            "this is a near-copy, and the scores are also given without them (default %(default)s)",
+        ),
+        opt(
+            "--summary",
+            action="store_true",
+            help="aggregates only, no phrasing's text (no misread list, no per-phrasing scores): for sets that "
+            "must not steer anything (a reporting-only set written apart)",
+        ),
         JSON,
     ],
     "Over every ordered pair of the split's trajectories, every feature that differs (beyond the model's tie "
@@ -107,7 +121,7 @@ def cmd_train(args: argparse.Namespace) -> None:
 )
 def cmd_evaluate(args: argparse.Namespace) -> None:
     from langpref.language.pairs import phrasings_from_bank, phrasings_from_mapping
-    from langpref.model.evaluate import evaluate_split
+    from langpref.model.evaluate import evaluate_split, summary_only
 
     model, dataset = load(args)
     if args.utterances:
@@ -129,22 +143,49 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
     else:
         out = evaluate_split(model, dataset, args.split, phrasings)
     out["utterances"] = str(args.utterances) if args.utterances else f"bank:{phrasing_split}"
-    emit(
-        out,
-        args.json,
-        lambda o: (
-            f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
-            f"{o['utterances']}{', oracle ' + o['oracle'] + ' side' if o.get('oracle') else ''}); "
-            + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items())
-            + (
-                f"\nread as their own meaning by `langpref embed`: {o['reading_accuracy']:.3f} of "
-                f"{o['num_phrasings']} phrasings"
-                + "".join(f"\n  misread: {m['text']!r} ({m['meaning']}) as {m['read_as']}" for m in o["misread"])
-                if "reading_accuracy" in o
-                else ""
-            )
-        ),
-    )
+    if args.utterances and "per_phrasing" in out:
+        out["near_copies"] = near_copy_report(out, phrasings, dataset.env, args.near_copy_ratio)
+    if args.summary:
+        out = summary_only(out)
+    emit(out, args.json, evaluate_text)
+
+
+def near_copy_report(out: dict, phrasings, env: str, ratio: float) -> dict:
+    """How many of a file's phrasings nearly copy a same-meaning train phrasing of the bank, and the scores
+    without them (`langpref.language.near_copies`)."""
+    from langpref.language.bank import load_bank
+    from langpref.language.near_copies import definition, near_copies
+    from langpref.model.evaluate import without_phrasings
+
+    copies = near_copies(phrasings, load_bank(env), ratio=ratio)
+    report = {"definition": definition(ratio), "ratio": ratio, "num": len(copies), "texts": copies}
+    report["without"] = without_phrasings(out, copies)
+    return report
+
+
+def evaluate_text(o: dict) -> str:
+    """`langpref evaluate`'s text output: accuracy per feature, reading, near-copies, misread phrasings."""
+    lines = [
+        f"accuracy {o['accuracy']:.3f} on {o['num_samples']} samples ({o['split']}, "
+        f"{o['utterances']}{', oracle ' + o['oracle'] + ' side' if o.get('oracle') else ''}); "
+        + ", ".join(f"{f} {a:.3f}" for f, a in o["per_feature"].items())
+    ]
+    if "reading_accuracy" in o:
+        lines.append(
+            f"read as their own meaning by `langpref embed`: {o['reading_accuracy']:.3f} of {o['num_phrasings']} "
+            "phrasings"
+        )
+    if "near_copies" in o:
+        nc = o["near_copies"]
+        w = nc["without"]
+        lines.append(
+            f"near-copies of a train phrasing ({nc['definition']}): {nc['num']} of {o['num_phrasings']}; without "
+            f"them accuracy {w['accuracy']:.3f}"
+            + (f", read {w['reading_accuracy']:.3f}" if "reading_accuracy" in w else "")
+            + f" of {w['num_phrasings']} phrasings"
+        )
+    lines += [f"  misread: {m['text']!r} ({m['meaning']}) as {m['read_as']}" for m in o.get("misread", [])]
+    return "\n".join(lines)
 
 
 @command(

@@ -51,7 +51,8 @@ class Relevance:
 class FeedbackGate:
     """Scores texts against one env's bank; built once (it embeds the bank), then a few ms per text."""
 
-    def __init__(self, env: str):
+    def __init__(self, env: str, phrasings: list[str] | None = None):
+        """The gate of task `env`'s bank, or of `phrasings` (a bank not registered as a task: a task file's)."""
         import torch
 
         from langpref.language.bank import load_bank
@@ -63,8 +64,10 @@ class FeedbackGate:
         self._torch = torch
         self._lock = threading.Lock()
         self.env = env
-        bank = load_bank(env)
-        self.phrasings = sorted({t for split in ("train", "val", "test") for t, _, _ in bank.all_of_split(split)})
+        if phrasings is None:
+            bank = load_bank(env)
+            phrasings = [t for split in ("train", "val", "test") for t, _, _ in bank.all_of_split(split)]
+        self.phrasings = sorted(set(phrasings))
         self._bank = self._embed(self.phrasings)
 
     def _embed(self, texts: list[str]) -> np.ndarray:
@@ -88,3 +91,25 @@ class FeedbackGate:
                 f"{rel.nearest!r}, similarity {rel.score:.2f}); say how it should move differently, e.g. {EXAMPLE}"
             )
         return rel
+
+
+def gate_report(gate: FeedbackGate, feedback: list[str], not_feedback: list[str]) -> dict:
+    """How the gate treats a set of texts it must let through (feedback) and one it should refuse: counts and the
+    scores nearest the floor, no text (the sets may be reporting-only, docs/design.md#the-command-line)."""
+    out: dict = {"env": gate.env, "floor": RELEVANCE_FLOOR, "unknown_words_floor": UNKNOWN_WORDS_FLOOR}
+    if feedback:
+        scores = [gate.score(t) for t in feedback]
+        out["feedback"] = {
+            "num": len(scores),
+            "let_through": sum(r.ok for r in scores),
+            "lowest_score": min(r.score for r in scores),
+        }
+    if not_feedback:
+        scores = [gate.score(t) for t in not_feedback]
+        passed = [r.score for r in scores if r.ok]
+        out["not_feedback"] = {
+            "num": len(scores),
+            "refused": len(scores) - len(passed),
+            "highest_score_let_through": max(passed, default=None),
+        }
+    return out

@@ -18,7 +18,7 @@ whose psi is closest in cosine to that meaning's prototype; what a person typing
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
 import numpy as np
 import torch
@@ -111,6 +111,33 @@ def summarise_accuracy(correct: np.ndarray, total: np.ndarray, feature_names: Se
         "per_feature": {f: float(c / t) for f, c, t in zip(feature_names, correct, total) if t},
         "num_samples": n,
     }
+
+
+def without_phrasings(out: dict, texts: Collection[str]) -> dict:
+    """Accuracy and reading accuracy of an `evaluate_split` result with the phrasings `texts` left out, from its
+    per-phrasing counts: {"num_left_out", "accuracy", "reading_accuracy" (when read), "num_phrasings"}."""
+    kept = {t: p for t, p in out["per_phrasing"].items() if t not in texts}
+    samples = sum(p["num_samples"] for p in kept.values())
+    correct = sum(p["accuracy"] * p["num_samples"] for p in kept.values())
+    num = out["num_phrasings"] - sum(t in texts for t in out["per_phrasing"])
+    res = {
+        "num_left_out": out["num_phrasings"] - num,
+        "num_phrasings": num,
+        "accuracy": correct / samples if samples else float("nan"),
+    }
+    if "misread" in out:
+        misread = sum(m["text"] not in texts for m in out["misread"])
+        res["reading_accuracy"] = 1.0 - misread / num if num else float("nan")
+    return res
+
+
+def summary_only(out: dict) -> dict:
+    """An `evaluate` result without a single phrasing's text: for sets that must not steer anything
+    (reporting-only phrasings written apart), whose individual errors nobody should read."""
+    out = {k: v for k, v in out.items() if k not in ("per_phrasing", "misread")}
+    if "near_copies" in out:
+        out["near_copies"] = {k: v for k, v in out["near_copies"].items() if k != "texts"}
+    return out
 
 
 def reading(psi: torch.Tensor, prototypes: torch.Tensor, phrasings: Phrasings) -> dict:
