@@ -103,6 +103,26 @@ def test_plot_writes_a_png(space, tmp_path):
     assert out.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_recorded_candidates_search_every_split_on_the_test_scale():
+    """`recorded`: the generator's baseline. Same start, human and normalisation as `test`, a pool of every row."""
+    space = toy_latent_space(n=100, seed=0)
+    test_rows = set(space.split("test").tolist())
+    outside, above = 0, 0
+    for seed in range(5):
+        w = human_weights(len(space.feature_names), 0, seed)
+        base = run_improvement(space, w, ImproveConfig(iterations=4, seeds=1, strategy="history"), (0, seed))
+        wide = run_improvement(
+            space, w, ImproveConfig(iterations=4, seeds=1, strategy="history", candidate_split="recorded"), (0, seed)
+        )
+        assert wide.shown[0] == base.shown[0] and wide.reward[0] == base.reward[0]
+        assert wide.optimal_raw == base.optimal_raw  # normalised by the test split's best, as `test` is
+        outside += sum(s not in test_rows for s in wide.shown)
+        above += max(wide.reward) > 1.0
+        assert all(s in test_rows for s in base.shown) and max(base.reward) <= 1.0
+    assert outside > 0  # the wider pool is used: train and val rows are shown
+    assert above > 0  # and a recorded row better than every test row is reached: the scale stays the test split's
+
+
 def test_cli_improve_json(tmp_path, capsys):
     data = write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True)
     assert (

@@ -170,6 +170,25 @@ def test_learn_reward_optimize_scores_the_generated_optimum(generation):
     assert 0 <= out["optimized_beats_best_of_split"] <= 1
 
 
+def test_the_recorded_baseline_is_the_final_reward_s_pick_over_every_split(generation):
+    from langpref.feedback.humans import normalised_reward, true_reward
+    from langpref.reward import LearnRewardConfig, human_weights, run_reward_learning
+
+    space, gen = generation
+    cfg = LearnRewardConfig(queries=4, humans=1, seeds=1)
+    w = human_weights(len(space.feature_names), cfg.seed, 0)
+    learners = []
+    curves = run_reward_learning(space, w, cfg, (cfg.seed, 0, 0), generation=gen, learners=learners)
+    pick = int(np.argmax(learners[0].predict(space.phi)))
+    R_test = true_reward(w, space.theta[space.split(cfg.eval_split)])
+    assert curves.recorded_true_reward == pytest.approx(
+        float(normalised_reward(true_reward(w, space.theta[[pick]]), R_test)[0])
+    )
+    assert pick not in set(space.split(cfg.eval_split).tolist()) or curves.recorded_true_reward == pytest.approx(
+        curves.true_reward_of_best[-1]
+    )  # a pick inside the test split is the test pick
+
+
 def test_affine_scale_recovers_the_space_scale(real_data):
     from langpref.feedback.space import paper_theta
 

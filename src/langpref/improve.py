@@ -47,8 +47,11 @@ from langpref.reward import RewardConfig, RewardLearner
 
 Strategy = Literal["paper", "history"]
 Objective = Literal["cosine", "printed"]
-CandidateSplit = Literal["train", "val", "test", "generated"]
-"""A dataset split, or `generated` (`langpref.propose.GENERATED`)."""
+RECORDED = "recorded"
+CandidateSplit = Literal["train", "val", "test", "generated", "recorded"]
+"""A dataset split; `generated` (`langpref.propose.GENERATED`): the base split plus trajectories made in the
+simulator; `recorded`: every trajectory of the dataset, whatever its split (the baseline `generated` must beat, as
+the generator starts from and learns on all of them)."""
 IMPROVE_STRATEGIES: tuple[str, ...] = get_args(Strategy)
 OBJECTIVES: tuple[str, ...] = get_args(Objective)
 
@@ -65,10 +68,12 @@ class ImproveConfig:
     """Master seed: the same seed gives the same numbers."""
     candidate_split: CandidateSplit = "test"
     """The candidate set C the argmax searches (and whose best/worst define the normalised reward); `generated`:
-    the base split plus new trajectories made in the simulator (`langpref.propose`)."""
+    the base split plus new trajectories made in the simulator (`langpref.propose`); `recorded`: every trajectory
+    of the dataset."""
     base_split: Split | None = None
-    """With candidates `generated`: the split of the start trajectory, whose trajectories stay candidates and whose
-    best/worst define the normalised reward (above 1: better than any trajectory of it); None: test."""
+    """With candidates `generated` or `recorded`: the split of the start trajectory, whose best/worst define the
+    normalised reward (above 1: better than any trajectory of it) and of which the synthetic human knows the best;
+    None: test."""
     generated_out: str | None = None
     """With candidates `generated`: also store every generated trajectory shown as a dataset in this directory (it
     replays from its stored parameters and seed; `langpref render` makes its video)."""
@@ -89,7 +94,7 @@ class ImproveConfig:
     @property
     def split(self) -> str:
         """The split of the start trajectory and of the normalisation."""
-        return (self.base_split or "test") if self.generated else self.candidate_split
+        return (self.base_split or "test") if self.candidate_split in (GENERATED, RECORDED) else self.candidate_split
 
     def validate(self) -> None:
         if self.strategy not in IMPROVE_STRATEGIES:
@@ -207,7 +212,7 @@ def run_improvement(
     )
     learner = RewardLearner(space.dim, cfg.reward, seed=int(run_seed[-1])) if cfg.strategy == "history" else None
     proposer = generation.proposer(key=(*run_seed, 52711)) if cfg.generated else None
-    pool = list(cands)
+    pool = list(range(n)) if cfg.candidate_split == RECORDED else list(cands)
     cur = int(rng_start.choice(cands))
     shown, said, step_s = [cur], [], []
     for it in range(cfg.iterations):

@@ -138,7 +138,8 @@ def cmd_improve(args: argparse.Namespace) -> None:
             action="store_true",
             help="after the last query, generate r_xi's optimum in the simulator "
             "(`langpref.propose`); adds optimized_true_reward, one per human x seed run (above 1: better than the "
-            "eval split's best)",
+            "eval split's best), and recorded_true_reward, r_xi's best recorded trajectory over every split (the "
+            "baseline: the generator starts from and fits all of them)",
         ),
         PROPOSE,
         path(
@@ -205,7 +206,9 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
             + (f"; figure {r['figure']}" if "figure" in r else "")
             + (
                 f"\ngenerated r_xi optimum: mean normalised true reward {r['optimized_true_reward_mean']:.2f}, "
-                f"above the split's best in {r['optimized_beats_best_of_split']:.0%} of runs"
+                f"above the split's best in {r['optimized_beats_best_of_split']:.0%} of runs; r_xi's best recorded "
+                f"trajectory (every split) {r['recorded_true_reward_mean']:.2f}, beaten in "
+                f"{r['optimized_beats_recorded']:.0%}"
                 if "optimized_true_reward" in r
                 else ""
             )

@@ -21,6 +21,8 @@ class Curves:
     true_reward_of_best: list[float] = field(default_factory=list)
     optimized_true_reward: float | None = None
     """With generation: the normalised true reward of r_xi's generated optimum after the last query."""
+    recorded_true_reward: float | None = None
+    """With generation: the same of the recorded trajectory r_xi ranks first over every split of the dataset."""
     kinds: list[str] = field(default_factory=list)
     """The kind of feedback asked at queries 1..Q."""
     seconds: list[float] = field(default_factory=list)
@@ -139,14 +141,23 @@ def kinds_summary(runs: list[Curves]) -> dict:
 
 def optimized_summary(runs: list[Curves]) -> dict:
     """Of runs with a generated optimum: `optimized_true_reward` (one per run), its mean, and the shares of runs where
-    it beats the eval split's best trajectory (> 1) and the split's trajectory r_xi ranks first."""
+    it beats the eval split's best trajectory (> 1) and the split's trajectory r_xi ranks first; and the recorded
+    trajectory r_xi ranks first over every split (`recorded_true_reward`), with the share the optimum beats it."""
     if not runs or any(c.optimized_true_reward is None for c in runs):
         return {}
     opt = np.array([c.optimized_true_reward for c in runs])
     picked = np.array([c.true_reward_of_best[-1] for c in runs])
-    return {
+    out = {
         "optimized_true_reward": opt.tolist(),
         "optimized_true_reward_mean": float(opt.mean()),
         "optimized_beats_best_of_split": float((opt > 1.0).mean()),
         "optimized_beats_true_reward_of_best": float((opt > picked).mean()),
     }
+    if all(c.recorded_true_reward is not None for c in runs):
+        recorded = np.array([c.recorded_true_reward for c in runs])
+        out.update(
+            recorded_true_reward=recorded.tolist(),
+            recorded_true_reward_mean=float(recorded.mean()),
+            optimized_beats_recorded=float((opt > recorded).mean()),
+        )
+    return out

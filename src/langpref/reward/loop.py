@@ -245,7 +245,7 @@ def run_reward_learning(
             curves.kinds.append(kind.name)
             curves.seconds.append(curves.seconds[-1] + seconds)
             curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
-    _score_final(curves, learner, w, cfg, R_eval, run_seed, generation, episodes)
+    _score_final(curves, learner, space, w, cfg, R_eval, run_seed, generation, episodes)
     if learners is not None:
         learners.append(learner)
     return curves
@@ -304,6 +304,7 @@ def _learn_from(
 def _score_final(
     curves: Curves,
     learner: RewardLearner | AnswerModelLearner,
+    space: LatentSpace,
     w: np.ndarray,
     cfg: LearnRewardConfig,
     R_eval: np.ndarray,
@@ -312,13 +313,17 @@ def _score_final(
     episodes: SuccessEpisodes | None,
 ) -> None:
     """What is scored once, after the last query: the answer-model belief's calibration, r_xi's generated optimum
-    (with `generation`) and the value-order correlations through successful episodes (with `episodes`)."""
+    (with `generation`) beside its best recorded trajectory over every split (the baseline the optimum, which starts
+    from and is fitted on all of them, must beat), and the value-order correlations through successful episodes
+    (with `episodes`)."""
     if cfg.learner == "answer-model":
         curves.credible = learner.credible(np.asarray(w)[learner.features])  # the experimenter's check
     if generation is not None:
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
         raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
         curves.optimized_true_reward = float(normalised_reward(raw, R_eval)[0])
+        recorded = int(np.argmax(learner.predict(space.phi)))
+        curves.recorded_true_reward = float(normalised_reward(true_reward(w, space.theta[[recorded]]), R_eval)[0])
     if episodes is not None:
         order = value_order_correlation([learner.predict(np.ascontiguousarray(p)) for p in episodes.phi])
         truth = value_order_correlation([true_reward(w, t) for t in episodes.theta])
