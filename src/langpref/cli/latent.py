@@ -274,6 +274,24 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
 
 
 @command(
+    "experiment seeds",
+    EXPERIMENTS["seeds"].help,
+    [config(EXPERIMENTS["seeds"].config, {"env": {"metavar": "TASK"}}), JSON, RERUN],
+    "Trains one model per training seed with the default `langpref train` configuration (or evaluates the model "
+    "already at --models), evaluates each on the test split with the bank's test phrasings, and writes seeds.md/.json: "
+    "the table and the mean, range and sd over the seeds, computed, not typed.",
+)
+def cmd_experiment_seeds(args: argparse.Namespace) -> None:
+    from langpref.experiments.seeds import seeds_table
+
+    experiment = EXPERIMENTS["seeds"]
+    cfg = from_args(experiment.config_class(), args).resolved()
+    summary = experiment.runner()(cfg)
+    record(args, Path(str(cfg.out)) / "seeds.config.json", cfg)
+    emit(summary, args.json, lambda s: seeds_table(s) + f"\n(wrote {cfg.out}/seeds.md and .json)")
+
+
+@command(
     "experiment observations",
     EXPERIMENTS["observations"].help,
     [

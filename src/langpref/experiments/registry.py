@@ -94,6 +94,14 @@ for _experiment in (
         default_out="results/alignment/ENV",
     ),
     Experiment(
+        "seeds",
+        "the alignment accuracy over training seeds (default 0, 1, 2): the seeds table, its mean and range",
+        "langpref.experiments.seeds:run_seeds_experiment",
+        "langpref.experiments.seeds:SeedsConfig",
+        inputs="own",
+        default_out="results/seeds/ENV",
+    ),
+    Experiment(
         "observations",
         "issue 19: state vs camera images vs both as the trajectory encoder's input",
         "langpref.experiments.observations:run_observations_experiment",

@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import difflib
 import re
+from typing import TYPE_CHECKING
 
-from langpref.language.bank import Bank
-from langpref.language.pairs import Phrasings
+if TYPE_CHECKING:  # the CLI reads NEAR_COPY_RATIO for --help, which must not import numpy
+    from langpref.language.bank import Bank
+    from langpref.language.pairs import Phrasings
 
 NEAR_COPY_RATIO = 0.9
 
