@@ -122,12 +122,12 @@ def _improvement_stage(out: Path, data: Path, model_dir: Path, made: dict):
 def _reward_stage(out: Path, space, made: dict) -> dict:
     """Stage 6: reward learning from language and from comparisons; each kind's `learn_reward` result."""
     from langpref.experiments.reward import plot_reward_curves
+    from langpref.feedback.kind import PAPER_KINDS
     from langpref.reward import LearnRewardConfig, learn_reward
 
     _banner("6. Reward learning: comparative language vs pairwise comparisons (2 humans x 2 seeds, 20 queries)")
     rewards = {
-        fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=20, humans=2, seeds=2))
-        for fb in ("language", "comparison")
+        fb: learn_reward(space, LearnRewardConfig(feedback=fb, queries=20, humans=2, seeds=2)) for fb in PAPER_KINDS
     }
     made["reward_figure"] = str(plot_reward_curves(rewards, out / "reward_learning.png", "Reward learning"))
     for fb, r in rewards.items():

@@ -79,3 +79,18 @@ def test_active_experiment_writes_curves_intervals_and_targets(tmp_path, make_sy
     assert json.loads((tmp_path / "a" / "active.json").read_text())["command"].startswith(
         "langpref experiment active --env metaworld"
     )
+
+
+def test_every_active_method_names_a_registered_kind_and_one_of_its_strategies():
+    """The methods table is data: each feedback is a registered kind (or `mixed`) and each selection one the kind has,
+    under a learner that exists; the answer-model rows name kinds that learner reads."""
+    from langpref.experiments.active import ACTIVE_METHODS
+    from langpref.feedback.kind import MIXED, MIXED_KINDS, RANDOM, kind_names
+    from langpref.reward.answer_model import ANSWER_KINDS, LEARNERS
+    from langpref.reward.selection import strategies_of
+
+    for name, (feedback, strategy, learner, _) in ACTIVE_METHODS.items():
+        assert feedback in (*kind_names(), MIXED) and learner in LEARNERS, name
+        assert (strategy or RANDOM) in (*strategies_of(feedback), RANDOM), name
+        read = MIXED_KINDS if feedback == MIXED else (feedback,)
+        assert learner == "paper" or set(read) <= set(ANSWER_KINDS), name

@@ -112,6 +112,9 @@ def test_failing_and_missing_hooks_are_logged_and_counted(hooked, h, tmp_path, c
     last = status["recent"][0]
     assert (last["status"], last["returncode"], last["participant"]) == ("failed", 1, pid)
     assert "robot offline" in last["output"]
+    videos = {step["seq"]: len(step["videos"]) for step, _ in steps}  # the admin page names positions of several
+    assert all(r["shows"] == videos[r["seq"]] for r in status["recent"])
+    assert {r["shows"] for r in status["recent"]} == {1, 2}
     assert client.get("/api/admin/participants", headers=h.admin).json()["hooks"]["counts"]["failed"] == n
     assert any("--on-show hook failed" in r.getMessage() and "robot offline" in r.getMessage() for r in caplog.records)
 

@@ -1,11 +1,14 @@
 """The kinds a study runs are data (`StudyConfig.kinds`): feedback kinds from an installed package (entry-point group
 `langpref.feedback`, faked by monkeypatching its entry points as tests/feedback/test_plugins.py does) run through
 Study 2 over HTTP with no edit in `langpref.study`: a choice among three shown trajectories and a typed verdict on
-one, beside the paper's language. Their pages, answers, storage, replay after a restart and export."""
+one, beside the paper's language. Their pages, answers, storage, replay after a restart and export; a kind's own
+active query selection choosing its queries (`langpref.study.queries`), and a simulated participant answering with the
+kind's own synthetic human (`langpref.study.simulate`)."""
 
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -15,6 +18,8 @@ import pytest
 
 from langpref.errors import LangprefError
 from langpref.feedback import KINDS, FeedbackKind, PairBatch, StudyPage, kind
+from langpref.reward.batch import Scored
+from langpref.reward.selection import Selector
 
 # ---- the fake package: two kinds -----------------------------------------------------------------------------------
 
@@ -83,6 +88,17 @@ def _verdict_parse(value: Any, query: VerdictQuery) -> VerdictAnswer:
     return VerdictAnswer(query, value.strip().lower())
 
 
+class _VerdictHuman:
+    """Says good of a trajectory whose true reward w . theta is at least the median of its candidates'."""
+
+    def __init__(self, w, space, candidates, cfg, rng):
+        self.reward = space.theta @ w
+        self.bar = float(np.median(self.reward[np.asarray(candidates)]))
+
+    def answer(self, query: VerdictQuery) -> VerdictAnswer:
+        return VerdictAnswer(query, "good" if self.reward[query.shown] >= self.bar else "bad")
+
+
 def _verdict_pairs(space, answer: VerdictAnswer, cfg, rng) -> PairBatch:
     """good: the shown trajectory beats the mean one; bad: the mean one beats it."""
     shown, mean = space.phi[answer.query.shown][None], space.phi.mean(axis=0)[None]
@@ -95,7 +111,7 @@ VERDICT = FeedbackKind(
     query=VerdictQuery,
     answer=VerdictAnswer,
     shows=1,
-    make_human=lambda *args: None,
+    make_human=_VerdictHuman,
     pairs=_verdict_pairs,
     answer_key="verdict",
     parse=_verdict_parse,
@@ -106,8 +122,34 @@ VERDICT = FeedbackKind(
     page=StudyPage("text", "Verdict", "Is this trajectory good or bad?", "Type good or bad for each trajectory."),
 )
 STUDY = ("language", "best_of_three", "verdict")
-PICKY = {"random": None, "mine": lambda *args: None}
-"""The strategies of a kind with an active selection of its own, which the study does not run."""
+
+
+class _Highest(Selector):
+    """`highest`: the trajectory furthest along the first latent axis; it records what the study gave it."""
+
+    name = "highest"
+    calls: list[tuple[tuple[int, ...], str]] = []
+
+    def __init__(self, space, pool, reward, candidates, samples):
+        self.space = space
+
+    def score_rows(self, learner, rows, rng) -> Scored:
+        _Highest.calls.append((tuple(int(r) for r in rows), type(learner).__name__))
+        n = len(rows)
+        zeros = np.zeros(n, dtype=np.int64)
+        gains = self.space.phi[rows, 0]
+        return Scored(("picky",), zeros, np.asarray(rows), zeros - 1, gains, self.space.phi[rows], zeros, zeros)
+
+
+class _Opaque(Selector):
+    """A selector the reward loop could run (`score`) but the study cannot (no `score_rows`)."""
+
+    def __init__(self, *args):
+        pass
+
+
+PICKY = {"random": None, "highest": _Highest, "opaque": _Opaque}
+"""The strategies of a kind with active selections of its own."""
 
 
 class _EntryPoint:
@@ -186,8 +228,9 @@ def test_an_installed_kind_is_a_study_kind_and_a_serve_flag(installed):
     for kinds, message in refused.items():
         with pytest.raises(LangprefError, match=message):
             StudyConfig(kinds=kinds).validate()
-    with pytest.raises(LangprefError, match="asks picky at random only"):  # the kind has it, the study does not
-        StudyConfig(kinds=("comparison", "picky"), query_selection="comparison=infogain,picky=mine").validate()
+    StudyConfig(kinds=("comparison", "picky"), query_selection="comparison=infogain,picky=highest").validate()
+    with pytest.raises(LangprefError, match="not defined for verdict"):
+        StudyConfig(kinds=("verdict",), query_selection="highest").validate()
     with pytest.raises(LangprefError, match="both store their answers in table 'verdicts'"):
         StudyConfig(kinds=("verdict", "picky"), query_selection="random").validate()
     with pytest.raises(LangprefError, match="each once"):
@@ -272,3 +315,68 @@ def test_plugin_answers_replay_after_a_restart_and_export(plugin_client, plugin_
     out = export(plugin_state.db_path, tmp_path / "out")
     assert {"tables/triples.csv", "tables/verdicts.csv"} <= set(out["tables"])
     assert (tmp_path / "out" / "tables" / "triples.csv").read_text().count("\n") == 1 + 4
+
+
+def test_a_plugin_kinds_own_selection_chooses_its_study_queries(installed, engine, h, tmp_path):
+    """The kind's `highest` runs in Study 2 as the paper's strategies do: over the study set less what the participant
+    already answered about (a query that shows one trajectory), from the participant's learner; each choice stored
+    with its score. A strategy whose selector cannot score given rows is refused at start in one line."""
+    from langpref.study import db as sdb
+    from langpref.study.serve import build_state
+
+    _Highest.calls.clear()
+    cfg = h.serve_config(tmp_path / "picky.sqlite", kinds=("language", "picky"), query_selection="picky=highest")
+    state = build_state(cfg, engine=engine, progress=False)
+    try:
+        from fastapi.testclient import TestClient
+
+        from langpref.study.app import create_app
+
+        with TestClient(create_app(state)) as client:
+            pid, headers = h.join(client)
+            steps = walk(client, h, pid, headers)
+    finally:
+        state.videos.close()
+    phi, study = engine.space.phi, np.asarray(engine.study)
+    expected = study[np.argsort(-phi[study, 0], kind="stable")][:4].tolist()
+    shown = [int(s["videos"][0].split("traj")[1][:6]) for s in steps if s["kind"] == "picky"]
+    assert shown == expected
+    conn = sdb.connect(tmp_path / "picky.sqlite")
+    rows = conn.execute("SELECT number, a, b, strategy, score, candidates FROM queries WHERE method='picky'").fetchall()
+    conn.close()
+    assert [(r["number"], r["a"], r["b"], r["strategy"]) for r in rows] == [
+        (n, a, None, "highest") for n, a in enumerate(expected, start=1)
+    ]
+    assert [r["score"] for r in rows] == pytest.approx(phi[expected, 0].tolist())
+    assert [r["candidates"] for r in rows] == [len(study) - n for n in range(4)]
+    for n, (rows_given, learner) in enumerate(_Highest.calls[:4]):
+        assert set(rows_given) == set(study.tolist()) - set(expected[:n]) and learner == "RewardLearner"
+    with pytest.raises(LangprefError, match="picky=opaque: its selector cannot score the study's candidates"):
+        build_state(
+            h.serve_config(tmp_path / "opaque.sqlite", kinds=("picky",), query_selection="opaque"),
+            engine=engine,
+            progress=False,
+        )
+
+
+def test_a_simulated_participant_answers_a_plugin_kind_with_its_own_human(installed, study_data):
+    """Given the dataset, it answers with the kind's synthetic human (`make_human`) under its own reward; without it,
+    at random by the kind's widget."""
+    from langpref.study import simulate as sim
+    from langpref.study.kinds import widget
+
+    world = sim._World(study_data, "all")
+    p = sim.SimParticipant("http://study.test", sim.SimConfig(), 0, world)
+    bar = np.median(p.reward[world.study])
+    said = set()
+    for row in world.study.tolist():
+        step = {"kind": "verdict", "seq": row, "videos": [f"/videos/traj{row:06d}-x.webm"], "widget": widget("verdict")}
+        body = p._body(step, time.perf_counter(), [row])
+        assert body["verdict"] == ("good" if p.reward[row] >= bar else "bad") and body["seq"] == row
+        said.add(body["verdict"])
+    assert said == {"good", "bad"}
+    blind = sim.SimParticipant("http://study.test", sim.SimConfig(), 0, None)
+    three = {"kind": "best_of_three", "seq": 1, "videos": ["a", "b", "c"], "widget": widget("best_of_three")}
+    assert {blind._body(three, time.perf_counter(), [])["best"] for _ in range(40)} == {0, 1, 2}
+    text = {"kind": "verdict", "seq": 2, "videos": ["a"]}  # no widget in the step: the kind's own
+    assert blind._body(text, time.perf_counter(), [])["verdict"] in sim.SAYINGS

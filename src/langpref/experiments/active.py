@@ -33,6 +33,8 @@ import numpy as np
 from langpref.experiments.common import SweepConfig, figure_link
 from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary
 from langpref.extras import pyplot
+from langpref.feedback.kind import MIXED as BOTH
+from langpref.feedback.kind import PAPER_KINDS
 from langpref.reward.cost import elapsed, on_time_grid, time_average
 
 CONFIRM_MARGIN = 0.5
@@ -40,21 +42,24 @@ CONFIRM_MARGIN = 0.5
 Chosen on the val protocol of the drawer recording (margins 0.2, 0.3, 0.5, 0.7, 1.0: 0.5 is the smallest with the
 best AUC; docs/results.md)."""
 
+LANGUAGE, COMPARISON = PAPER_KINDS
+"""The registered kinds the experiment compares (`langpref.feedback.kind`)."""
 ACTIVE_METHODS = {
-    "language-random": ("language", None, "paper", None),
-    "language-lal-infogain": ("language", "lal-infogain", "paper", None),
-    "language-infogain": ("language", "infogain", "paper", None),
-    "comparison-random": ("comparison", None, "paper", None),
-    "comparison-infogain": ("comparison", "infogain", "paper", None),
-    "comparison-volume-removal": ("comparison", "volume-removal", "paper", None),
-    "mixed-infogain": ("mixed", "infogain", "paper", None),
-    "am-language-random": ("language", None, "answer-model", None),
-    "am-language-infogain": ("language", "infogain", "answer-model", None),
-    "am-language-infogain-confirm": ("language", "infogain", "answer-model", CONFIRM_MARGIN),
-    "am-comparison-infogain": ("comparison", "infogain", "answer-model", None),
-    "am-mixed-infogain": ("mixed", "infogain", "answer-model", None),
+    "language-random": (LANGUAGE, None, "paper", None),
+    "language-lal-infogain": (LANGUAGE, "lal-infogain", "paper", None),
+    "language-infogain": (LANGUAGE, "infogain", "paper", None),
+    "comparison-random": (COMPARISON, None, "paper", None),
+    "comparison-infogain": (COMPARISON, "infogain", "paper", None),
+    "comparison-volume-removal": (COMPARISON, "volume-removal", "paper", None),
+    "mixed-infogain": (BOTH, "infogain", "paper", None),
+    "am-language-random": (LANGUAGE, None, "answer-model", None),
+    "am-language-infogain": (LANGUAGE, "infogain", "answer-model", None),
+    "am-language-infogain-confirm": (LANGUAGE, "infogain", "answer-model", CONFIRM_MARGIN),
+    "am-comparison-infogain": (COMPARISON, "infogain", "answer-model", None),
+    "am-mixed-infogain": (BOTH, "infogain", "answer-model", None),
 }
-"""Method name -> (feedback, query selection, learner, confirm margin); None is random, and never asking."""
+"""Method name -> (feedback, query selection, learner, confirm margin); None is random, and never asking. Data: each
+feedback is a registered kind or `mixed`, each selection one of its `strategies` (tests/experiments/test_active.py)."""
 OURS, LAL, LANG_RANDOM = "language-infogain", "language-lal-infogain", "language-random"
 COMP, MIXED = "comparison-infogain", "mixed-infogain"
 AM_LANG, AM_RANDOM, AM_COMP, AM_MIXED = (
@@ -135,7 +140,7 @@ def language_share(runs: dict, method: str, keys: list[str]) -> float | None:
     kinds = [runs[f"{method}/{k}"].get("kinds") or [] for k in keys]
     if not all(kinds):
         return None
-    return float(np.mean([kind == "language" for ks in kinds for kind in ks]))
+    return float(np.mean([kind == LANGUAGE for ks in kinds for kind in ks]))
 
 
 def run_active_experiment(

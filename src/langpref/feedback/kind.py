@@ -21,14 +21,14 @@ A kind that the study web app can ask people (`langpref study serve --kinds NAME
 and the question above the videos; `parse` checks what the widget sends and `pairs` is what the learner takes.
 
 A kind's active query selections are its own: `strategies` maps each `--query-selection` name to the factory of its
-selector (`langpref.reward.selection.Selector`), so the reward loop asks the kind, never a table beside it.
+selector (`langpref.reward.selection.Selector`), so the reward loop and Study 2 ask the kind, never a table beside it.
 """
 
 from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -111,7 +111,8 @@ class FeedbackKind:
     """A stored row of `table` -> the answer again (the study replays them to rebuild a learner)."""
     strategies: Mapping[str, SelectorFactory | None] = field(default_factory=lambda: {RANDOM: None})
     """`--query-selection` name -> the factory of its selector, in the order errors list them; `random` (uniform,
-    `random_query`; the paper's) has none and every kind should keep it."""
+    `random_query`; the paper's) has none and every kind should keep it. Study 2 runs a strategy whose selector can
+    score the rows it is given (`Selector.score_rows`)."""
     page: StudyPage | None = None
     """How the study web app asks this kind (`langpref study serve --kinds`); None: the study cannot run it."""
 
@@ -125,7 +126,9 @@ ENTRY_POINT_GROUP = "langpref.feedback"
 _plugins_loaded = False
 MIXED = "mixed"
 """The `feedback` of a learner that asks either kind, chosen per query (`langpref.reward.mixed`); not a kind."""
-MIXED_KINDS = ("language", "comparison")
+PAPER_KINDS = ("language", "comparison")
+"""The paper's two kinds, in its order: those Study 2 and the demo compare by default."""
+MIXED_KINDS = PAPER_KINDS
 """The kinds a mixed learner chooses between, in this order."""
 
 
@@ -182,6 +185,11 @@ def random_query(kind: FeedbackKind, pool: np.ndarray, rng: np.random.Generator)
     if kind.shows == 1:
         return kind.query(int(rng.choice(pool)))
     return kind.query(*(int(i) for i in rng.choice(pool, size=kind.shows, replace=False)))
+
+
+def shown_by(query: Any) -> tuple[int, ...]:
+    """The dataset trajectories `query` shows, in order: its fields, as `FeedbackKind.query(*indices)` made it."""
+    return tuple(int(getattr(query, f.name)) for f in fields(query))
 
 
 def kind_of(query: Any) -> FeedbackKind:

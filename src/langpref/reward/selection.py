@@ -151,9 +151,21 @@ class Selector:
     fit, then `observe` each answer. A strategy is its `score`: every candidate, scored once."""
 
     name = "random"
+    reads_learner = True
+    """Whether `score_rows` reads the learner's fit; False (the follow-up's strategy, which reads only the answers it
+    observed): a caller may pass None and spare the fit."""
+    observes = False
+    """Whether the selector keeps a record of the answers (`observe`); a caller that chooses for many people (the
+    study) builds one per choice and shows it that person's answers."""
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         raise NotImplementedError
+
+    def score_rows(self, learner: RewardLearner | None, rows: np.ndarray, rng: np.random.Generator) -> Scored:
+        """The queries over exactly `rows` (dataset indices, drawn by the caller) scored from the learner's fit:
+        `score` without its own draw of candidates. The study chooses its active queries with it
+        (`langpref.study.queries`), so a kind's strategy runs there with no edit in the study."""
+        raise NotImplementedError(f"the {self.name!r} selector cannot score rows it is given (Selector.score_rows)")
 
     def select_batch(self, learner: RewardLearner, rng: np.random.Generator, k: int) -> list[Selection]:
         """The next min(k, candidates) queries, chosen at once from one scoring (`langpref.reward.batch.pick`);
@@ -243,7 +255,9 @@ class LanguageInfoGain(Selector):
         return language_candidates(rows, self.scores(xi, rows), self.space.phi[rows], star)
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
-        rows = candidate_rows(self.pool, self.candidates, rng)
+        return self.score_rows(learner, candidate_rows(self.pool, self.candidates, rng), rng)
+
+    def score_rows(self, learner: RewardLearner | None, rows: np.ndarray, rng: np.random.Generator) -> Scored:
         return self.scored(laplace_posterior(learner).sample(self.samples, rng), rows)
 
 
@@ -251,6 +265,8 @@ class LalInfoGain(Selector):
     """`lal-infogain`: the follow-up's information gain over trajectories not shown before (module docstring)."""
 
     name = "lal-infogain"
+    reads_learner = False
+    observes = True
 
     def __init__(self, space: LatentSpace, pool: Sequence[int], candidates: int | None = None):
         self.space = space
@@ -298,7 +314,9 @@ class LalInfoGain(Selector):
         follow-up has no guess of the best trajectory; only batches use the directions)."""
         rows = candidate_rows(self.pool, self.candidates, rng)
         fresh = rows[~np.isin(rows, self.shown)]
-        rows = fresh if len(fresh) else rows
+        return self.score_rows(learner, fresh if len(fresh) else rows, rng)
+
+    def score_rows(self, learner: RewardLearner | None, rows: np.ndarray, rng: np.random.Generator) -> Scored:
         w, l_samples = self.samples(rng)
         star = self.space.phi[self.pool].mean(axis=0)
         return language_candidates(rows, self.scores(w, l_samples, rows), self.space.phi[rows], star)
@@ -342,7 +360,9 @@ class ComparisonActive(Selector):
         return comparison_candidates(rows, i, j, s, self.space.phi[rows])
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
-        rows = candidate_rows(self.pool, self.candidates, rng)
+        return self.score_rows(learner, candidate_rows(self.pool, self.candidates, rng), rng)
+
+    def score_rows(self, learner: RewardLearner | None, rows: np.ndarray, rng: np.random.Generator) -> Scored:
         return self.scored(laplace_posterior(learner).sample(self.samples, rng), rows)
 
 

@@ -10,7 +10,8 @@ from langpref.errors import LangprefError
 from langpref.study.hook import parse_command
 
 METHODS = ("language", "comparison")
-"""The paper's two Study-2 methods: the default `StudyConfig.kinds`, and the two the analyses compare."""
+"""The paper's two Study-2 methods (`langpref.feedback.kind.PAPER_KINDS`, spelled out here so that the CLI's help
+imports no numpy): the default `StudyConfig.kinds`, and the two the analyses compare."""
 VIDEO_FORMATS = ("webm", "mp4")
 IMPROVE_CANDIDATES = ("split", "generated")
 ADMIN_TOKEN_ENV = "LANGPREF_STUDY_ADMIN_TOKEN"
@@ -89,13 +90,10 @@ class StudyConfig:
 
         self.kinds = check_kinds(self.kinds)
         selections = self.selections()
-        others = sorted(k for k in self.kinds if k not in METHODS)
         unread = sorted(k for k in self.kinds if k not in ANSWER_KINDS)
         if unread and self.learner == "answer-model":
             read = " and ".join(ANSWER_KINDS)
             raise LangprefError(f"--learner answer-model reads {read} only, not {', '.join(unread)}")
-        if any(selections[k] != "random" for k in others):
-            raise LangprefError(f"--query-selection: the study asks {', '.join(others)} at random only")
         if self.learner == "answer-model":
             other = sorted({s for s in selections.values() if s not in ("random", "infogain")})
             if other:

@@ -212,8 +212,14 @@ class StudyRobot:
             number,
             lambda *keys: self._rng(p, *keys),
             lambda: self._learner(p, method, number - 1),
-            lambda: self._answers(p, method, number - 1),
+            lambda: [self.as_read(answer) for answer in self._answers(p, method, number - 1)],
         )
+
+    def as_read(self, answer: Any) -> Any:
+        """`answer` as the learners read it: language with its whitespace collapsed, as the text cache keys it."""
+        if isinstance(answer, LanguageAnswer):
+            return replace(answer, text=self.engine.normalise(answer.text))
+        return answer
 
     # ---- Study 1 ----
 
@@ -246,8 +252,7 @@ class StudyRobot:
         if confirmed is not None and confirmed.meaning is None:
             return
         meaning = None if confirmed is None else confirmed.meaning
-        if isinstance(answer, LanguageAnswer):
-            answer = replace(answer, text=self.engine.normalise(answer.text))
+        answer = self.as_read(answer)
         if isinstance(learner, AnswerModelLearner):
             learner.observe(method, answer, meaning=meaning)
             learner.fit()

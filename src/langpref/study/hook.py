@@ -86,6 +86,8 @@ class ShowEvent:
     """Its index in the study's dataset, or for a generated trajectory in the generated dataset `data`."""
     data: str | None = None
     """The generated dataset (absolute) of a generated trajectory; None: the study's dataset."""
+    shows: int = 1
+    """How many trajectories the step shows (the admin page names the position, A, B, ..., of one of several)."""
 
 
 @dataclass(frozen=True)
@@ -154,7 +156,7 @@ class ShowHook:
                 return
             self._handed_out.add((participant, seq))
             for position, index in enumerate(trajectories):
-                event = ShowEvent(participant, seq, kind, position, int(index))
+                event = ShowEvent(participant, seq, kind, position, int(index), shows=len(trajectories))
                 if sum(e.participant == participant for e in self._waiting_events()) >= self.per_participant:
                     self._skip(event, f"this participant already had {self.per_participant} runs waiting")
                 elif len(self._queue) + self._waiting_runs() >= self.queue_size and not self._make_room(seq):

@@ -10,9 +10,11 @@ data: Study 2 asks each in turn, and everything it needs of one is the kind's ow
   kind's `pairs`; stored by `to_record` in the kind's `table` (`kind_row`).
 
 A kind from an installed package (entry-point group `langpref.feedback`) runs with no edit here. Study 1 stays the
-paper's improvement with language (`STUDY1`: Eq. 4 reads a sentence). Active query selection and the answer-model
-learner know the paper's two kinds only (`langpref.study.queries`); another kind is asked at random, with the paper's
-learner. The paper's two keep their own pages and the analyses (`langpref.study.analysis`) compare them.
+paper's improvement with language (`STUDY1`: Eq. 4 reads a sentence). A kind's own active query selections
+(`FeedbackKind.strategies`) choose its queries (`langpref.study.queries`, through `Selector.score_rows`); the
+answer-model learner reads the kinds it has a record of (`langpref.reward.answer_model.ANSWER_KINDS`), any other kind
+learns with the paper's learner. The paper's two keep their own pages and the analyses (`langpref.study.analysis`)
+compare them.
 """
 
 from __future__ import annotations

@@ -1,21 +1,23 @@
 """Which trajectories a Study-2 query shows, by the study's query selection (`StudyConfig.query_selection`).
 
-- `random` (the paper's, the default): language shows one pass over the study set in a random order, then another;
-  comparisons show two distinct trajectories drawn afresh for every query. Both fixed by the study and participant
-  seeds, as before active selection existed.
-- an active strategy of `langpref.reward.selection` (`infogain`, `lal-infogain` for language; `infogain`,
-  `volume-removal` for comparisons): the library's scores, over at most `query_candidates` trajectories of the study
-  set drawn for the query, from the participant's reward learner fit on their answers so far (`infogain`,
-  `volume-removal`: its Laplace posterior) or from their answers themselves (`lal-infogain`). The highest score is
-  shown.
+- `random` (the paper's, the default): a kind whose query shows one trajectory (language) shows one pass over the
+  study set in a random order, then another; one that shows several (comparisons) shows distinct trajectories drawn
+  afresh for every query. Both fixed by the study and participant seeds, as before active selection existed.
+- an active strategy: the kind's own (`FeedbackKind.strategies`: `infogain`, `lal-infogain` for language;
+  `infogain`, `volume-removal` for comparisons; any a plugin kind brings), whose selector scores at most
+  `query_candidates` trajectories of the study set drawn for the query (`Selector.score_rows`), from the
+  participant's reward learner fit on their answers so far (`infogain`, `volume-removal`: its Laplace posterior) or
+  from their answers themselves (`lal-infogain`, a selector that `observes`). The highest score is shown.
 
 With the answer-model learner (`--learner answer-model`), `infogain` is that learner's own: the mutual information
-between its belief and the person's answer under its answer model (`language_gains`, `comparison_gains`), from draws
-of its belief made with the query's generator (never the learner's own stream, which its fits use).
+between its belief and the person's answer under its answer model (the kind's `ANSWER_KINDS` record in
+`langpref.reward.answer_model`), from draws of its belief made with the query's generator (never the learner's own
+stream, which its fits use).
 
-Study-specific choices (the reward loop of `langpref.reward` does not make them): a language query never shows a
-trajectory the participant already gave feedback on in this method while unseen ones remain (as random's pass over
-the set does); the two videos of a comparison are put left and right at random (the scores are symmetric).
+Study-specific choices (the reward loop of `langpref.reward` does not make them): a query that shows one trajectory
+never shows one the participant already gave feedback on in this method while unseen ones remain (as random's pass
+over the set does); the videos of a query that shows two are put left and right at random (the scores are
+symmetric). The answers a strategy observes are as the learner reads them (the engine's `as_read`).
 
 Every draw comes from a generator seeded by (study seed, participant seed, method, query number), never from a
 stream: what query n shows depends only on the seeds and the first n - 1 answers, so a restarted server that has
@@ -26,17 +28,17 @@ rebuilt the learner from the database chooses as the running one would have. The
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from langpref.feedback.kind import get_kind
-from langpref.feedback.language import LanguageAnswer
+from langpref.errors import LangprefError
+from langpref.feedback.kind import RANDOM, get_kind, shown_by
 from langpref.feedback.space import LatentSpace
 from langpref.reward import RewardConfig
-from langpref.reward.posterior import laplace_posterior
-from langpref.reward.selection import DEFAULT_SAMPLES, ComparisonActive, LalInfoGain, LanguageInfoGain, candidate_rows
+from langpref.reward.batch import Scored
+from langpref.reward.selection import DEFAULT_SAMPLES, Selector, candidate_rows
 from langpref.study.config import StudyConfig
 
 ANSWER_MODEL_SAMPLES = 64
@@ -67,14 +69,26 @@ class QueryChooser:
         self.space = space
         self.study = np.asarray(study, dtype=np.int64)
         self.cfg = cfg
+        self.reward = reward
         self.strategies = cfg.selections()
         self.answer_model = cfg.learner == "answer-model"
-        # the stateless scorers, built once (the language one embeds the bank's feature axes); lal-infogain keeps a
-        # record of the answers, so it is made per query; the answer-model learner scores with its own model
-        language, comparison = self.strategies.get("language", "random"), self.strategies.get("comparison", "random")
-        paper = not self.answer_model
-        self._info = LanguageInfoGain(space, self.study, reward) if paper and language == "infogain" else None
-        self._pairs = ComparisonActive(space, self.study, comparison) if paper and comparison != "random" else None
+        # each active method's selector, built once (language's infogain embeds the bank's feature axes); one that
+        # keeps a record of the answers is made again per query; the answer-model learner scores with its own model
+        active = [m for m, s in self.strategies.items() if s != RANDOM]
+        self._selectors = {} if self.answer_model else {m: self._selector(m) for m in active}
+
+    def _selector(self, method: str) -> Selector:
+        """The selector of `method`'s strategy, made by its kind (`FeedbackKind.strategies`)."""
+        strategy = self.strategies[method]
+        selector = get_kind(method).strategies[strategy](
+            self.space, self.study, self.reward, self.cfg.query_candidates, DEFAULT_SAMPLES
+        )
+        if type(selector).score_rows is Selector.score_rows:
+            raise LangprefError(
+                f"--query-selection {method}={strategy}: its selector cannot score the study's candidates "
+                "(Selector.score_rows); ask it at random"
+            )
+        return selector
 
     def choose(
         self, method: str, number: int, rng: Rng, learner: Callable[[], Any], history: Callable[[], list]
@@ -82,35 +96,50 @@ class QueryChooser:
         """Query `number` (1-based) of `method`. `learner` gives the participant's learner fit on the first
         `number - 1` answers and `history` those answers; either is asked for only when the strategy needs it."""
         strategy = self.strategies[method]
-        if strategy == "random":
+        if strategy == RANDOM:
             return self._random(method, number, rng)
         gen = rng(5, self.cfg.kinds.index(method), number)
-        if method == "language":
-            past = history()
-            seen = {int(a.query.shown) for a in past}
-            fresh = self.study[~np.isin(self.study, list(seen))]
-            rows = candidate_rows(fresh if len(fresh) else self.study, self.cfg.query_candidates, gen)
-            if strategy == "lal-infogain":
-                scores = self._lal_scores(past, rows, gen)
-            elif self.answer_model:
-                model = learner()
-                scores = model.language_gains(*model.draw(ANSWER_MODEL_SAMPLES, gen), rows)
-            else:
-                xi = laplace_posterior(learner()).sample(DEFAULT_SAMPLES, gen)
-                scores = self._info.scores(xi, rows)
-            best = int(np.argmax(scores))
-            return Chosen((int(rows[best]),), strategy, float(scores[best]), len(rows))
-        rows = candidate_rows(self.study, self.cfg.query_candidates, gen)
+        selector = self._selectors.get(method)
+        one = get_kind(method).shows == 1
+        past = history() if one or (selector is not None and selector.observes) else []
+        rows = candidate_rows(self._unseen(past) if one else self.study, self.cfg.query_candidates, gen)
+        scored = self._scored(method, selector, rows, gen, learner, past)
+        best = int(np.argmax(scored.gains))
+        shown = (int(scored.first[best]),)
+        if scored.second[best] >= 0:
+            shown = (*shown, int(scored.second[best]))
+            if gen.random() < 0.5:
+                shown = shown[::-1]
+        return Chosen(shown, strategy, float(scored.gains[best]), len(scored.gains))
+
+    def _unseen(self, past: list) -> np.ndarray:
+        """The study set less the trajectories the answers `past` were about (all of it once none is left)."""
+        seen = [i for answer in past for i in shown_by(answer.query)]
+        fresh = self.study[~np.isin(self.study, seen)]
+        return fresh if len(fresh) else self.study
+
+    def _scored(
+        self,
+        method: str,
+        selector: Selector | None,
+        rows: np.ndarray,
+        gen: np.random.Generator,
+        learner: Callable[[], Any],
+        past: list,
+    ) -> Scored:
+        """`method`'s queries over `rows`, scored by the answer-model learner or by the kind's selector."""
         if self.answer_model:
+            from langpref.reward.answer_model import ANSWER_KINDS
+
             model = learner()
-            i, j, scores = model.comparison_gains(model.draw(ANSWER_MODEL_SAMPLES, gen)[0], rows)
-        else:
-            i, j, scores = self._pairs.scores(laplace_posterior(learner()).sample(DEFAULT_SAMPLES, gen), rows)
-        best = int(np.argmax(scores))
-        pair = (int(rows[i[best]]), int(rows[j[best]]))
-        if gen.random() < 0.5:
-            pair = pair[::-1]
-        return Chosen(pair, strategy, float(scores[best]), len(scores))
+            v, best = model.draw(ANSWER_MODEL_SAMPLES, gen)
+            return ANSWER_KINDS[method].candidates(model, v, best, rows, self.space.phi[rows])
+        assert selector is not None  # every active method has one (__init__)
+        if selector.observes:  # a record of this participant's answers
+            selector = self._selector(method)
+            for answer in past:
+                selector.observe(self.space, answer)
+        return selector.score_rows(learner() if selector.reads_learner else None, rows, gen)
 
     def _random(self, method: str, number: int, rng: Rng) -> Chosen:
         study, shows = self.study, get_kind(method).shows
@@ -119,14 +148,3 @@ class QueryChooser:
             return Chosen((int(rng(1, cycle).permutation(study)[pos]),), "random", None, len(study))
         shown = tuple(int(i) for i in rng(2, number).choice(study, size=shows, replace=False))
         return Chosen(shown, "random", None, len(study))
-
-    def _lal_scores(self, past: list, rows: np.ndarray, gen: np.random.Generator) -> np.ndarray:
-        """The follow-up's scores of `rows` after the answers `past` (text read with its whitespace collapsed, as
-        the learner reads it)."""
-        lal = LalInfoGain(self.space, self.study)
-        for answer in past:
-            if isinstance(answer, LanguageAnswer):
-                answer = replace(answer, text=" ".join(answer.text.split()))
-            lal.observe(self.space, answer)
-        w, l_samples = lal.samples(gen)
-        return lal.scores(w, l_samples, rows)

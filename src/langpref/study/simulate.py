@@ -2,14 +2,15 @@
 
 Each simulated participant is a thread with its own HTTP connection. It answers surveys with random valid answers
 and, when it is given the dataset, answers the robot like the library's synthetic humans (`langpref.feedback.language`
-and `.comparison`): a random reward w over the normalised features, language feedback by Eq. 10 with the bank's test
-phrasings, comparisons by Eq. 11, "satisfied" once the shown trajectory is within 10% of the best of the study set
+and `.comparison`): a random reward w over the normalised features, and for every feedback kind the kind's own
+synthetic human (`FeedbackKind.make_human`, with the bank's test phrasings: language by Eq. 10, comparisons by Eq. 11,
+a plugin kind by its own), "satisfied" once the shown trajectory is within 10% of the best of the study set
 (`satisfied_at`), and ratings 1 + 4 x the normalised reward. It reads which trajectory a video shows from the
 video's name (`trajNNNNNN-...`, `genNNNNNN-...`), a shortcut only a simulation takes. Without the dataset it answers
-at random, and so it answers a kind beyond the paper's (`study serve --kinds`, the step's `widget`): a shown
-trajectory at random for a choice, "Move faster." for a text. The time per query it reports is the time it really
-took from receiving the step to sending the answer (its optional think time included). A participant's reward is
-fixed by the seed and its number: w = `sample_weights(D, np.random.default_rng([seed, number]))`.
+at random by the kind's widget (`StudyPage.widget`, sent in the step's `widget`): a shown trajectory at random for
+a choice, one of a few sentences for a text. The time per query it reports is the time it really took from receiving
+the step to sending the answer (its optional think time included). A participant's reward is fixed by the seed and
+its number: w = `sample_weights(D, np.random.default_rng([seed, number]))`.
 
 Study 1 with generated candidates (`study serve --improve-candidates generated`): the trajectories the server makes in
 the simulator are numbered from len(dataset) on (videos `genNNNNNN-...`). Given the server's database (`db`; the
@@ -29,13 +30,18 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from langpref.errors import LangprefError
 
+if TYPE_CHECKING:
+    from langpref.feedback.kind import FeedbackKind
+
 _INDEX = re.compile(r"/videos/(?:traj|gen)(\d{6})-")
+SAYINGS = ("Move faster.", "Go higher.", "Slow down.", "Stay lower, please")
+"""What a participant without the dataset types into a text widget, one at random."""
 
 
 @dataclass
@@ -172,20 +178,35 @@ class SimParticipant:
             self._meet(world.theta)
 
     def _meet(self, theta: np.ndarray) -> None:
-        """The synthetic human over `theta` (the world's rows so far): its reward, the reward normalised over the
-        study set (0 worst, 1 best), its Eq. 10 and Eq. 11 answerers; made again when the world gains rows."""
-        from langpref.feedback.comparison import ComparisonHuman
-        from langpref.feedback.language import LanguageHuman
-
-        world, cfg = self.world, self.cfg
+        """The synthetic human over `theta` (the world's rows so far): its reward and the reward normalised over the
+        study set (0 worst, 1 best); its answerer of each feedback kind is made when first asked (`_human`), and
+        again once the world gains rows."""
+        world = self.world
         self.theta = theta
         self.reward = theta @ self.w
         ref = self.reward[world.study]
         self.norm = (self.reward - ref.min()) / max(float(ref.max() - ref.min()), 1e-12)
-        self.lang = LanguageHuman(
-            self.w, theta, world.phrases, world.study, world.feature_names, cfg.temperature, self.rng
-        )
-        self.comp = ComparisonHuman(self.w, theta, 1.0, self.rng)
+        self._humans: dict[str, Any] = {}
+
+    def _human(self, kind: FeedbackKind) -> Any:
+        """The kind's synthetic human (`FeedbackKind.make_human`) with this participant's reward, in the world's
+        latent view: theta and the bank's test phrasings (no embeddings: a human reads none), sharing its stream."""
+        from langpref.feedback.humans import HumanConfig
+        from langpref.feedback.space import LatentSpace
+
+        if kind.name not in self._humans:
+            world, theta = self.world, self.theta
+            space = LatentSpace(
+                world.dataset.env,
+                tuple(world.feature_names),
+                theta,
+                np.zeros((len(theta), 1)),
+                {},
+                {"test": world.phrases},
+            )
+            config = HumanConfig(temperature=self.cfg.temperature, phrasing_split="test")
+            self._humans[kind.name] = kind.make_human(self.w, space, world.study, config, self.rng)
+        return self._humans[kind.name]
 
     def _rows(self, step: dict[str, Any], stop_at: float) -> list[int] | None:
         """The world's rows of the trajectories a step shows. A generated one the server has not made yet is waited
@@ -226,8 +247,7 @@ class SimParticipant:
 
     def _body(self, step: dict[str, Any], received: float, shown: list[int]) -> dict[str, Any]:
         """The answer to a step; `shown` are the world's rows of its trajectories (empty without a world)."""
-        from langpref.feedback.comparison import ComparisonQuery
-        from langpref.feedback.language import LanguageQuery
+        from langpref.study.kinds import asks_feedback
 
         kind, rng, world = step["kind"], self.rng, self.world
         if kind == "survey":
@@ -236,20 +256,8 @@ class SimParticipant:
         if hi > 0:
             time.sleep(float(rng.uniform(lo, hi)) / 1000.0)
         client_ms = (time.perf_counter() - received) * 1000.0
-        if kind == "language":
-            text = (
-                self.lang.answer(LanguageQuery(shown[0])).text
-                if world
-                else str(rng.choice(["Move faster.", "Go higher.", "Slow down.", "Stay lower, please"]))
-            )
-            return {"feedback": text, "client_ms": round(client_ms, 1), "seq": step["seq"]}
-        if kind == "comparison":
-            choice = self.comp.answer(ComparisonQuery(*shown)).choice if world else int(rng.integers(2))
-            return {"choice": int(choice), "client_ms": round(client_ms, 1), "seq": step["seq"]}
-        widget = step.get("widget")
-        if widget is not None:  # a kind from a plugin, which no synthetic human here knows: a choice at random
-            value = int(rng.integers(len(step["videos"]))) if widget["type"] == "choice" else "Move faster."
-            return {widget["answer_key"]: value, "client_ms": round(client_ms, 1), "seq": step["seq"]}
+        if asks_feedback(kind):  # Study 1's language or a Study-2 query, of any feedback kind
+            return {**self._feedback(step, shown), "client_ms": round(client_ms, 1), "seq": step["seq"]}
         if kind == "confirm":  # asked what it meant: the robot's top reading
             return {"meaning": step["options"][0]["meaning"]}
         if kind == "satisfaction":
@@ -257,6 +265,20 @@ class SimParticipant:
             return {"satisfied": bool(satisfied)}
         rating = np.clip(1 + round(4 * self.norm[shown[0]]), 1, 5) if world else rng.integers(1, 6)
         return {"rating": int(rating)}
+
+    def _feedback(self, step: dict[str, Any], shown: list[int]) -> dict[str, Any]:
+        """The answer field of a feedback step: the kind's synthetic human's answer about the `shown` rows, as a
+        client sends it (`FeedbackKind.value`); without a world, a random one by the kind's widget."""
+        from langpref.feedback.kind import get_kind
+        from langpref.study.kinds import widget
+
+        if self.world is not None:
+            kind = get_kind(step["kind"])
+            return {kind.answer_key: kind.value(self._human(kind).answer(kind.query(*shown)))}
+        page = step.get("widget") or widget(step["kind"])  # Study 1's language step has none: the kind's own
+        if page["type"] == "choice":
+            return {page["answer_key"]: int(self.rng.integers(len(step["videos"])))}
+        return {page["answer_key"]: str(self.rng.choice(SAYINGS))}
 
     def run(self, stop_at: float) -> None:
         try:

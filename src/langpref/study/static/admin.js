@@ -130,7 +130,7 @@ function showHooks(h) {
     const output = cell(r.output);
     output.className = "hook-output";
     tr.append(cell(when(r.started_at)), cell(r.participant.slice(0, 8) + "\u2026"), cell(`${r.kind} (#${r.seq})`),
-              cell(r.kind === "comparison" ? `${r.trajectory} (${"AB"[r.position]})`
+              cell(r.shows > 1 ? `${r.trajectory} (${String.fromCharCode(65 + r.position)})`
                    : r.data ? `generated ${r.trajectory}` : r.trajectory), cell(r.episode), status,
               cell(r.returncode), cell(r.seconds.toFixed(1)), output);
     body.append(tr);
