@@ -31,6 +31,18 @@ def pytest_runtest_makereport(item, call):
     nginx, so a skip there means a claim went untested while the run stayed green."""
     outcome = yield
     report = outcome.get_result()
+    _fail_a_skip_under_ci(report)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector):
+    """The same for a skip while collecting (a module-level `pytest.importorskip` or `pytest.skip(...,
+    allow_module_level=True)`): it skips a whole module without one test report, so the hook above never sees it."""
+    outcome = yield
+    _fail_a_skip_under_ci(outcome.get_result())
+
+
+def _fail_a_skip_under_ci(report) -> None:
     if os.environ.get("CI") and report.skipped and not hasattr(report, "wasxfail"):
         reason = report.longrepr[-1] if isinstance(report.longrepr, tuple) else report.longrepr
         report.outcome, report.longrepr = "failed", f"skipped under CI, which must run every test: {reason}"

@@ -11,13 +11,25 @@ coloured square's position and brightness in 32x32 frames), the observations and
 
 from __future__ import annotations
 
+import importlib
+import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from langpref.dataset.storage import DatasetMeta, Trajectory, save_trajectory, write_meta
 
 MW_FEATURES = ["height", "speed", "distance_to_button"]
+
+
+def require(module: str, install: str):
+    """`module`, imported. Where it is missing the test is skipped (a partial install), except under CI (the env var
+    CI set, as `.ci/run` sets it): `make test` installs it (`install` says how), so there a missing module is a
+    broken install, and its own ImportError fails the test (or the module, at module level) rather than a skip."""
+    if os.environ.get("CI"):
+        return importlib.import_module(module)
+    return pytest.importorskip(module, reason=f"{module} is not installed ({install})")
 
 
 def _toy_splits(n: int) -> dict[str, list[int]]:

@@ -11,8 +11,9 @@ import pytest
 from langpref.backends import run_jobs
 from langpref.dataset.generate import GenerateConfig, generate
 from langpref.dataset.storage import load_dataset
+from tests.factories import require
 
-ray = pytest.importorskip("ray")
+ray = require("ray", "pip install 'langpref[ray]'")
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 
 

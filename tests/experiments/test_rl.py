@@ -13,9 +13,10 @@ from langpref.errors import LangprefError
 from langpref.experiments.rl import RLConfig, RunFiles, judges, learn_rewards, policy_jobs
 from langpref.experiments.rl_policy import Judge, PolicyJob, make_env, train_policy
 from langpref.reward import RewardConfig
+from tests.factories import require
 
 torch.set_num_threads(1)
-pytest.importorskip("stable_baselines3", reason="stable-baselines3 is not installed (pip install 'langpref[test]')")
+require("stable_baselines3", "pip install 'langpref[test]'")
 
 SMALL = RewardConfig(num_negatives=3, max_iter=20)
 
