@@ -47,7 +47,13 @@ def test_active_experiment_reports_the_mixed_arm_per_query_and_per_second(tmp_pa
     mixed = res["methods"][MIXED]
     assert len(mixed["cross_entropy"]) == len(mixed["true_reward_of_best"]) == 4
     assert mixed["config"]["feedback"] == "mixed" and len(mixed["kinds_asked"]) == 2
-    assert 0.0 <= res["language_share"][MIXED] <= 1.0 and res["language_share"]["language-random"] == 1.0
+    # the share and the modelled time are those of the kinds the mixed learner asked, run by run
+    asked = np.array(mixed["kinds_asked"])
+    assert asked.shape == (2, 3) and set(asked.ravel()) <= {"language", "comparison"}
+    assert res["language_share"][MIXED] == pytest.approx((asked == "language").mean())
+    assert res["language_share"]["language-random"] == 1.0 and res["language_share"]["comparison-random"] == 0.0
+    spent = [sum(cfg.costs[k] for k in run) for run in asked]
+    assert res["per_second"]["methods"][MIXED]["seconds_for_q"] == pytest.approx(np.mean(spent))
     timed = res["per_second"]
     assert timed["horizon"] == pytest.approx(min(m["seconds_for_q"] for m in timed["methods"].values()))
     assert timed["methods"]["comparison-random"]["seconds_for_q"] == pytest.approx(3.0)

@@ -19,7 +19,19 @@ def test_a_model_per_kind_with_time_and_memory(tmp_path):
     cfg = ObservationsConfig(env="metaworld", data=str(data), out=str(tmp_path / "out"), kinds=("images",))
     summary = run_observations_experiment(cfg, train_config=train_cfg)
     run = summary["runs"]["images"]
-    assert 0 <= run["test"]["accuracy"] <= 1 and run["train"]["train_s"] > 0
+    assert run["train"]["train_s"] > 0
+    # the table's accuracy is the saved model's own, on every test trajectory, with the bank's test phrasings
+    from langpref.dataset.storage import load_dataset
+    from langpref.language.bank import load_bank
+    from langpref.language.pairs import phrasings_from_bank
+    from langpref.model.checkpoint import load_model
+    from langpref.model.evaluate import evaluate_split
+
+    dataset = load_dataset(data)
+    test = phrasings_from_bank(load_bank("metaworld"), "test", dataset.feature_names)
+    again = evaluate_split(load_model(run["model"], dataset=dataset), dataset, "test", test)
+    assert run["test"]["num_trajectories"] == len(dataset.split("test")) and run["test"]["num_samples"] > 0
+    assert run["test"]["accuracy"] == pytest.approx(again["accuracy"]), "not the saved model's test accuracy"
     assert run["train"]["peak_rss_mib"] > 100  # torch and the language model are in there
     assert (tmp_path / "out" / "latent-images.png").is_file() and run["figure"].endswith("latent-images.png")
     assert json.loads((tmp_path / "out" / "images" / "config.json").read_text())["model"]["observations"] == "images"

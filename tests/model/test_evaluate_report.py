@@ -45,6 +45,9 @@ def test_evaluate_reports_per_phrasing_and_ties(trained, tiny_data, tiny_texts):
     n, ties = out["num_samples"], out["num_tie_samples"]
     assert ties > 0  # the tiny data has near-equal features, so the threshold leaves some samples out
     assert out["accuracy_ties_at_chance"] == pytest.approx((out["accuracy"] * n + 0.5 * ties) / (n + ties))
-    assert 0.0 <= out["accuracy_no_tie_threshold"] <= 1.0
+    # every sample the threshold kept, scored as before, plus the tie samples scored by the model: between none and
+    # all of the ties right
+    right_on_ties = out["accuracy_no_tie_threshold"] * (n + ties) - out["accuracy"] * n
+    assert -1e-9 <= right_on_ties <= ties + 1e-9 and abs(right_on_ties - round(right_on_ties)) < 1e-6
     thresholds = np.asarray(trained.model.info.tie_thresholds)
     assert thresholds.max() > 0  # so `accuracy_no_tie_threshold` differs in what it counts

@@ -160,7 +160,10 @@ def test_downstream_takes_a_model_of_generated_frames_as_a_state_model(tmp_path,
     result = train(cfg, train_phrasings=phrasings[0], val_phrasings=phrasings[1], progress=False)
     model, dataset = result.model, load_dataset(data)
     assert model.observations == "images+state"
-    assert 0 <= evaluate_split(model, dataset, "test", phrasings[0])["accuracy"] <= 1
+    # above chance (0.5) where it trained (0.81 of 1844 pairs at seed 0) and on the test split (0.88 of 16)
+    fit, test = (evaluate_split(model, dataset, split, phrasings[0]) for split in ("train", "test"))
+    assert fit["accuracy"] > 0.7 and fit["num_samples"] > 1000, fit["accuracy"]
+    assert test["accuracy"] > 0.5 and test["num_samples"] > 0, test["accuracy"]
     space = load_space(data, result.out, env="metaworld")
     np.testing.assert_allclose(space.phi, model.encode_dataset(dataset).double().numpy())
     rollouts = [dataset.load(i) for i in dataset.split("test")]

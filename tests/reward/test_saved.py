@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from langpref.errors import LangprefError
+from tests.factories import require
 
 HORIZON = 40
 
@@ -128,10 +129,25 @@ def test_learn_reward_refuses_an_unsaveable_reward_before_any_run(tmp_path):
         learn_reward(NoSpace(), LearnRewardConfig(), progress=False, save_reward=str(tmp_path), model=None)
 
 
+def _learned_return(env, policy, seeds) -> np.ndarray:
+    """The learned reward summed over one episode of `policy`'s deterministic actions, per reset seed."""
+    returns = []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        done, total = False, 0.0
+        while not done:
+            action, _ = policy.predict(obs, deterministic=True)
+            obs, r, term, trunc, info = env.step(action)
+            assert info["env_reward"] == 0.0  # whatever PPO learned, it learned from r_xi
+            total, done = total + r, term or trunc
+        returns.append(total)
+    return np.array(returns)
+
+
 def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp_path):
-    sb3 = pytest.importorskip(
-        "stable_baselines3", reason="stable-baselines3 is not installed (pip install 'langpref[test]')"
-    )
+    """PPO's policy earns more of the learned reward after 2048 steps than before, on scenes it did not train on
+    (about -6.4 to -4.2..-4.7 per 64-step episode over training seeds 0-2)."""
+    sb3 = require("stable_baselines3", "pip install 'langpref[test]'")
     import gymnasium as gym
 
     from langpref.reward.saved import LearnedReward, save_learned_reward
@@ -139,8 +155,11 @@ def test_ppo_from_stable_baselines3_trains_on_the_learned_reward(checkpoint, tmp
     save_learned_reward(_learner("linear"), tmp_path, env="metaworld", model=checkpoint, default=True)
     env = LearnedReward(gym.make("langpref/metaworld-button-press", horizon=64), tmp_path)
     model = sb3.PPO("MlpPolicy", env, n_steps=256, batch_size=64, n_epochs=2, seed=0, device="cpu", verbose=0)
+    unseen = range(100, 104)
+    before = _learned_return(env, model, unseen)
     model.learn(total_timesteps=2048)
-    assert model.num_timesteps >= 2048
+    after = _learned_return(env, model, unseen)
+    assert (after > before).all() and after.mean() > before.mean() + 1.0, (before, after)
     obs, _ = env.reset(seed=0)
     action, _ = model.predict(obs, deterministic=True)
     assert env.action_space.contains(np.asarray(action, dtype=np.float32))
