@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import gc
 import sys
 import types
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
 
+from langpref.feedback.humans import normalised_reward
 from langpref.feedback.language import LanguageHuman
 from langpref.feedback.space import perfect_latent_space
 from langpref.improve import ImproveConfig, human_weights, run_improvement
@@ -103,35 +107,128 @@ def _reachable(*roots):
     return out
 
 
+def _assert_unreachable(roots, space, gen, w) -> None:
+    """None of the synthetic human, its weights, the humans' theta or the experimenter's feature scale is reachable
+    from `roots`, as those objects or as copies of the weights and of theta. (The oracle's phi is (theta, 3): the
+    proposer holds theta's numbers by design, one column wider, which is all this check can say of them; whether it
+    *uses* the experimenter's copies, or a rollout's features, is `_blinded`'s check.)"""
+    for obj in _reachable(*roots):
+        assert not isinstance(obj, LanguageHuman), "a synthetic human is reachable"
+        assert obj is not w and obj is not space.theta, "the human's weights or the humans' theta are reachable"
+        assert obj is not gen.scale and obj is not gen, "the experimenter's feature scale is reachable"
+        if isinstance(obj, np.ndarray) and obj.dtype.kind == "f":
+            assert not (obj.shape == w.shape and np.allclose(obj, w)), "a copy of the human's weights is reachable"
+            assert not (obj.shape == space.theta.shape and np.allclose(obj, space.theta)), "a copy of theta"
+
+
+class _Poison:
+    def __call__(self, *args, **kwargs):
+        raise AssertionError("the optimiser scored a rollout's features on the experimenter's scale")
+
+
+@contextmanager
+def _blinded(space, gen, w, embedders: list):
+    """While inside: the human's weights and the humans' theta are NaN (in place, so every holder of those arrays
+    sees NaN), the experimenter's feature scale (`gen.scale`, what `gen.theta` scores a rollout with) raises, and
+    every new rollout's step features, so its features, are NaN to all but the embedder. The oracle's embedder
+    reads a rollout's features, as phi = (features, 3) is its definition: `embedders` (a list, filled inside) gives
+    each embedder to wrap so that it alone sees them (a learned model's encoder reads observations only)."""
+    from langpref.dataset import generate as generate_module
+
+    assert not np.shares_memory(space.theta, space.phi)  # poisoning theta must leave phi as it is
+    real_rollout, hidden = generate_module.rollout, {}
+    saved_w, saved_theta, saved_scale = w.copy(), space.theta.copy(), gen.scale
+
+    def rollout(*args, **kwargs):
+        traj = real_rollout(*args, **kwargs)
+        hidden[id(traj)] = traj.step_features
+        traj.step_features = np.full_like(traj.step_features, np.nan)
+        return traj
+
+    def unveil(embed):
+        return lambda traj: embed(dataclasses.replace(traj, step_features=hidden[id(traj)]))
+
+    embedders.append(unveil)
+    w[:], space.theta[:] = np.nan, np.nan
+    gen.scale, generate_module.rollout = _Poison(), rollout
+    try:
+        yield
+    finally:
+        w[:], space.theta[:] = saved_w, saved_theta
+        gen.scale, generate_module.rollout = saved_scale, real_rollout
+    assert hidden, "no rollout ran while blinded"
+
+
+def _assert_same_proposal(a, b) -> None:
+    for name in ("units", "phi", "scores", "surrogate_scores"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
 @pytest.mark.parametrize("strategy", ["paper", "history"])
 def test_the_proposer_cannot_reach_the_true_reward(generation, monkeypatch, strategy):
-    """Spy on every generation step of a real improvement run: nothing reachable from the proposer or the objective
-    it is given is the synthetic human, its weights, or the humans' features."""
+    """Every generation step of a real improvement run runs twice, the second time on a copy of the proposer with
+    the human's weights, the humans' theta and the rollouts' features poisoned (`_blinded`): the same proposal. And
+    none of them is reachable from the proposer or the objective it is given."""
     space, gen = generation
     w = human_weights(len(space.feature_names), 0, 0)
     seen = []
     real = Proposer.propose
 
-    def spy(self, objective, start, step=()):
-        for obj in _reachable(self, objective, start, step):
-            assert not isinstance(obj, LanguageHuman)
-            assert obj is not w and obj is not space.theta
-            if isinstance(obj, np.ndarray) and obj.dtype.kind == "f":
-                assert not (obj.shape == w.shape and np.allclose(obj, w)), "the human's weights are reachable"
-                assert not (
-                    obj.shape[-1:] == space.theta.shape[-1:]
-                    and obj.ndim == 2
-                    and len(obj) >= len(space.theta)
-                    and np.allclose(obj[: len(space.theta)], space.theta)
-                ), "the humans' theta is reachable"
+    def twice(self, objective, start, step=()):
+        _assert_unreachable((self, objective, start, step), space, gen, w)
+        blind = copy.copy(self)
+        blind.surrogate = copy.deepcopy(self.surrogate)
+        embedders: list = []
+        with _blinded(space, gen, w, embedders):
+            blind.embed = embedders[0](self.embed)
+            blinded = real(blind, objective, start, step)
+        proposal = real(self, objective, start, step)
+        _assert_same_proposal(proposal, blinded)
         seen.append(step)
-        return real(self, objective, start, step)
+        return proposal
 
-    monkeypatch.setattr(Proposer, "propose", spy)
+    monkeypatch.setattr(Proposer, "propose", twice)
     cfg = ImproveConfig(iterations=2, seeds=1, candidate_split="generated", strategy=strategy)
     run = run_improvement(space, w, cfg, (0, 0), gen)
     assert seen == [(0,), (1,)]
     assert len(run.reward) == 3 and len(run.generated) == 3 and len(run.step_s) == 2
+
+
+def test_optimize_never_reads_the_humans_weights_or_the_true_features(generation, monkeypatch):
+    """`learn-reward --optimize`: r_xi's optimum, made again with the human's weights, the humans' theta and the
+    rollouts' features poisoned (`_blinded`) once the queries are answered, is the same optimum; the experimenter
+    then scores it with them."""
+    from langpref.reward import LearnRewardConfig, loop, run_reward_learning
+
+    space, gen = generation
+    w = human_weights(len(space.feature_names), 0, 0)
+    real, made = loop.optimize_reward, []
+
+    def twice(generation, learner, run_seed=(0,)):
+        assert generation is gen
+        _assert_unreachable((learner,), space, gen, w)
+        clean = real(generation, learner, run_seed)
+        embedders: list = []
+        real_embed = gen.embed
+        with _blinded(space, gen, w, embedders):
+            gen.embed = embedders[0](real_embed)
+            try:
+                blinded = real(generation, learner, run_seed)
+            finally:
+                gen.embed = real_embed
+        _assert_same_proposal(clean, blinded)
+        assert len(clean.trajectories) == gen.cfg.rollouts * gen.cfg.optimize_rounds
+        made.append(clean)
+        return clean
+
+    monkeypatch.setattr(loop, "optimize_reward", twice)
+    cfg = LearnRewardConfig(feedback="language", queries=4, humans=1, seeds=1)
+    run = run_reward_learning(space, w, cfg, (0, 0, 0), generation=gen)
+    assert len(made) == 1 and np.isfinite(run.optimized_true_reward)
+    # the experimenter's score of the optimum, on the eval split's scale, with the weights and features restored
+    R_eval = space.theta[space.split(cfg.eval_split)] @ w
+    expected = normalised_reward(gen.theta(made[0].trajectories[0])[None] @ w, R_eval)[0]
+    assert run.optimized_true_reward == pytest.approx(float(expected))
 
 
 def test_generated_improvement_keeps_the_split_scale(generation, tmp_path):
@@ -146,11 +243,10 @@ def test_generated_improvement_keeps_the_split_scale(generation, tmp_path):
     assert run.optimal_raw == base.optimal_raw
     n = len(space.phi)
     assert [s >= n for s in run.shown] == run.generated
-    assert len(store) == len({s for s in run.shown if s >= n})
-    theta = np.array([gen.theta(store_traj) for store_traj in _stored(tmp_path / "shown")]) if len(store) else None
-    if theta is not None:  # the stored trajectories are the ones scored
-        raw = theta @ w
-        assert np.isin(np.round(raw, 9), np.round(run.raw_reward, 9)).all()
+    assert len(store) == len({s for s in run.shown if s >= n}) and len(store) > 0, "no generated trajectory shown"
+    # the stored trajectories are the ones scored: each one's true reward is one of the run's
+    raw = np.array([gen.theta(stored) for stored in _stored(tmp_path / "shown")]) @ w
+    assert len(raw) == len(store) and np.isin(np.round(raw, 9), np.round(run.raw_reward, 9)).all()
 
 
 def _stored(root):
@@ -165,9 +261,10 @@ def test_learn_reward_optimize_scores_the_generated_optimum(generation):
 
     space, gen = generation
     out = learn_reward(space, LearnRewardConfig(queries=4, humans=2, seeds=1), progress=False, generation=gen)
-    assert len(out["optimized_true_reward"]) == 2
-    assert all(np.isfinite(out["optimized_true_reward"]))
-    assert 0 <= out["optimized_beats_best_of_split"] <= 1
+    made = np.array(out["optimized_true_reward"])
+    assert len(made) == 2 and np.isfinite(made).all()
+    assert out["optimized_true_reward_mean"] == pytest.approx(made.mean())
+    assert out["optimized_beats_best_of_split"] == (made > 1.0).mean()  # the share of its own runs, not any number
 
 
 def test_the_recorded_baseline_is_the_final_reward_s_pick_over_every_split(generation):
