@@ -1,14 +1,16 @@
 """The sealed held-out phrasings (heldout/sealed/): well-formed, read by no code, disjoint from the shipped bank.
 
-The sealed set is for final reporting only (see heldout/sealed/README.md). These tests check its schema, that no
-code under src/langpref nor the Makefile refers to it, and that none of its phrasings is (after normalisation) a
-phrasing of the bank of the same task.
+The sealed set is for final reporting only (see heldout/sealed/README.md). These tests check its schema, that no file
+of the repository but prose refers to it or globs its way into heldout/, and that none of its phrasings is (after
+normalisation) a phrasing of the bank of the same task.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import re
+import subprocess
 import tomllib
 from pathlib import Path
 
@@ -49,8 +51,9 @@ def _task_features(task: str) -> tuple[str, ...]:
     if task == "drawer-open":
         return tuple(tomllib.loads(DRAWER_TASK_FILE.read_text())["features"])
     if task == "metaworld-reach":
-        pytest.importorskip("langpref_reach")
-        from langpref_reach import TASK
+        from tests.factories import require
+
+        TASK = require("langpref_reach", "pip install -e examples/plugin, as make install does").TASK
 
         return tuple(TASK.features)
     raise AssertionError(f"unknown task {task}")
@@ -109,11 +112,110 @@ def test_not_feedback():
     assert len({t.lower() for t in texts}) == len(texts)
 
 
-def test_no_code_reads_the_sealed_set():
-    """Only the reporting command line (in docs) may name it; nothing under src/langpref nor the Makefile."""
-    files = sorted((ROOT / "src" / "langpref").rglob("*.py")) + [ROOT / "Makefile"]
-    offenders = [str(f.relative_to(ROOT)) for f in files if "sealed" in f.read_text(encoding="utf-8", errors="replace")]
-    assert not offenders, f"these files refer to the sealed set: {offenders}"
+# Who may name the sealed set: its own folder, this test, and prose (Markdown: the reporting command line is written in
+# docs/results.md, and README and CHANGELOG tell of it). Nothing else in the repository, and no glob or listing that
+# reaches into heldout/ (which a pattern such as `heldout/*/utterances.json` or a walk of the repository does).
+MAY_NAME_IT = ("heldout/sealed/", "tests/language/test_sealed.py")
+PROSE = (".md",)
+SHELL = ("Makefile", ".sh", ".ci/", ".yml", ".yaml", ".toml", ".cfg", ".ini", ".txt")
+_ROOT_DIR = r"""(?:ROOT|REPO\w*|repo_root|Path\s*\(\s*(?:["']\.?["'])?\s*\)|Path\.cwd\s*\(\s*\))"""
+_NOT_A_FILE = r"""(?![\w/.-]*\.\w)"""  # `heldout` not followed by a file's path (heldout/utterances.json)
+READS_IT = {
+    "names the sealed set": re.compile(r"sealed", re.I),
+    "a glob into heldout/": re.compile(r"""heldout/[^\s"'`]*[*?\[{]"""),
+    "a glob onto the heldout folder": re.compile(r"""["']heldout["']\s*/\s*f?["'][^"'\n]*[*?\[{]"""),
+    "lists the heldout folder": re.compile(r"""["']heldout/?["']\s*\)*\s*\.\s*(?:r?glob|iterdir|walk)\b"""),
+    "lists a folder of heldout": re.compile(
+        r"""\b(?:walk|listdir|scandir|i?glob|copytree|make_archive)\s*\([^)\n]*heldout""" + _NOT_A_FILE
+    ),
+    "walks the repository (heldout/sealed/ too)": re.compile(
+        _ROOT_DIR
+        + r"""\s*\)?\s*\.\s*(?:rglob\s*\(|walk\s*\(|glob\s*\(\s*f?["']\*\*)"""
+        + r"""|\bos\.walk\s*\(\s*(?:ROOT|REPO\w*|repo_root|["']\.?["'])\s*[,)]"""
+        + r"""|\bglob\.i?glob\s*\(\s*f?["']\*\*"""
+    ),
+}
+SHELL_READS_IT = re.compile(r"""\b(?:find|ls|cp|rsync|tar|zip|du|grep\s+-r\w*)\s[^\n|;&]*\bheldout/?""" + _NOT_A_FILE)
+
+
+def _repository_files() -> list[str]:
+    """Every file of the checkout, tracked or new but not ignored, as a path from the root (outside a git checkout:
+    every file below the root but the ignored build, data and environment folders)."""
+    try:
+        listed = subprocess.run(
+            ["git", "-C", str(ROOT), "ls-files", "--cached", "--others", "--exclude-standard", "-z"],
+            capture_output=True,
+            check=True,
+        ).stdout.decode()
+        files = {f for f in listed.split("\0") if f}
+    except (OSError, subprocess.CalledProcessError):
+        skip = {".git", ".venv", ".venv-lerobot", "build", "dist", "data", "results", "models", "runs", "__pycache__"}
+        files = {p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*") if not skip & set(p.relative_to(ROOT).parts)}
+    return sorted(f for f in files if (ROOT / f).is_file())
+
+
+def _offences(path: str, text: str) -> list[str]:
+    """What in `text` (the file at `path`) names or reaches the sealed set (see READS_IT)."""
+    if path.startswith(MAY_NAME_IT) or path.endswith(PROSE):
+        return []
+    found = [what for what, pattern in READS_IT.items() if pattern.search(text)]
+    if (path.endswith(SHELL) or path.startswith(SHELL)) and SHELL_READS_IT.search(text):
+        found.append("a shell command lists heldout/")
+    return found
+
+
+def test_no_file_reads_the_sealed_set():
+    """No file of the repository but prose names the sealed set or globs, lists or walks its way into it: src, tests,
+    benchmarks, examples, the Makefile, CI, configuration."""
+    files = _repository_files()
+    assert "Makefile" in files and "src/langpref/cli/__init__.py" in files and "heldout/sealed/utterances.json" in files
+    offenders = {}
+    for f in files:
+        raw = (ROOT / f).read_bytes()
+        if b"\0" in raw[:8192]:  # binary (figures, fixtures)
+            continue
+        if found := _offences(f, raw.decode("utf-8", errors="replace")):
+            offenders[f] = found
+    assert not offenders, f"these files refer to the sealed set or reach into heldout/: {offenders}"
+
+
+@pytest.mark.parametrize(
+    "path,text",
+    [
+        ("src/langpref/x.py", 'load_user_utterances("heldout/sealed/utterances.json", env)'),
+        ("benchmarks/x.py", 'sorted(glob.glob("heldout/*/utterances.json"))'),
+        ("examples/x.py", 'for p in (ROOT / "heldout").rglob("*.json"):'),
+        ("src/langpref/x.py", 'files = Path("heldout").glob("**/utterances.json")'),
+        ("src/langpref/x.py", 'ROOT / "heldout" / "*" / "utterances.json"'),
+        ("src/langpref/x.py", 'f"heldout/{name}/utterances.json"'),
+        ("src/langpref/x.py", "for d, _, names in os.walk(ROOT / 'heldout'):"),
+        ("src/langpref/x.py", 'os.listdir("heldout")'),
+        ("tests/x.py", 'phrasings = [json.loads(p.read_text()) for p in ROOT.rglob("utterances.json")]'),
+        ("tests/x.py", "for d, _, names in os.walk(ROOT):"),
+        ("benchmarks/x.py", 'glob.glob("**/utterances.json", recursive=True)'),
+        ("Makefile", "\tfor f in heldout/*/utterances.json; do langpref evaluate --utterances $$f; done"),
+        ("Makefile", "\tcp -r heldout build/"),
+        (".ci/run", "find heldout -name '*.json'"),
+    ],
+)
+def test_the_tripwire_catches_a_read_of_the_sealed_set(path, text):
+    assert _offences(path, text), text
+
+
+@pytest.mark.parametrize(
+    "path,text",
+    [
+        ("src/langpref/x.py", 'load_user_utterances(ROOT / "heldout" / "utterances.json", env)'),
+        ("benchmarks/x.py", 'json.loads((ROOT / "heldout" / "not_feedback.json").read_text())'),
+        ("Makefile", "\tlangpref experiment improve --phrasings heldout/utterances.json"),
+        ("tests/x.py", 'NEGATED = HELDOUT.parent / "negated" / "utterances.json"'),
+        ("tests/x.py", 'for path in (ROOT / "src").rglob("*.py"):'),
+        ("src/langpref/x.py", 'for old in self.root.glob("*.json"):'),
+        ("docs/results.md", "langpref evaluate --utterances heldout/sealed/utterances.json"),
+    ],
+)
+def test_the_tripwire_lets_the_named_held_out_files_be(path, text):
+    assert not _offences(path, text), text
 
 
 def _strings(obj, seen=None) -> set[str]:
