@@ -37,3 +37,22 @@ def test_nonsense_is_refused_with_one_line(gate, text):
 def test_a_bank_phrasing_scores_one(gate):
     rel = gate.check(gate.phrasings[0])
     assert rel.score == pytest.approx(1.0, abs=1e-6) and rel.nearest == gate.phrasings[0]
+
+
+def test_small_talk_above_the_floor_is_refused_as_off_topic(gate):
+    rel = gate.score("Good evening, everyone!")
+    assert rel.score >= 0.35  # the floor alone would let it through
+    assert rel.off_topic > rel.score and not rel.ok
+    with pytest.raises(NotFeedbackError, match="something other than feedback") as err:
+        gate.check("Good evening, everyone!")
+    assert "good morning" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_off_topic_texts_copy_no_heldout_text():
+    import json
+
+    from langpref.language.relevance import OFF_TOPIC
+
+    ours = {t.lower().strip(" .!?") for t in json.loads(OFF_TOPIC.read_text())["texts"]}
+    heldout = json.loads((HELDOUT.parent / "not_feedback.json").read_text())["texts"]
+    assert not ours & {t.lower().strip(" .!?") for t in heldout}
