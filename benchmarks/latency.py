@@ -156,14 +156,16 @@ def gate_table(envs: list[str], today: str) -> str:
     """The feedback gate on text it must let through (heldout/utterances.json, people-written phrasings outside the
     bank) and on text it should refuse (heldout/not_feedback.json)."""
     from langpref.language.bank import load_user_utterances
-    from langpref.language.relevance import RELEVANCE_FLOOR, UNKNOWN_WORDS_FLOOR, FeedbackGate
+    from langpref.language.relevance import RELEVANCE_FLOOR, UNKNOWN_WORDS_FLOOR, FeedbackGate, gate_report
 
     nonsense = json.loads((ROOT / "heldout" / "not_feedback.json").read_text())["texts"]
     lines = [
         f"Measured {today} with `make bench` (`python -m benchmarks.pipeline`): `langpref.language.relevance` "
         f"(highest cosine to a bank phrasing in the pretrained MiniLM space; refused below {RELEVANCE_FLOOR}, "
-        f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary) on the 12 x features x 2 "
-        "held-out phrasings of `heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json`.\n",
+        f"or below {UNKNOWN_WORDS_FLOOR} when no word is in the tokenizer's vocabulary, or when nearer to one of the "
+        "gate's off-topic texts than to every bank phrasing) on the 12 x features x 2 held-out phrasings of "
+        "`heldout/utterances.json` and the 25 texts of `heldout/not_feedback.json` (`langpref bank gate ENV "
+        "--feedback heldout/utterances.json --not-feedback heldout/not_feedback.json`).\n",
         "| env | held-out phrasings let through | lowest held-out score | not-feedback texts refused "
         "| highest score among those let through | check, median (ms) |",
         "|---|---|---|---|---|---|",
@@ -171,16 +173,18 @@ def gate_table(envs: list[str], today: str) -> str:
     for env_name in envs:
         gate = FeedbackGate(env_name)
         mapping = load_user_utterances(ROOT / "heldout" / "utterances.json", env_name)
-        held = [gate.score(t) for by_dir in mapping.values() for ts in by_dir.values() for t in ts]
-        junk, ms = [], []
+        held = [t for by_dir in mapping.values() for ts in by_dir.values() for t in ts]
+        report = gate_report(gate, held, nonsense)
+        ms = []
         for text in nonsense:
             start = time.perf_counter()
-            junk.append(gate.score(text))
+            gate.score(text)
             ms.append(1e3 * (time.perf_counter() - start))
-        passed = [r.score for r in junk if r.ok]
+        fb, junk = report["feedback"], report["not_feedback"]
+        high = junk["highest_score_let_through"]
         lines.append(
-            f"| {env_name} | {sum(r.ok for r in held)} / {len(held)} | {min(r.score for r in held):.3f} "
-            f"| {len(junk) - len(passed)} / {len(junk)} | {max(passed, default=float('nan')):.3f} "
+            f"| {env_name} | {fb['let_through']} / {fb['num']} | {fb['lowest_score']:.3f} "
+            f"| {junk['refused']} / {junk['num']} | {high if high is None else f'{high:.3f}'} "
             f"| {np.median(ms):.1f} |"
         )
     return "\n".join(lines)
