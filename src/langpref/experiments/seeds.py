@@ -102,7 +102,7 @@ def run_seeds_experiment(cfg: SeedsConfig) -> dict[str, Any]:
     cache = RunCache(out / "runs.json", identity, cfg.force)
     for seed in cfg.seeds:
         if str(seed) not in cache:
-            cache.put(str(seed), _evaluate(_model_of(cfg, seed), str(cfg.data), cfg.env))
+            cache.put(str(seed), {**_evaluate(_model_of(cfg, seed), str(cfg.data), cfg.env), "commit": source_commit()})
     runs = {seed: cache.runs[str(seed)] for seed in cfg.seeds}
     summary = {
         "env": cfg.env,
@@ -119,6 +119,22 @@ def run_seeds_experiment(cfg: SeedsConfig) -> dict[str, Any]:
     (out / "seeds.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "seeds.md").write_text(seeds_table(summary) + "\n")
     return summary
+
+
+def source_commit() -> str | None:
+    """The commit of the langpref checkout this runs from (with `+dirty` when it has uncommitted changes), or None
+    outside a git checkout (an installed wheel): which code made a row of the table."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[3]
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--", "src"], capture_output=True)
+    except OSError:
+        return None
+    if head.returncode != 0:
+        return None
+    return head.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
 
 
 def over_seeds(values: list[float]) -> dict[str, float]:
@@ -138,19 +154,23 @@ def seeds_table(summary: dict[str, Any]) -> str:
     """Markdown: one row per seed, then the mean, range and sd over the seeds (and the paper's number)."""
     env = summary["env"]
     lines = [
-        "| env | training seed | test accuracy (bank test phrasings) | tie pairs at chance | reading accuracy |",
-        "|---|---|---|---|---|",
+        "| env | training seed | test accuracy (bank test phrasings) | tie pairs at chance | reading accuracy | data "
+        "checksum | commit evaluated at |",
+        "|---|---|---|---|---|---|---|",
     ]
     for seed, r in summary["runs"].items():
         read = f"{r['reading_accuracy']:.3f}" if "reading_accuracy" in r else "-"
-        lines.append(f"| {env} | {seed} | {r['accuracy']:.3f} | {r['accuracy_ties_at_chance']:.3f} | {read} |")
+        lines.append(
+            f"| {env} | {seed} | {r['accuracy']:.3f} | {r['accuracy_ties_at_chance']:.3f} | {read} "
+            f"| {summary['data_checksum'][:12]} | {r.get('commit') or '-'} |"
+        )
     s, t = summary["over_seeds"], summary["over_seeds_ties_at_chance"]
     paper = f"; paper {PAPER_ACCURACY[env]}" if env in PAPER_ACCURACY else ""
     seeds = ", ".join(summary["runs"])
     lines += [
         "",
         f"Over training seeds {seeds}: {env} mean **{s['mean']:.3f}** ({s['min']:.3f} to {s['max']:.3f}, sd "
-        f"{s['sd']:.3f}{paper}), ties at chance {t['mean']:.3f}. Data checksum {summary['data_checksum'][:12]} "
+        f"{s['sd']:.3f}{paper}), ties at chance {t['mean']:.3f}. Data checksum {summary['data_checksum']} "
         f"(`langpref inspect {summary['data']} --json`), {summary['date']}.",
     ]
     return "\n".join(lines)
