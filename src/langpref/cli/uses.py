@@ -269,3 +269,22 @@ for _experiment in EXPERIMENTS.values():
             _experiment.help + ". Writes NAME.json, NAME.png and NAME.md (a section for docs/results.md); an "
             "interrupted run resumes without redoing finished seeds.",
         )(cmd_experiment_uses)
+
+
+@command(
+    "experiment verdict",
+    EXPERIMENTS["verdict"].help,
+    [config(EXPERIMENTS["verdict"].config, {"env": {"metavar": "TASK"}}), JSON, RERUN],
+    "Reads each folder's runs.json (written by `langpref experiment reward`, e.g. one per training seed: --model "
+    "models/ENV-seedN --out results/reward/ENV-seedN --humans 10), pairs language with comparisons run by run, and "
+    "writes verdict.md/.json: per model and pooled, language minus comparisons in the AUC of the true reward and in "
+    "the mean cross-entropy, with 95% t-intervals, and the verdict worded from the pooled intervals.",
+)
+def cmd_experiment_verdict(args: argparse.Namespace) -> None:
+    from langpref.experiments.verdict import verdict_table
+
+    experiment = EXPERIMENTS["verdict"]
+    cfg = from_args(experiment.config_class(), args).resolved()
+    summary = experiment.runner()(cfg)
+    record(args, Path(str(cfg.out)) / "verdict.config.json", cfg)
+    emit(summary, args.json, lambda s: verdict_table(s) + f"\n(wrote {cfg.out}/verdict.md and .json)")
