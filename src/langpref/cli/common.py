@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+from pathlib import Path
 
-from langpref.cli_config import opt, path
+from langpref.cli_config import emit, from_args, opt, path, record
 
 TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
 DEVICES = ("auto", "cpu", "cuda")
@@ -41,3 +43,15 @@ def load(args: argparse.Namespace, with_data: bool = True):
     dataset = load_dataset(args.data) if with_data else None
     device = resolve_device(getattr(args, "device", "cpu"))  # commands without --device run on the CPU
     return load_model(args.model, device=device, dataset=dataset), dataset
+
+
+def run_config_experiment(args: argparse.Namespace, name: str, table: Callable[[dict], str]) -> None:
+    """`langpref experiment NAME` for an experiment whose only input is its config dataclass: run it, record the
+    config beside its output (NAME.config.json, so `--config` reruns it) and print `table` of its summary."""
+    from langpref.experiments.registry import EXPERIMENTS
+
+    experiment = EXPERIMENTS[name]
+    cfg = from_args(experiment.config_class(), args).resolved()
+    summary = experiment.runner()(cfg)
+    record(args, Path(str(cfg.out)) / f"{name}.config.json", cfg)
+    emit(summary, args.json, lambda s: table(s) + f"\n(wrote {cfg.out}/{name}.md and .json)")

@@ -6,7 +6,7 @@ import argparse
 import importlib
 from pathlib import Path
 
-from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, TASK, load
+from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, TASK, load, run_config_experiment
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.dataset.splits import SPLITS
 from langpref.experiments.registry import EXPERIMENTS
@@ -284,11 +284,7 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
 def cmd_experiment_seeds(args: argparse.Namespace) -> None:
     from langpref.experiments.seeds import seeds_table
 
-    experiment = EXPERIMENTS["seeds"]
-    cfg = from_args(experiment.config_class(), args).resolved()
-    summary = experiment.runner()(cfg)
-    record(args, Path(str(cfg.out)) / "seeds.config.json", cfg)
-    emit(summary, args.json, lambda s: seeds_table(s) + f"\n(wrote {cfg.out}/seeds.md and .json)")
+    run_config_experiment(args, "seeds", seeds_table)
 
 
 @command(

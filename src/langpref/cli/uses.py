@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from langpref import cli_config as cc
-from langpref.cli.common import JSON, TASK
+from langpref.cli.common import JSON, TASK, run_config_experiment
 from langpref.cli_config import RERUN, beside, command, command_of, config, emit, from_args, opt, path, record
 from langpref.experiments.registry import EXPERIMENTS, Experiment, get_experiment
 from langpref.extras import require
@@ -283,8 +283,4 @@ for _experiment in EXPERIMENTS.values():
 def cmd_experiment_verdict(args: argparse.Namespace) -> None:
     from langpref.experiments.verdict import verdict_table
 
-    experiment = EXPERIMENTS["verdict"]
-    cfg = from_args(experiment.config_class(), args).resolved()
-    summary = experiment.runner()(cfg)
-    record(args, Path(str(cfg.out)) / "verdict.config.json", cfg)
-    emit(summary, args.json, lambda s: verdict_table(s) + f"\n(wrote {cfg.out}/verdict.md and .json)")
+    run_config_experiment(args, "verdict", verdict_table)
