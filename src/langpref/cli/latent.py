@@ -246,6 +246,8 @@ def cmd_experiment_alignment(args: argparse.Namespace) -> None:
                 "train.stage2_epochs",
                 "train.frame_contrastive",
                 "train.frame_pretrain_steps",
+                "train.augment_phrasings",
+                "train.threads",
             ),
         ),
         JSON,
