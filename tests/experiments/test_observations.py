@@ -37,6 +37,8 @@ def test_a_model_per_kind_with_time_and_memory(tmp_path):
     assert json.loads((tmp_path / "out" / "images" / "config.json").read_text())["model"]["observations"] == "images"
     table = (tmp_path / "out" / "observations.md").read_text()
     assert table.splitlines()[2].startswith("| images | ") and "--kinds images" in table
+    # the threads the model trained on, which an image model needs to train again bit for bit
+    assert run["train"]["torch_threads"] >= 1 and f"--threads {run['train']['torch_threads']} " in table
     again = run_observations_experiment(cfg, train_config=train_cfg)  # every kind cached: nothing retrains
     assert again["runs"] == summary["runs"]
     with pytest.raises(LangprefError, match="--observations must be one of"):
@@ -51,3 +53,16 @@ def test_the_reproducing_command_carries_the_frame_loss_settings():
     assert "--frame" not in observations_command(cfg, TrainConfig())
     line = observations_command(cfg, TrainConfig(frame_contrastive=1.0, frame_pretrain_steps=1500))
     assert line.endswith("--frame-contrastive 1 --frame-pretrain-steps 1500 --kinds images")
+
+
+def test_the_reproducing_command_carries_the_small_bank_and_thread_settings():
+    """A row of docs/results.md measured before small banks were augmented by default reruns with
+    `--augment-phrasings 0`; an image model trains again bit for bit on as many threads."""
+    from langpref.experiments.observations import observations_command
+    from langpref.model.config import TrainConfig
+
+    cfg = ObservationsConfig(env="drawer-open-hidden", data="d", out="o", kinds=("state", "images+state"))
+    line = observations_command(cfg, TrainConfig(augment_phrasings=0), threads=2)
+    assert line.endswith("--augment-phrasings 0 --threads 2 --kinds state,images+state")
+    assert "--threads 3" in observations_command(cfg, TrainConfig(threads=3))
+    assert "--augment" not in observations_command(cfg, TrainConfig())

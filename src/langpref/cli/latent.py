@@ -301,6 +301,8 @@ def cmd_experiment_seeds(args: argparse.Namespace) -> None:
                 "train.stage2_epochs",
                 "train.frame_contrastive",
                 "train.frame_pretrain_steps",
+                "train.augment_phrasings",
+                "train.threads",
             ),
         ),
         JSON,

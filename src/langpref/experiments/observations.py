@@ -150,7 +150,7 @@ def run_observations_experiment(cfg: ObservationsConfig, *, train_config: TrainC
         "env": cfg.env,
         "data": str(data),
         "runs": {kind: cache.runs[kind] for kind in cfg.kinds},
-        "command": observations_command(cfg, start),
+        "command": observations_command(cfg, start, _threads_used(cache.runs[kind] for kind in cfg.kinds)),
     }
     out.mkdir(parents=True, exist_ok=True)
     (out / "observations.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -158,8 +158,18 @@ def run_observations_experiment(cfg: ObservationsConfig, *, train_config: TrainC
     return summary
 
 
-def observations_command(cfg: ObservationsConfig, train: TrainConfig | None = None) -> str:
-    """The `langpref experiment observations` command that reproduces this run."""
+def _threads_used(runs) -> int | None:
+    """The thread count every CPU run trained on, or None (a GPU run, an older run that did not say, or counts that
+    differ)."""
+    counts = {r["train"].get("torch_threads") if r["train"].get("device") == "cpu" else None for r in runs}
+    return counts.pop() if len(counts) == 1 else None
+
+
+def observations_command(cfg: ObservationsConfig, train: TrainConfig | None = None, threads: int | None = None) -> str:
+    """The `langpref experiment observations` command that reproduces this run: on CPU with `--threads`, the
+    threads its models trained on (`threads`, else the config's), as an image model is bit-reproducible only on
+    as many threads (`TrainConfig.threads`)."""
+    threads = threads or (train.threads if train is not None else None)
     flags = f" --data {cfg.data} --out {cfg.out}"
     default = TrainConfig()
     if train is not None and train.stage1_epochs != default.stage1_epochs:
@@ -170,6 +180,10 @@ def observations_command(cfg: ObservationsConfig, train: TrainConfig | None = No
         flags += f" --frame-contrastive {train.frame_contrastive:g}"
     if train is not None and train.frame_pretrain_steps is not None:
         flags += f" --frame-pretrain-steps {train.frame_pretrain_steps}"
+    if train is not None and train.augment_phrasings is not None:
+        flags += f" --augment-phrasings {train.augment_phrasings}"
+    if threads:
+        flags += f" --threads {threads}"
     if tuple(cfg.kinds) != OBSERVATIONS:
         flags += f" --kinds {','.join(cfg.kinds)}"
     if cfg.heldout:

@@ -89,6 +89,12 @@ class TrainConfig:
     """The same seed gives the same model on CPU."""
     device: str = "auto"
     """auto (cuda when available), cpu or cuda."""
+    threads: int | None = None
+    """Threads torch computes with on CPU during training (default: as many as torch starts with, one per core).
+    The same seed gives the same model bit for bit only on the same number of threads: the gradients of a
+    convolution and of a matrix product are sums split among the threads, so another count rounds them otherwise
+    (by 1e-6), and an image model's training amplifies that into another model. The checkpoint records the count
+    (`results.torch_threads`); `--threads N` repeats a run."""
     mixed_precision: bool = True
     """On CUDA, run the training steps' forward passes under bfloat16 autocast (weights and optimiser stay float32);
     no effect on CPU, whose path is unchanged. Not yet measured on a GPU here."""
@@ -185,6 +191,8 @@ class TrainConfig:
             raise LangprefError("no output given: pass --out MODEL_DIR")
         if self.device not in ("auto", "cpu", "cuda"):
             raise LangprefError(f"--device must be auto, cpu or cuda, got {self.device!r}")
+        if self.threads is not None and self.threads < 1:
+            raise LangprefError(f"threads must be >= 1, got {self.threads}")
         for name in (
             "stage1_epochs",
             "stage2_epochs",

@@ -86,16 +86,27 @@ def _save(trainer: Trainer, out: Path, lang_finetuned: bool, results: dict, forc
 
 
 @contextmanager
-def _deterministic_on_cpu(device: str):
+def _deterministic_on_cpu(device: str, threads: int | None):
     """Multi-threaded CPU kernels may sum in a different order from run to run (differences of 1e-7 in the first
     epoch's loss, a different model after ten); torch's deterministic algorithms make two runs with the same seed
-    bit-identical. CUDA keeps its fast kernels (documented there as not bit-reproducible)."""
-    previous = torch.are_deterministic_algorithms_enabled()
+    bit-identical on the same number of threads (`threads`, else torch's own count; the sums of a convolution's and a
+    matrix product's gradients are split among them). CUDA keeps its fast kernels (documented there as not
+    bit-reproducible)."""
+    previous, before = torch.are_deterministic_algorithms_enabled(), torch.get_num_threads()
     torch.use_deterministic_algorithms(previous or resolve_device(device).type == "cpu", warn_only=True)
+    if threads:
+        torch.set_num_threads(threads)
     try:
         yield
     finally:
         torch.use_deterministic_algorithms(previous)
+        torch.set_num_threads(before)
+
+
+def numerics() -> dict[str, Any]:
+    """What else a CPU run's numbers depend on, beside the seed and `torch_threads` (provenance in the results): the
+    torch build and the instruction set its kernels chose for this CPU (AVX2 and AVX-512 kernels round otherwise)."""
+    return {"torch": torch.__version__, "cpu_capability": torch.backends.cpu.get_cpu_capability()}
 
 
 def train(
@@ -110,10 +121,11 @@ def train(
 
     `stage1_out`, when given, also saves the stage-1 (frozen language model) checkpoint there: the frozen ablation
     and the co-finetuned model share stage 1, so one run yields both. Phrasings default to the bank's (train, val).
-    On CPU the same seed gives the same model bit for bit, in one process or two.
+    On CPU the same seed gives the same model bit for bit, in one process or two, on the same number of threads
+    (`cfg.threads`, recorded in the results as `torch_threads`) and the same kind of CPU.
     """
     cfg.validate()
-    with _deterministic_on_cpu(cfg.device):
+    with _deterministic_on_cpu(cfg.device, cfg.threads):
         return _train(cfg, train_phrasings, val_phrasings, progress, stage1_out)
 
 
@@ -148,6 +160,7 @@ def _train(
             "samples_per_s": n / s if s else 0.0,
             "device": str(trainer.device),
             "torch_threads": torch.get_num_threads(),
+            "numerics": numerics(),
             "stage_seconds": {str(k): v for k, v in trainer.seconds.items() if k <= stage and (k or v)},
             "stage_samples_per_s": {
                 str(k): trainer.samples_seen[k] / trainer.seconds[k] for k in range(1, stage + 1) if trainer.seconds[k]
