@@ -80,7 +80,7 @@ def test_flag_choices_come_from_the_literal_fields():
     assert lr["--negatives"].choices == NEGATIVES and lr["--learner"].choices == LEARNERS
     assert lr["--query-split"].choices == lr["--eval-split"].choices == ("train", "val", "test")
     assert imp["--strategy"].choices == IMPROVE_STRATEGIES and imp["--objective"].choices == OBJECTIVES
-    assert imp["--candidates"].choices == ("train", "val", "test", "generated")
+    assert imp["--candidates"].choices == ("train", "val", "test", "generated", "recorded")
     assert imp["--base-split"].choices == ("train", "val", "test")
     assert ex["--backend"].choices == flags["generate"]["--backend"].choices == BACKENDS
     assert flags["experiment active"]["--humans"].default == 10 and ex["--humans"].default == 3

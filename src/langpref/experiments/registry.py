@@ -162,15 +162,6 @@ for _experiment in (
         default_out=_OUT.format(name="generate") + ", ENV-mlp",
     ),
     Experiment(
-        "verdict",
-        "language vs comparisons over several reward experiments (one per trained model): paired intervals on AUC "
-        "and mean CE",
-        "langpref.experiments.verdict:run_verdict_experiment",
-        "langpref.experiments.verdict:VerdictConfig",
-        inputs="own",
-        default_out="results/verdict/ENV",
-    ),
-    Experiment(
         "rl",
         "issue 33: policies (SAC) trained on the reward learned from language, from comparisons, the true reward "
         "and the task's success, judged by the true reward (1 human x 3 seeds, Q = 40)",
@@ -192,6 +183,15 @@ for _experiment in (
             "reward.model",
         ),
         default_out="results/rl/ENV",
+    ),
+    Experiment(
+        "verdict",
+        "language vs comparisons over several reward experiments (one per trained model): paired intervals on AUC "
+        "and mean CE",
+        "langpref.experiments.verdict:run_verdict_experiment",
+        "langpref.experiments.verdict:VerdictConfig",
+        inputs="own",
+        default_out="results/verdict/ENV",
     ),
 ):
     register_experiment(_experiment)
