@@ -144,6 +144,8 @@ def verdict_table(summary: dict[str, Any]) -> str:
     lines.append(f"| **pooled** | {p['auc']['n']} | **{cell(p['auc'])}** | **{cell(p['mean_ce'])}** |")
     v = summary["verdict"]
     runs = ",".join(summary["runs"])
+    out = summary["config"]["out"]
+    runs += f" --out {out}" if out != str(RESULTS_ROOT / summary["env"]) else ""
     lines += [
         "",
         f"Verdict on {summary['env']} (pooled paired intervals): AUC of the true reward, {v['auc']}; mean "
