@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from langpref.cli import main
+from langpref.errors import LangprefError
 from langpref.experiments.verdict import VerdictConfig, interval, run_verdict_experiment
 
 
@@ -54,3 +55,16 @@ def test_a_missing_folder_is_one_line(tmp_path, capsys):
     code = main(["experiment", "verdict", "--env", "metaworld", "--runs", str(tmp_path / "nope")])
     err = capsys.readouterr().err
     assert code == 2 and "experiment reward" in err and err.count("\n") == 1
+
+
+def test_two_other_methods_of_the_same_runs(tmp_path):
+    folder = _write_runs(tmp_path / "m", 0.05, 0)
+    runs = json.loads((tmp_path / "m" / "runs.json").read_text())
+    renamed = {k.replace("language/", "am-language-infogain/"): v for k, v in runs["runs"].items()}
+    (tmp_path / "m" / "runs.json").write_text(json.dumps({"runs": renamed}))
+    cfg = VerdictConfig(env="toy", runs=(folder,), methods=("am-language-infogain", "comparison"), out=str(tmp_path))
+    s = run_verdict_experiment(cfg)
+    assert s["verdict"]["auc"] == "am-language-infogain better"
+    assert "--methods am-language-infogain,comparison" in (tmp_path / "verdict.md").read_text()
+    with pytest.raises(LangprefError, match="the runs hold am-language-infogain, comparison"):
+        run_verdict_experiment(VerdictConfig(env="toy", runs=(folder,), out=str(tmp_path)))

@@ -8,7 +8,8 @@ per-run differences, language minus comparisons, with a two-sided 95% t-interval
   trajectory r_xi ranks first; higher is better);
 - the mean cross-entropy over query counts 1..Q (lower is better);
 pooled over every model and per model, and words the verdict from the pooled intervals: language is better, worse,
-or not told apart. Writes verdict.json and verdict.md.
+or not told apart. `--methods A,B` compares two other methods of the same runs instead (e.g. of `experiment active`:
+`am-language-infogain,comparison-infogain`). Writes verdict.json and verdict.md.
 """
 
 from __future__ import annotations
@@ -22,8 +23,6 @@ from typing import Any
 from langpref.errors import LangprefError
 
 RESULTS_ROOT = Path("results") / "verdict"
-METHODS = ("language", "comparison")
-"""The two methods of `experiment reward`, language first: every difference is language minus comparisons."""
 
 
 @dataclass(frozen=True)
@@ -34,12 +33,17 @@ class VerdictConfig:
     """Task the reward experiments ran on (a label for the table)."""
     runs: tuple[str, ...] = ()
     """Output folders of `langpref experiment reward`, one per trained model (comma-separated)."""
+    methods: tuple[str, ...] = ("language", "comparison")
+    """The two methods compared, A minus B (comma-separated): `experiment reward`'s by default, or two of
+    `experiment active`'s."""
     out: str | None = None
     """Output folder for verdict.json/.md; default results/verdict/ENV."""
 
     def resolved(self) -> VerdictConfig:
         if len(self.runs) < 1:
             raise LangprefError("--runs needs at least one `experiment reward` output folder")
+        if len(self.methods) != 2 or self.methods[0] == self.methods[1]:
+            raise LangprefError(f"--methods needs two different methods A,B, got {','.join(self.methods)}")
         return replace(self, out=self.out or str(RESULTS_ROOT / self.env))
 
 
@@ -55,16 +59,17 @@ def _read_runs(folder: str) -> dict[str, dict]:
     return runs
 
 
-def paired_runs(runs: dict[str, dict]) -> dict[str, Any]:
+def paired_runs(runs: dict[str, dict], methods: tuple[str, ...]) -> dict[str, Any]:
     """Per (human, seed) run both methods finished: AUC of the true-reward curve and mean CE over 1..Q, per method."""
     import numpy as np
 
-    keys = sorted({k.split("/", 1)[1] for k in runs if k.split("/", 1)[0] in METHODS})
-    keys = [k for k in keys if all(f"{m}/{k}" in runs for m in METHODS)]
+    keys = sorted({k.split("/", 1)[1] for k in runs if k.split("/", 1)[0] in methods})
+    keys = [k for k in keys if all(f"{m}/{k}" in runs for m in methods)]
     if not keys:
-        raise LangprefError("no run of both language and comparisons to pair")
+        known = sorted({k.split("/", 1)[0] for k in runs})
+        raise LangprefError(f"no run of both {' and '.join(methods)} to pair; the runs hold {', '.join(known)}")
     out: dict[str, Any] = {"keys": keys}
-    for m in METHODS:
+    for m in methods:
         out[m] = {
             "auc": [float(np.mean(runs[f"{m}/{k}"]["true_reward_of_best"])) for k in keys],
             "mean_ce": [float(np.mean(runs[f"{m}/{k}"]["cross_entropy"][1:])) for k in keys],
@@ -84,9 +89,9 @@ def interval(differences: list[float]) -> dict[str, float]:
     return {"mean": mean, "low": mean - half, "high": mean + half, "n": n}
 
 
-def _differences(pairs: dict[str, Any]) -> dict[str, list[float]]:
-    lang, comp = pairs["language"], pairs["comparison"]
-    return {metric: [a - b for a, b in zip(lang[metric], comp[metric])] for metric in ("auc", "mean_ce")}
+def _differences(pairs: dict[str, Any], methods: tuple[str, ...]) -> dict[str, list[float]]:
+    first, second = pairs[methods[0]], pairs[methods[1]]
+    return {metric: [a - b for a, b in zip(first[metric], second[metric])] for metric in ("auc", "mean_ce")}
 
 
 def run_verdict_experiment(cfg: VerdictConfig) -> dict[str, Any]:
@@ -94,19 +99,20 @@ def run_verdict_experiment(cfg: VerdictConfig) -> dict[str, Any]:
     cfg = cfg.resolved()
     per_model, pooled = {}, {"auc": [], "mean_ce": []}
     for folder in cfg.runs:
-        diffs = _differences(paired_runs(_read_runs(folder)))
+        diffs = _differences(paired_runs(_read_runs(folder), cfg.methods), cfg.methods)
         per_model[folder] = {metric: interval(d) for metric, d in diffs.items()}
         for metric, d in diffs.items():
             pooled[metric] += d
     summary = {
         "env": cfg.env,
         "runs": list(cfg.runs),
+        "methods": list(cfg.methods),
         "pooled": {metric: interval(d) for metric, d in pooled.items()},
         "per_model": per_model,
         "config": asdict(cfg),
         "date": datetime.date.today().isoformat(),
     }
-    summary["verdict"] = verdict(summary["pooled"])
+    summary["verdict"] = verdict(summary["pooled"], cfg.methods)
     out = Path(str(cfg.out))
     out.mkdir(parents=True, exist_ok=True)
     (out / "verdict.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -114,14 +120,15 @@ def run_verdict_experiment(cfg: VerdictConfig) -> dict[str, Any]:
     return summary
 
 
-def verdict(pooled: dict[str, dict[str, float]]) -> dict[str, str]:
-    """Per metric, `language better`, `comparisons better` or `not told apart` (the interval holds 0)."""
+def verdict(pooled: dict[str, dict[str, float]], methods: tuple[str, ...] = ("language", "comparison")) -> dict:
+    """Per metric, `A better`, `B better` or `not told apart` (the interval holds 0), for methods (A, B)."""
+    first, second = (f"{m} better" for m in methods)
 
     def word(iv: dict[str, float], higher_is_better: bool) -> str:
         if iv["low"] > 0:
-            return "language better" if higher_is_better else "comparisons better"
+            return first if higher_is_better else second
         if iv["high"] < 0:
-            return "comparisons better" if higher_is_better else "language better"
+            return second if higher_is_better else first
         return "not told apart"
 
     return {"auc": word(pooled["auc"], True), "mean_ce": word(pooled["mean_ce"], False)}
@@ -133,9 +140,9 @@ def verdict_table(summary: dict[str, Any]) -> str:
     def cell(iv: dict[str, float]) -> str:
         return f"{iv['mean']:+.3f} ({iv['low']:+.3f} to {iv['high']:+.3f})"
 
+    a, b = summary["methods"]
     lines = [
-        "| reward runs | pairs | AUC, language - comparisons (95% CI) "
-        "| mean CE 1..Q, language - comparisons (95% CI) |",
+        f"| reward runs | pairs | AUC, {a} - {b} (95% CI) | mean CE 1..Q, {a} - {b} (95% CI) |",
         "|---|---|---|---|",
     ]
     for folder, m in summary["per_model"].items():
@@ -146,6 +153,7 @@ def verdict_table(summary: dict[str, Any]) -> str:
     runs = ",".join(summary["runs"])
     out = summary["config"]["out"]
     runs += f" --out {out}" if out != str(RESULTS_ROOT / summary["env"]) else ""
+    runs += f" --methods {a},{b}" if (a, b) != ("language", "comparison") else ""
     lines += [
         "",
         f"Verdict on {summary['env']} (pooled paired intervals): AUC of the true reward, {v['auc']}; mean "
