@@ -114,13 +114,16 @@ def add_config(
         spec = {"flag": spec} if isinstance(spec, str) else dict(spec)
         flag = spec.pop("flag", "--" + flag_prefix + f.name.replace("_", "-"))
         aliases = spec.pop("aliases", ())
-        text = spec.pop("help", None) or docs.get(f.name, "")
+        own_help = spec.pop("help", None)
+        text = own_help or docs.get(f.name, "")
         kw: dict[str, Any] = {"dest": name}
         if literal_choices(hint) is not None and "choices" not in spec:
             spec["choices"] = literal_choices(hint)
         if hint is bool:
             flag = flag if default is False or flag.startswith("--no-") else "--no-" + flag[2:]
             kw["action"] = "store_true" if default is False else "store_false"
+            if default is True and not own_help and text:  # the field's docstring says what the flag turns off
+                text = f"Turn off, on by default: {text}"
         elif default is dataclasses.MISSING or default == "":
             kw.update(required=True, type=_base_type(hint))
         else:

@@ -146,6 +146,8 @@ def test_config_round_trip_through_the_parser():
     add_config(p, Outer, {"label": "--tag", "inner.width": {"choices": (3, 4)}})
     help_text = p.format_help()
     assert "--no-fast" in help_text and "--tag" in help_text and "How wide." in help_text and "100%" in help_text
+    no_fast = next(a for a in p._actions if "--no-fast" in a.option_strings)
+    assert no_fast.help == "Turn off, on by default: Go fast."  # the docstring describes the on state
     cfg = from_args(Outer, p.parse_args(["--name", "x", "--sizes", "4,5,6", "--no-fast", "--width", "4"]))
     assert cfg == Outer("x", (4, 5, 6), False, None, Inner(4))
     assert from_args(Outer, p.parse_args(["--name", "y"])) == Outer("y")
