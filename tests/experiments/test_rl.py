@@ -52,7 +52,8 @@ def _recorder():
 
         def _on_step(self) -> bool:
             self._obs.append(np.array(self.model._last_obs[0]))
-            self._act.append(np.array(self.locals["actions"][0]))
+            sent = self.locals.get("clipped_actions", self.locals["actions"])  # PPO clips what it sends to the env
+            self._act.append(np.array(sent[0]))
             self._rew.append(float(self.locals["rewards"][0]))
             if self.locals["dones"][0]:
                 self.episodes.append((np.array(self._obs), np.array(self._act), np.array(self._rew)))

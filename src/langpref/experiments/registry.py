@@ -163,7 +163,7 @@ for _experiment in (
     ),
     Experiment(
         "rl",
-        "issue 33: policies (SAC) trained on the reward learned from language, from comparisons, the true reward "
+        "issue 33: policies (PPO) trained on the reward learned from language, from comparisons, the true reward "
         "and the task's success, judged by the true reward (1 human x 3 seeds, Q = 40)",
         "langpref.experiments.rl:run_rl_experiment",
         "langpref.experiments.rl:RLConfig",

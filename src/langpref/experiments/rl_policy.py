@@ -156,8 +156,8 @@ def make_agent(algorithm: str, env, cfg, seed: int):
     if algorithm == "sac":
         return sb3.SAC("MlpPolicy", env, learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, **kw)
     if algorithm == "ppo":
-        n_steps = max(cfg.batch_size, min(2048, cfg.steps))
-        return sb3.PPO("MlpPolicy", env, n_steps=n_steps, batch_size=cfg.batch_size, **kw)
+        n_steps = max(2, min(2048, cfg.steps))  # a tiny budget is not overrun by one default-sized rollout
+        return sb3.PPO("MlpPolicy", env, n_steps=n_steps, batch_size=min(cfg.batch_size, n_steps), **kw)
     raise LangprefError(f"unknown algorithm {algorithm!r}: choose sac or ppo")
 
 
