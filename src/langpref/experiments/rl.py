@@ -47,7 +47,7 @@ class RLConfig:
     algorithm: Algorithm = "ppo"
     """Stable-Baselines3 `ppo` or `sac`. Chosen on a val human (master seed 1, the true reward, 20,000 steps, 2 seeds):
     the same final true reward (0.659 both), PPO's rollouts press the button (success 0.67 against 0.00) and it trains
-    12 times faster (docs/results.md, "Policies on the learned reward: the algorithm chosen on a val human")."""
+    12 times faster (docs/results.md, "Policies on the learned reward, three seeds")."""
     steps: int = 100_000
     """Environment steps per policy (the budget)."""
     horizon: int = 150
