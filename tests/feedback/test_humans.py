@@ -67,6 +67,31 @@ def test_language_human_follows_eq10_softmax(space):
     assert np.all(np.abs(counts / 3000 - expected) < 4 * np.sqrt(expected * (1 - expected) / 3000) + 1e-9)
 
 
+def test_a_human_who_can_say_no_change_says_it_near_its_best_and_rarely_far_from_it(space):
+    w = np.array([0.6, -0.3, 0.74])
+    pool = space.split("train")
+
+    def human(logit):
+        return LanguageHuman(
+            w, space.theta, space.table("test"), pool, space.feature_names, seed=1, no_change_logit=logit
+        )
+
+    worst = int(pool[np.argmin(space.theta[pool] @ w)])
+    talker = human(1.0)
+    near = [talker.answer(LanguageQuery(talker.best)).no_change for _ in range(600)]
+    far = [talker.answer(LanguageQuery(worst)).no_change for _ in range(600)]
+    at_best = np.e / (np.e + 3)  # every feature logit is 0 at tau* itself
+    assert np.isclose(talker.no_change_probability(talker.best), at_best)
+    assert abs(np.mean(near) - at_best) < 0.07 and np.mean(far) < 0.5 * np.mean(near)
+    said = next(a for a in (talker.answer(LanguageQuery(talker.best)) for _ in range(50)) if a.no_change)
+    assert said.feature is None and said.direction is None and said.text
+    # the paper's human never says it, and draws exactly what it drew before the option existed
+    paper = human(None)
+    assert not any(paper.answer(LanguageQuery(talker.best)).no_change for _ in range(200))
+    a, b = human(None), LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, seed=1)
+    assert [a.answer(LanguageQuery(int(i))).text for i in pool] == [b.answer(LanguageQuery(int(i))).text for i in pool]
+
+
 def test_language_human_is_seeded(space):
     def texts(seed):
         h = LanguageHuman(

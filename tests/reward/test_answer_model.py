@@ -13,6 +13,7 @@ from langpref.feedback import KINDS, toy_latent_space
 from langpref.feedback.comparison import ComparisonAnswer, ComparisonQuery
 from langpref.feedback.humans import HumanConfig
 from langpref.feedback.language import LanguageAnswer, LanguageQuery
+from langpref.language.bank import NO_CHANGE_FEEDBACK
 from langpref.reward import LearnRewardConfig, learn_reward
 from langpref.reward.answer_model import AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner
 from langpref.reward.cost import query_costs
@@ -47,6 +48,31 @@ def test_the_same_sentence_about_two_trajectories_teaches_two_things(space):
     assert not np.allclose(means[0], means[1], atol=1e-2)
     scale = AnswerModelConfig().prior_scale  # the belief's weights are in units of the prior's spread
     assert means[1][1] > means[0][1] + 0.3 * scale and means[1][1] > 0.5 * scale
+
+
+def test_no_change_says_the_shown_trajectory_is_nearly_the_best(space):
+    """"That's good, no change" about a trajectory moves the belief toward rewards under which it is the best, and
+    the paper's learner, which compares imagined improvements, learns nothing from it (no pairs, no failure)."""
+    pool = space.split("train")
+    learner = learner_of(space)
+    position = int(np.argmin(learner.predict(space.phi[pool])))  # the worst under the prior's mean
+    good = LanguageAnswer(LanguageQuery(int(pool[position])), NO_CHANGE_FEEDBACK, no_change=True)
+    learner.observe("language", good)
+    learner.fit()
+    after = learner.predict(space.phi[pool])
+    assert np.mean(after < after[position]) > 0.8  # it now beats most of the pool
+    paper = KINDS["language"].pairs(space, good, LearnRewardConfig().reward, np.random.default_rng(0))
+    assert len(paper.weights) == 0
+
+
+def test_a_human_who_says_no_change_is_learned_from_by_both_learners(space):
+    cfg = LearnRewardConfig(
+        feedback="language", queries=12, humans=2, seeds=1, human=HumanConfig(phrasing_split="train", no_change_logit=2.0)
+    )
+    for learner in ("paper", "answer-model"):
+        out = learn_reward(space, replace(cfg, learner=learner))
+        assert np.isfinite(out["cross_entropy"]).all()
+    assert out["config"]["human"]["no_change_logit"] == 2.0
 
 
 def test_the_belief_contracts_as_answers_arrive(space):

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+from langpref.language.bank import NO_CHANGE_FEEDBACK
+
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = [
     "--headless",
@@ -172,6 +174,7 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
     # again, then the last round, which says so
     begin(page, "improve", "Experiment 1")
     wait_kind(page, "language", "improve")
+    assert not page.query_selector("#no-change")  # Study 1 asks how to change; "satisfied" comes after each change
     assert page.query_selector(".frame.loading .video-status")  # on screen until the video plays
     assert_videos_play(page, 1)
     shots(page, "language")
@@ -208,7 +211,7 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
     order = page.evaluate("[...document.querySelectorAll('#main > *')].map(e => e.className || e.tagName)")
     assert order.index("notice understood") < order.index("separator") < order.index("videos")
     assert "a new trajectory" in page.inner_text("h1")
-    give_feedback(page, "Get closer to the button.")
+    click_and_wait(page, "#no-change")  # "that's good, no change": an answer of its own, past the feedback gate
     wait_kind(page, "rating", "pref_language")
     assert_videos_play(page, 1)
     shots(page, "rating")
@@ -248,7 +251,8 @@ def test_a_participant_clicks_through_the_whole_study(browser, server, h, tmp_pa
     n_steps = conn.execute("SELECT count(*) FROM steps").fetchone()[0]
     assert conn.execute("SELECT count(*) FROM answers").fetchone()[0] == n_steps - 1 == 1 + 4 + 1 + 3 + 3 + 1
     assert conn.execute("SELECT count(*) FROM answers WHERE time_consistent = 0").fetchone()[0] == 0
-    assert conn.execute("SELECT text FROM feedback ORDER BY seq").fetchone()[0] == EVIL
+    texts = [r[0] for r in conn.execute("SELECT text FROM feedback ORDER BY seq")]
+    assert texts[0] == EVIL and texts[-1] == NO_CHANGE_FEEDBACK
     assert conn.execute("SELECT count(*) FROM comparisons").fetchone()[0] == 2
     assert [r[0] for r in conn.execute("SELECT choice FROM comparisons ORDER BY seq")] == [1, 0]
     assert conn.execute("SELECT count(*) FROM participants WHERE user_agent IS NOT NULL").fetchone()[0] == 0

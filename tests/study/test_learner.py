@@ -171,3 +171,43 @@ def test_a_database_made_before_the_learner_option_continues_with_the_papers(eng
     build_state(h.serve_config(db), engine=engine, progress=False).videos.close()  # it continues
     with pytest.raises(LangprefError, match="--learner paper, not answer-model"):
         resolve_study_config(db, {"learner": "answer-model"})
+
+
+@pytest.mark.parametrize("learner", ["paper", "answer-model"])
+def test_good_as_it_is_is_a_study2_answer_and_not_a_study1_one(engine, h, tmp_path, learner):
+    """"That's good, no change" (`{"feedback": {"no_change": true}}`): refused where Study 1 asks how to change, taken
+    in Study 2 without the feedback gate (which refuses typed praise), stored as its text, and read back from the
+    database as the same answer: the answer model's own meaning, no pairs for Eq. 9."""
+    from langpref.language.bank import NO_CHANGE_FEEDBACK
+
+    db = tmp_path / f"{learner}.sqlite"
+    state = build_state(h.serve_config(db, learner=learner), engine=engine, progress=False)
+    good = {"no_change": True}
+    try:
+        with TestClient(create_app(state)) as client:
+            pid, headers = h.join(client)
+            url = f"/api/participants/{pid}/answer"
+            step = _walk(client, h, pid, headers, lambda s: s["kind"] == "language")
+            assert step["phase"] == "improve"
+            r = client.post(url, json={"feedback": good, "client_ms": 5, "seq": step["seq"]}, headers=headers)
+            assert r.status_code == 400 and "satisfied" in r.json()["error"]
+            step = _walk(client, h, pid, headers, lambda s: s["kind"] == "language" and s["phase"] == "pref_language")
+            for bad in ({"no_change": False}, {"no_change": True, "text": "x"}, ["no_change"]):
+                r = client.post(url, json={"feedback": bad, "client_ms": 5, "seq": step["seq"]}, headers=headers)
+                assert r.status_code == 400 and "no_change" in r.json()["error"], r.text
+            r = client.post(url, json={"feedback": good, "client_ms": 5, "seq": step["seq"]}, headers=headers)
+            assert r.status_code == 200, r.text
+            assert r.json()["understood"]["no_change"] is True
+            kept = state.robot._learners[(pid, "language")][0]
+            rebuilt = StudyRobot(state.engine, state._history, cfg=state.cfg)._learner(_participant(state, pid), "language", 1)
+    finally:
+        state.videos.close()
+    conn = sdb.connect(db)
+    text = conn.execute("SELECT text FROM feedback WHERE phase = 'pref_language'").fetchone()["text"]
+    conn.close()
+    assert text == NO_CHANGE_FEEDBACK
+    if learner == "answer-model":
+        for x in (kept, rebuilt):
+            assert x.answers[-1][2][x.no_change] == 1.0  # its own meaning, not a reading of the text
+    else:
+        assert [len(b.weights) for b in kept.batches] == [0] == [len(b.weights) for b in rebuilt.batches]

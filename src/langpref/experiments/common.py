@@ -172,6 +172,8 @@ def title_suffix(perfect: bool, human) -> str:
         parts.append(f"feature rule {human.feature_rule}")
     if human.vague:
         parts.append(f"{human.vague:g} vague")
+    if human.no_change_logit is not None:
+        parts.append(f"says no change, logit {human.no_change_logit:g}")
     return f" ({', '.join(parts)})" if parts else ""
 
 

@@ -102,6 +102,10 @@ class HumanConfig:
     (|theta*_f - theta0_f|, whatever its weight), said in the direction toward tau*."""
     vague: float = 0.0
     """Probability that the language human says something vague that names no feature ("Not quite.")."""
+    no_change_logit: float | None = None
+    """The logit of "that's good, no change" beside Eq. 10's feature logits w_f (theta*_f - theta0_f) / temperature,
+    so it is likely only near the human's best trajectory (at tau* itself it has e^c / (e^c + F)); None: the human
+    always names a feature (the paper's). With `largest-change`, the human says it when shown tau* itself."""
 
     @property
     def phrase_source(self) -> str:
@@ -133,4 +137,5 @@ class HumanConfig:
             + ([] if self.direction == "reward" else [self.direction])
             + ([] if self.feature_rule == "eq10" else [self.feature_rule])
             + ([] if self.vague == 0 else [f"vague{self.vague:g}"])
+            + ([] if self.no_change_logit is None else [f"nochange{self.no_change_logit:g}"])
         )

@@ -31,7 +31,7 @@ from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
 from langpref.feedback.kind import RANDOM, FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
-from langpref.language.bank import DIRECTIONS, VAGUE_FEEDBACK
+from langpref.language.bank import DIRECTIONS, NO_CHANGE_FEEDBACK, VAGUE_FEEDBACK
 
 if TYPE_CHECKING:
     from langpref.reward import RewardConfig
@@ -60,6 +60,9 @@ class LanguageAnswer:
     """What a synthetic human meant (ground truth; never read by a method). `None` for a real participant."""
     direction: str | None = None
     """`increase` or `decrease`, what a synthetic human meant; `None` for a real participant."""
+    no_change: bool = False
+    """"That's good, no change": the shown trajectory is as the person wants it (`text` is then
+    `NO_CHANGE_FEEDBACK`). The answer-model learner reads it as its own meaning; Eq. 9 has nothing to learn from it."""
 
     def __post_init__(self) -> None:
         if not self.text.strip():
@@ -81,6 +84,7 @@ class LanguageHuman:
         direction: str = "reward",
         feature_rule: str = "eq10",
         vague: float = 0.0,
+        no_change_logit: float | None = None,
     ):
         self.w = np.asarray(w, dtype=np.float64)
         self.theta = np.asarray(theta, dtype=np.float64)
@@ -98,6 +102,7 @@ class LanguageHuman:
             raise LangprefError(f"unknown feature rule {feature_rule!r}: choose one of {', '.join(FEATURE_RULES)}")
         self.feature_rule = feature_rule
         self.vague = float(vague)
+        self.no_change_logit = None if no_change_logit is None else float(no_change_logit)
         cands = np.asarray(candidates, dtype=np.int64)
         self.best = int(cands[np.argmax(true_reward(self.w, self.theta[cands]))])
         """tau*, the best trajectory of the candidate set under w."""
@@ -116,14 +121,25 @@ class LanguageHuman:
                 return 0 if gap > 0 else 1
         return 0 if self.w[feature] >= 0 else 1
 
+    def no_change_probability(self, shown: int) -> float:
+        """P("that's good, no change" | shown): 0 for the paper's human (`no_change_logit` None)."""
+        if self.no_change_logit is None:
+            return 0.0
+        if self.feature_rule == "largest-change":
+            return float(shown == self.best)
+        logits = self.w * (self.theta[self.best] - self.theta[shown]) / self.temperature
+        return float(softmax(np.append(logits, self.no_change_logit))[-1])
+
     def answer(self, query: LanguageQuery) -> LanguageAnswer:
         if self.vague > 0 and self.rng.random() < self.vague:  # draws nothing for the default human
             return LanguageAnswer(query, VAGUE_FEEDBACK[int(self.rng.integers(len(VAGUE_FEEDBACK)))])
+        if self.no_change_logit is not None and self.rng.random() < self.no_change_probability(query.shown):
+            return LanguageAnswer(query, NO_CHANGE_FEEDBACK, no_change=True)
         if self.feature_rule == "largest-change":
             gap = self.theta[self.best] - self.theta[query.shown]
             feature = int(np.argmax(np.abs(gap)))
             direction = 0 if gap[feature] > 0 or (gap[feature] == 0 and self.w[feature] >= 0) else 1
-        else:
+        else:  # (given it named a feature, Eq. 10's softmax over features is the same with or without "no change")
             feature = int(self.rng.choice(len(self.w), p=self.feature_probabilities(query.shown)))
             direction = self.direction(feature, query.shown)
         rows = self.phrases.rows(feature, direction)
@@ -151,6 +167,7 @@ def make_human(
         direction=cfg.direction,
         feature_rule=cfg.feature_rule,
         vague=cfg.vague,
+        no_change_logit=cfg.no_change_logit,
     )
 
 
@@ -180,6 +197,9 @@ def language_pairs(
     """Explicit and implicit pairs of one piece of language feedback (no ground-truth label is read); `psi`, when
     given, stands for the sentence's embedding (a study participant's confirmed meaning)."""
     phi = space.phi[answer.query.shown]
+    if answer.no_change:  # Eq. 9 compares imagined improvements; "no change" names none
+        empty = np.zeros((0, len(phi)))
+        return PairBatch(empty, empty, np.zeros(0))
     psi = space.psi_of(answer.text) if psi is None else np.asarray(psi)
     hat = phi + psi
     winners, losers, weights = [], [], []
@@ -208,9 +228,12 @@ def language_pairs(
 
 def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
     """The body's `feedback`: text, trimmed, not empty, at most MAX_FEEDBACK characters (and at most
-    MAX_FEEDBACK_RAW before trimming: the answer body stores the text as sent)."""
+    MAX_FEEDBACK_RAW before trimming: the answer body stores the text as sent); or `{"no_change": true}`, "that's
+    good, no change" (stored as the text `NO_CHANGE_FEEDBACK`, which also means it when sent as text)."""
+    if isinstance(value, dict) and list(value) == ["no_change"] and value["no_change"] is True:
+        return LanguageAnswer(query, NO_CHANGE_FEEDBACK, no_change=True)
     if not isinstance(value, str):
-        raise LangprefError("'feedback' must be text")
+        raise LangprefError("'feedback' must be text, or {\"no_change\": true} when the trajectory is good as it is")
     if len(value) > MAX_FEEDBACK_RAW:
         raise LangprefError(f"Your feedback is {len(value)} characters long; please keep it under {MAX_FEEDBACK}.")
     text = value.strip()
@@ -218,7 +241,7 @@ def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
         raise LangprefError('Please type your feedback before continuing (for example: "Move faster.").')
     if len(text) > MAX_FEEDBACK:
         raise LangprefError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
-    return LanguageAnswer(query, text)
+    return LanguageAnswer(query, text, no_change=text == NO_CHANGE_FEEDBACK)
 
 
 def to_record(answer: LanguageAnswer) -> dict[str, Any]:
@@ -226,7 +249,7 @@ def to_record(answer: LanguageAnswer) -> dict[str, Any]:
 
 
 def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
-    return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
+    return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"], no_change=row["text"] == NO_CHANGE_FEEDBACK)
 
 
 # ---- active query selection (`langpref.reward.selection`, imported when a strategy is used) --------------------

@@ -38,6 +38,10 @@ VAGUE_FEEDBACK: tuple[str, ...] = (
 )
 """What a person says when they say nothing about any feature (a synthetic human's `vague` answers); the oracle
 encoder reads them as the zero vector."""
+NO_CHANGE_FEEDBACK = "That's good, no change."
+"""The answer "that's good, no change" (a button in the study, `no_change` in a language answer): the shown trajectory
+is as the person wants it. Recorded with this text; never read by the language model (the feedback gate refuses
+praise without a direction when it is typed)."""
 SPLIT_SHARES = (0.6, 0.2, 0.2)  # the paper's real-robot bank: 297/99/100 phrasings
 
 _APOSTROPHES = {"'", "\u2019", "\u2018", "`"}

@@ -16,9 +16,13 @@ The likelihood of a language answer l about tau is normalised over the 2F meanin
 person could have meant:
 
     P(l | v, tau) = sum_m P(m | l) P(m | v, tau)
-    P(f | v, tau) = softmax_f( v_f (z_f(tau*_v) - z_f(tau)) / T ),     tau*_v = argmax_{pool} r_v
+    P(f | v, tau) = softmax over f and "no change" of ( v_f (z_f(tau*_v) - z_f(tau)) / T ; c ),   tau*_v = argmax r_v
     P(d | f, v)   = 1 - slip for the direction that raises r_v (sign of v_f), slip for the other
-    P(m | v, tau) = (1 - lapse) P(f | v, tau) P(d | f, v) + lapse / 2F
+    P(m | v, tau) = (1 - lapse) P(f | v, tau) P(d | f, v) + lapse / (2F + 1)
+
+and one more meaning, "that's good, no change" (a button in the study, never read from text), whose logit beside the
+features' is a constant c (`no_change_logit`): likely only where every v_f (z_f(tau*_v) - z_f(tau)) is small, near
+the belief's optimum, so hearing it says tau is nearly the best, and hearing a feature says it is not.
 
 P(m | l) is the model's soft reading of the sentence: softmax over meanings of cos(psi_l, prototype_m) / T_read,
 prototypes the mean psi of each meaning's phrasings in the robot's bank split, T_read fitted to the bank's own val
@@ -86,6 +90,8 @@ class AnswerModelConfig:
     phrasings (the train split's when the bank has no val split)."""
     comparison_rationality: float = 1.0
     """beta of a comparison's Bradley-Terry likelihood in the same belief."""
+    no_change_logit: float = 1.0
+    """c, the logit of "that's good, no change" beside the feature logits v_f (z_f(tau*) - z_f(tau)) / T."""
     prior_scale: float = 0.5
     """Standard deviation of the Gaussian prior on each reward weight. 0.5 was chosen on the val protocol of all three
     tasks (Meta-World, robosuite, the drawer; language and comparisons): it has the lowest or near-lowest mean CE in
@@ -149,7 +155,7 @@ class AnswerReader:
         return table.psi[keep], target
 
     def fit_confusion(self, space: LatentSpace, features: np.ndarray) -> np.ndarray:
-        """(2F, 2F) P(read as r | meant m): how often the held-out phrasings of each meaning are read (argmax) as
+        """(2F + 1, 2F + 1) P(read as r | meant m): how often the held-out phrasings of each meaning are read (argmax) as
         each meaning, with one pseudo-count on the diagonal and a tenth on every cell. Active selection scores the
         information in what is *read*, so a meaning often misread is worth less to ask about."""
         psi, target = self.held_out(space, features)
@@ -157,7 +163,9 @@ class AnswerReader:
         counts = np.eye(m) + 0.1
         if len(target):
             np.add.at(counts, (target, self.log_probabilities(psi).argmax(axis=1)), 1.0)
-        return counts / counts.sum(axis=1, keepdims=True)
+        out = np.eye(m + 1)  # "no change" is a button: never misread, never read into
+        out[:m, :m] = counts / counts.sum(axis=1, keepdims=True)
+        return out
 
     def fit_temperature(self, space: LatentSpace, features: np.ndarray) -> float:
         """The T_read of `READING_TEMPERATURES` under which the bank's val phrasings are likeliest as their own
@@ -178,7 +186,9 @@ def confirm(learner: AnswerModelLearner, answer: Any, margin: float) -> tuple[bo
     """Ask when unsure: (asked, meaning). When the top two of the model's reading of `answer` are closer than
     `margin`, the person is shown the `CONFIRM_OPTIONS` top readings and clicks the one they meant (a synthetic human
     clicks the meaning it spoke, if shown), or "none of these" (meaning None: the answer is not learned from). When
-    sure, (False, the top reading)."""
+    sure, (False, the top reading). "No change" was clicked, never read: (False, its meaning)."""
+    if answer.no_change:
+        return False, learner.no_change
     reading = learner.reading(answer.text)
     order = np.argsort(-reading)
     if reading[order[0]] - reading[order[1]] >= margin:
@@ -234,15 +244,25 @@ class AnswerModelLearner:
         """(n,) position in the pool of tau*_v for each row of v."""
         return np.argmax(v @ self.z_pool.T, axis=1)
 
+    @property
+    def no_change(self) -> int:
+        """The index of the meaning "that's good, no change" (after the 2F feature meanings)."""
+        return 2 * self.num_features
+
     def meaning_probabilities(self, v: np.ndarray, best: np.ndarray, shown: np.ndarray) -> np.ndarray:
-        """(n, C, 2F) P(m | v_s, tau_c) for particles v (n, F) with optima `best` and trajectories `shown` (C,)."""
+        """(n, C, 2F + 1) P(m | v_s, tau_c) for particles v (n, F) with optima `best` and trajectories `shown` (C,);
+        the last meaning is "no change"."""
         cfg = self.cfg
         gap = self.z_pool[best][:, None, :] - self.z[np.asarray(shown)][None, :, :]  # (n, C, F)
-        pf = np.exp(_log_softmax(v[:, None, :] * gap / cfg.answer_temperature))
+        logits = v[:, None, :] * gap / cfg.answer_temperature
+        stay = np.full(logits.shape[:2] + (1,), cfg.no_change_logit)
+        p = np.exp(_log_softmax(np.concatenate([logits, stay], axis=-1)))
+        pf = p[..., :-1]
         up = np.where(v >= 0, 1.0 - cfg.direction_slip, cfg.direction_slip)[:, None, :]  # (n, 1, F) P(increase)
-        out = np.empty(pf.shape[:2] + (2 * pf.shape[2],))
-        out[..., 0::2] = pf * up
-        out[..., 1::2] = pf * (1.0 - up)
+        out = np.empty(pf.shape[:2] + (2 * pf.shape[2] + 1,))
+        out[..., 0:-1:2] = pf * up
+        out[..., 1:-1:2] = pf * (1.0 - up)
+        out[..., -1] = p[..., -1]
         return (1.0 - cfg.lapse) * out + cfg.lapse / out.shape[-1]
 
     def _log_likelihood(self, v: np.ndarray, best: np.ndarray, answer: tuple) -> np.ndarray:
@@ -412,11 +432,14 @@ class AnswerKind:
 
 
 def _record_language(learner: AnswerModelLearner, answer: Any, meaning: int | None) -> tuple:
-    """(shown trajectory, P(m | sentence)); a confirmed meaning replaces the reading."""
-    if meaning is None:
-        reading = learner.reading(answer.text)
+    """(shown trajectory, P(m | answer) over the 2F + 1 meanings); a confirmed meaning replaces the reading, and "no
+    change" is its own meaning (a sentence is never read as it)."""
+    reading = np.zeros(2 * learner.num_features + 1)
+    if answer.no_change:
+        reading[learner.no_change] = 1.0
+    elif meaning is None:
+        reading[:-1] = learner.reading(answer.text)
     else:
-        reading = np.zeros(2 * learner.num_features)
         reading[int(meaning)] = 1.0
     return int(answer.query.shown), reading
 

@@ -177,7 +177,7 @@ class RewardLearner:
     def fit(self) -> None:
         """Refit on all pairs so far. On one thread: the problem is small, and the fit (the mlp's above all, which is
         not convex) then does not depend on how many threads or sweep workers the machine has."""
-        if not self.batches:
+        if not any(len(b.weights) for b in self.batches):  # nothing yet, or only answers without pairs
             return
         torch = self._torch
         opt = torch.optim.LBFGS(

@@ -166,7 +166,7 @@ class LearnRewardConfig:
         self.reward.validate()
 
 
-NEWER_HUMAN_FIELDS = {"feature_rule": "eq10", "vague": 0.0}
+NEWER_HUMAN_FIELDS = {"feature_rule": "eq10", "vague": 0.0, "no_change_logit": None}
 """Fields of the synthetic human added with the answer-model learner, and their defaults."""
 
 

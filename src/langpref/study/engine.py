@@ -48,6 +48,8 @@ History = Callable[[str, str], list[Any]]
 Confirmations = Callable[[str, str], dict[int, Confirmed]]
 """(participant id, method) -> {query number: what the participant confirmed its answer meant}."""
 Learner = RewardLearner | AnswerModelLearner
+NO_CHANGE_READING: dict[str, Any] = {"feature": None, "direction": None, "confidence": 1.0, "no_change": True}
+"""How "that's good, no change" (a button, never read by the model) is shown back and stored."""
 CONFIRM_OPTIONS = 3
 """Readings offered on a confirm step (besides "none of these")."""
 
@@ -306,13 +308,15 @@ class StudyRobot:
         self._add(learner, p, method, number, answer, confirmed)
         learner.fit()
         self._keep(p, method, learner, [*past, answer])
-        return self.engine.understand(answer.text) if isinstance(answer, LanguageAnswer) else None
+        if not isinstance(answer, LanguageAnswer):
+            return None
+        return NO_CHANGE_READING if answer.no_change else self.engine.understand(answer.text)
 
     def confirm(self, p: Participant, method: str, answer: Any) -> dict[str, Any] | None:
         """What to ask about a language answer whose reading is uncertain (`flow.Robot.confirm`): None unless the
         margin between its top two meanings is below `confirm_margin` (1: always)."""
         limit = self.cfg.confirm_margin
-        if limit is None or not isinstance(answer, LanguageAnswer):
+        if limit is None or not isinstance(answer, LanguageAnswer) or answer.no_change:
             return None
         meanings = self.engine.meanings
         reading = meanings.reading(self.engine.psi(answer.text))

@@ -242,6 +242,8 @@ def parse_answer(body: Any, step: Step, kinds: tuple[str, ...] = METHODS) -> Ans
             )
         )
     value = _answer_value(kind, body, step, kinds)
+    if step.phase == "improve" and getattr(value, "no_change", False):
+        raise AnswerError("here, type how the robot should change; after it moves you are asked if you are satisfied")
     stored: dict[str, Any] = {"seq": step.seq}
     if kind == "survey":
         stored["answers"] = value

@@ -63,6 +63,7 @@ async function api(method, path, body) {
 }
 
 function meaning(u) {
+  if (u.no_change) return "The robot took it as: this trajectory is close to what you want.";
   const pair = MEANINGS[u.feature];
   const text = pair ? pair[u.direction === "increase" ? 0 : 1] : `${u.direction} ${u.feature.replaceAll("_", " ")}`;
   return `The robot understood your feedback as \u201c${text}\u201d (confidence ${Math.round(100 * u.confidence)}%).`;
@@ -287,8 +288,12 @@ function renderLanguage(main, step) {
     if (!box.value.trim()) { showError("Please type your feedback before continuing."); box.focus(); return; }
     submit({feedback: box.value, client_ms: clientMs()}, [send]);
   });
+  // Study 2: "that's good, no change" is an answer too (the robot learns the trajectory is close to the best)
+  const good = study1 ? null : el("button", {type: "button", id: "no-change", class: "secondary",
+                                             text: "It\u2019s good as it is (no change)"});
+  good?.addEventListener("click", () => submit({feedback: {no_change: true}, client_ms: clientMs()}, [send, good]));
   form.append(label, box, el("div", {}, counter), errorLine(), el("p", {id: "status", class: "thinking", hidden: true}),
-              el("p", {}, send));
+              el("p", {}, send, good ? " " : null, good));
   main.append(form);
   box.focus({preventScroll: true});
 }
