@@ -71,8 +71,10 @@ def test_a_human_who_says_no_change_is_learned_from_by_both_learners(space):
     )
     for learner in ("paper", "answer-model"):
         out = learn_reward(space, replace(cfg, learner=learner))
-        assert np.isfinite(out["cross_entropy"]).all()
+        assert np.isfinite(out["cross_entropy"]).all() and 0 < out["no_change_share"] < 1
+        assert out["true_reward_of_best"][-1] > out["true_reward_of_best"][0]
     assert out["config"]["human"]["no_change_logit"] == 2.0
+    assert "no_change_share" not in learn_reward(space, replace(cfg, human=HumanConfig(phrasing_split="train")))
 
 
 def test_the_belief_contracts_as_answers_arrive(space):

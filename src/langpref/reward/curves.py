@@ -32,6 +32,8 @@ class Curves:
     directions after the last query (a calibration check; read by the metrics only)."""
     confirmed: list[int] = field(default_factory=list)
     """With `confirm_margin`, per language answer: -1 not asked, -2 "none of these", else the meaning clicked."""
+    no_change: list[int] = field(default_factory=list)
+    """The queries (1..Q) the person answered "that's good, no change"."""
     kendall_tau: list[float] = field(default_factory=list)
     """Kendall's tau-b between the true and the learned ranking of the evaluation split, after 0..Q queries."""
     epic_distance: list[float] = field(default_factory=list)
@@ -110,11 +112,15 @@ def standard_summary(runs: list[Curves]) -> dict:
 def confirm_summary(runs: list[Curves]) -> dict:
     """Of answer-model runs, `credible_90`: the share whose true direction lies in the belief's 90% credible region
     (calibrated: about 0.9). Of runs that asked people to confirm their sentences: the share of language answers
-    confirmed, and of those the share answered "none of these". Empty for the paper's learner."""
+    confirmed, and of those the share answered "none of these". Of runs whose person said "that's good, no change",
+    the share of language answers that were it (`no_change_share`). Empty for the paper's learner and human."""
     out = {}
     credible = [c.credible for c in runs if c.credible is not None]
     if credible:
         out["credible_90"] = float(np.mean(credible))
+    said = sum(len(c.no_change) for c in runs)
+    if said:
+        out["no_change_share"] = said / max(sum(k == "language" for c in runs for k in c.kinds), 1)
     marks = np.array([m for c in runs for m in c.confirmed])
     if len(marks):
         asked = marks != -1

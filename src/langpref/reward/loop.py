@@ -243,6 +243,8 @@ def run_reward_learning(
             if n == len(batch):
                 learner.fit()
             curves.kinds.append(kind.name)
+            if getattr(answer, "no_change", False):
+                curves.no_change.append(len(curves.kinds))
             curves.seconds.append(curves.seconds[-1] + seconds)
             curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
     _score_final(curves, learner, space, w, cfg, R_eval, run_seed, generation, episodes)

@@ -277,6 +277,8 @@ class LalInfoGain(Selector):
         self.psi: list[np.ndarray] = []
 
     def observe(self, space: LatentSpace, answer: Any) -> None:
+        if answer.no_change:  # the follow-up's model has sentences only
+            return
         self.shown.append(int(answer.query.shown))
         self.phi.append(space.phi[answer.query.shown])
         self.psi.append(space.psi_of(answer.text))
