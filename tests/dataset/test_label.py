@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 import zipfile
 from pathlib import Path
 
@@ -93,11 +94,13 @@ def _run(capsys, *argv: str) -> tuple[int, str, str]:
 
 def test_cli_json_force_and_the_config_record(recording, reward_path, tmp_path, capsys):
     out = tmp_path / "out"
+    started = time.perf_counter()
     code, stdout, _ = _run(capsys, "label", str(recording), "--reward", str(reward_path), "--out", str(out), "--json")
+    took = time.perf_counter() - started
     assert code == 0
     summary = json.loads(stdout)
     assert summary["episodes"] == 3 and summary["frames"] == sum(LENGTHS) and summary["out"] == str(out)
-    assert summary["seconds"] >= 0 and (out / "label.config.json").is_file()
+    assert 0 < summary["seconds"] <= took + 0.01 and (out / "label.config.json").is_file()
     code, _, err = _run(capsys, "label", str(recording), "--reward", str(reward_path), "--out", str(out))
     assert code == 2 and "already exists; pass --force" in err and err.count("\n") == 1
     (out / "marker").write_text("old")
