@@ -9,31 +9,40 @@ when the model's `negation` setting is on, for the texts `detect` flags; everyth
 What counts as a cue (`CUES`, applied in order, one match = one cue):
 
 - "there's no need to / no need for" ("No need to rush." -> "Rush.");
-- "don't", "do not", "never" (a negated imperative or statement: "Don't go so high." -> "Go so high.");
+- "don't", "do not", "never" (a negated imperative: "Don't go so high." -> "Go high.");
 - n't on an auxiliary ("You shouldn't have lifted it." -> "You should have lifted it."), "cannot";
-- "not" ("Try not to sink." -> "Try to sink."), "nowhere" ("Go nowhere near the bottle.");
-- "no" before a word ("No rushing.", "Go no higher.");
-- "stop", "quit", "cease" before a gerund: the end of an activity negates it ("Stop hugging the table.").
+- "not" ("Try not to sink." -> "Try to sink."), "nowhere" ("Go nowhere near the bottle."); a clause that starts
+  with "Not" has no verb, and its request is a copular one ("Not so far." = "(Don't be) so far.");
+- "no" before a word ("Go no higher." -> "Go higher."); before a gerund it means "stop" ("No rushing.");
+- "stop", "quit", "cease" before a gerund, replaced by "keep", the request they negate ("Stop hugging the table."
+  -> "Keep hugging the table."; the bare gerund "Hugging the table." reads as a description, a complaint).
 
-A negated clause also loses its degree words ("so", "too", "such", "that" before a measure word: `DEGREE`):
-"Don't go so high." becomes "Go high.", not "Go so high.". A degree word marks the behaviour the speaker objects to
-as excessive, and with it the words read as that complaint ("so high" like "You're so high", which asks for lower),
-the opposite of the bare request; the sign flip must apply to the bare request.
+A negated clause also loses its degree words ("so", "too", "such", "so much", "that" before a measure word:
+`DEGREE`): "Don't go so high." becomes "Go high.", not "Go so high.". A degree word marks the behaviour the speaker
+objects to as excessive, and with it the words read as that complaint ("so high" like "You're so high", which asks
+for lower), the opposite of the bare request; the sign flip must apply to the bare request.
 
-What is left alone, and why (each is a phrasing whose meaning is NOT the opposite of its un-negated words):
+What is left alone (`Negation.reason` says which), and why: in each, the un-negated words do not make a request
+whose opposite is what was meant, or the encoder cannot be trusted to read them as one.
 
 - a sentence-initial interjection "No," / "Nope!" refuses what the robot did, it does not negate the request that
   follows ("No, faster." asks for more speed); it is skipped and the rest is read as usual;
-- rhetorical questions and suggestions with the negation on the fronted auxiliary ("Can't you go faster?", "Why
-  don't you speed up?", "Why not go faster?") ask FOR the un-negated action; so do exclamations of feeling ("I can't
-  believe how slow you are", "I can't stand it"), whose negation is about the speaker, not the request;
-- two cues in one clause: English double negatives are either cancelling ("don't stop rushing" = keep rushing) or
-  negative concord ("don't go nowhere near it" = one negation), which words alone cannot tell apart;
-- "not ... enough" means more ("not fast enough" = faster), the same direction as its words;
-- a sentence whose clauses are not all negated ("Don't hold back, go faster.", "Go low, not high."): a plain
-  clause says the request outright, and the encoder reads it; flipping the whole sentence would undo it.
-- words that negate by meaning, not by syntax ("avoid", "less", "barely", "without"): the encoder learns them as
-  words from the bank, and no cue can be removed from them.
+- "rhetorical": questions and suggestions with the negation on the fronted auxiliary ("Can't you go faster?", "Why
+  don't you speed up?", "Why not go faster?") ask FOR the un-negated action; exclamations of feeling ("I can't
+  believe how slow you are") negate something about the speaker, not the request;
+- "double": two cues in one clause: English double negatives are either cancelling ("don't stop rushing" = keep
+  rushing) or negative concord ("don't go nowhere near it" = one negation), which words alone cannot tell apart;
+- "enough": "not ... enough" means more ("not fast enough" = faster), the same direction as its words;
+- "description": a negated report of what the robot is or did ("It isn't open.", "You didn't lift it.") names a
+  shortfall, and asks for more of what it names, the same direction as its words; a report of an obligation or a
+  wish ("You weren't supposed to lift it.", "I don't want it so high.") is a request and flips;
+- "state": a negated copular request ("Don't be so slow.", "No need to be so close.", "Not so far."): "be slow"
+  names a state, not a change, and reads as a complaint about it as often as a request for it, so its opposite is
+  no reading at all (measured: docs/results.md, "Negation as a sign flip in the latent space");
+- "mixed": a sentence whose clauses are not all negated ("Don't hold back, go faster.", "Go low, not high."): a
+  plain clause says the request outright, and the encoder reads it; flipping the whole sentence would undo it;
+- words that negate by meaning, not by syntax ("avoid", "less", "barely", "without"), are no cues: the encoder
+  learns them as words from the bank, and nothing can be removed from them.
 """
 
 from __future__ import annotations
