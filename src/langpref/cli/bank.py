@@ -8,7 +8,7 @@ import json
 import os
 from pathlib import Path
 
-from langpref.cli.common import JSON
+from langpref.cli.common import JSON, NEGATION
 from langpref.cli_config import RERUN, command, emit, opt, path, record
 from langpref.errors import LangprefError
 
@@ -32,7 +32,9 @@ def _embedder(args: argparse.Namespace, task: str):
         return sentence_embedder(args.lang_model), f"pretrained {canonical_name(args.lang_model)}"
     from langpref.model.checkpoint import load_model
 
-    model = load_model(args.model, lang_model=args.lang_model if args.lang_model_given else None)
+    model = load_model(
+        args.model, lang_model=args.lang_model if args.lang_model_given else None, negation=args.negation
+    )
     if model.info.env != task:
         raise LangprefError(f"model {args.model} was trained on task {model.info.env!r}, the bank is task {task!r}")
     return (lambda texts: model.encode_texts(list(texts)).double().cpu().numpy()), f"model {args.model}"
@@ -66,6 +68,7 @@ def _embedder(args: argparse.Namespace, task: str):
         ),
         opt("--threshold", type=float, default=None, help="flag a meaning read right less often (default 0.8)"),
         SEED,
+        NEGATION,
         JSON,
     ],
     "Leave-one-out over the bank's train split: each phrasing is read as the meaning (feature, direction) whose "

@@ -32,17 +32,27 @@ DEVICE = opt(
     default=DEFAULT_DEVICE,
     help="where the model runs: auto (CUDA when there is one, else the CPU), cpu or cuda (default %(default)s)",
 )
+NEGATION = opt(
+    "--negation",
+    action=argparse.BooleanOptionalAction,
+    default=None,
+    help='read a negated request ("Don\'t go so fast.") as the opposite of the request without its cue, or not '
+    "(--no-negation); default: the checkpoint's setting (ModelConfig.negation)",
+)
+"""`--negation/--no-negation` of every command that loads a model to read text with it (`load`)."""
 
 
 def load(args: argparse.Namespace, with_data: bool = True):
-    """The model of `--model` (on `--device`) and, with `with_data`, the dataset of `--data` it is checked against."""
+    """The model of `--model` (on `--device`, reading negations as `--negation` says, else as saved) and, with
+    `with_data`, the dataset of `--data` it is checked against."""
     from langpref.dataset.storage import load_dataset
     from langpref.model.checkpoint import load_model
     from langpref.model.train import resolve_device
 
     dataset = load_dataset(args.data) if with_data else None
     device = resolve_device(getattr(args, "device", "cpu"))  # commands without --device run on the CPU
-    return load_model(args.model, device=device, dataset=dataset), dataset
+    negation = getattr(args, "negation", None)
+    return load_model(args.model, device=device, dataset=dataset, negation=negation), dataset
 
 
 def run_config_experiment(args: argparse.Namespace, name: str, table: Callable[[dict], str]) -> None:

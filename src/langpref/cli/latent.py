@@ -6,7 +6,7 @@ import argparse
 import importlib
 from pathlib import Path
 
-from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, TASK, load, run_config_experiment
+from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, NEGATION, TASK, load, run_config_experiment
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.dataset.splits import SPLITS
 from langpref.experiments.registry import EXPERIMENTS
@@ -113,6 +113,7 @@ def cmd_train(args: argparse.Namespace) -> None:
             help="aggregates only, no phrasing's text (no misread list, no per-phrasing scores): for sets that "
             "must not steer anything (a reporting-only set written apart)",
         ),
+        NEGATION,
         JSON,
     ],
     "Over every ordered pair of the split's trajectories, every feature that differs (beyond the model's tie "
@@ -194,6 +195,7 @@ def evaluate_text(o: dict) -> str:
     [
         MODEL,
         opt("text", help='free-form feedback, e.g. "you\'re way too slow"'),
+        NEGATION,
         JSON,
         lambda p: setattr(
             p,

@@ -75,7 +75,7 @@ def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: 
             frame_shift=model_cfg.frame_shift,
         )
     lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
-    return LatentModel(traj, lang, info, model_cfg.lang_model)
+    return LatentModel(traj, lang, info, model_cfg.lang_model, negation=model_cfg.negation)
 
 
 def _own_state(model: LatentModel) -> dict[str, torch.Tensor]:
@@ -105,6 +105,7 @@ def _config_record(model: LatentModel, model_cfg: ModelConfig, lang_finetuned: b
             "traj_hidden": list(model_cfg.traj_hidden),
             "frame_channels": list(model_cfg.frame_channels),
             "lang_hidden": model.lang.hidden_size,
+            "negation": model.negation,  # the model's own setting, whatever the config said
         },
         "lang_model": model.lang_model_name,
         "lang_model_info": lang_model_info(model.lang_model_name, model.lang.transformer),
@@ -268,12 +269,34 @@ def _check_files(path: Path, files: dict[str, dict[str, Any]]) -> None:
             raise LangprefError(f"{f} is corrupt (checksum mismatch); retrain the model")
 
 
+def _description(path: Path, cfg: dict[str, Any]) -> tuple[ModelConfig, DataInfo]:
+    """The architecture and the data facts of a checkpoint's config.json; fields added since an older checkpoint
+    was written take the value that reproduces it (or, for `negation`, a reading setting, today's default)."""
+    try:
+        mc = dict(cfg["model"])
+        mc.pop("lang_hidden", None)
+        mc.setdefault("observation_deltas", False)  # checkpoints from before the option: (observation, action)
+        mc.setdefault("observations", "state")  # checkpoints from before image observations
+        mc["traj_hidden"] = tuple(mc["traj_hidden"])
+        if "frame_channels" in mc:
+            mc["frame_channels"] = tuple(mc["frame_channels"])
+        return ModelConfig(**mc), DataInfo(**cfg["data"])
+    except (TypeError, KeyError) as exc:
+        raise LangprefError(f"{path / CONFIG} is not a valid model description ({exc}); retrain the model") from None
+
+
 def load_model(
-    path: str | Path, device: str | torch.device = "cpu", dataset=None, lang_model: str | None = None
+    path: str | Path,
+    device: str | torch.device = "cpu",
+    dataset=None,
+    lang_model: str | None = None,
+    negation: bool | None = None,
 ) -> LatentModel:
     """Load a checkpoint directory; with `dataset`, also check the model fits it (env, observation layout); with
     `lang_model`, refuse a checkpoint that names another language model. A frozen language model, loaded again from
-    its name, must be the one the checkpoint was trained with (its architecture and weights checksum)."""
+    its name, must be the one the checkpoint was trained with (its architecture and weights checksum). `negation`
+    overrides the checkpoint's reading of negated requests (`ModelConfig.negation`; a checkpoint from before the
+    setting reads with its default); None keeps the checkpoint's."""
     from safetensors import SafetensorError
     from safetensors.torch import load_file
 
@@ -290,18 +313,7 @@ def load_model(
         state = load_file(str(path / WEIGHTS))
     except (SafetensorError, OSError, ValueError) as exc:
         raise LangprefError(f"{path / WEIGHTS} is unreadable ({type(exc).__name__}); retrain the model") from None
-    try:
-        mc = dict(cfg["model"])
-        mc.pop("lang_hidden", None)
-        mc.setdefault("observation_deltas", False)  # checkpoints from before the option: (observation, action)
-        mc.setdefault("observations", "state")  # checkpoints from before image observations
-        mc["traj_hidden"] = tuple(mc["traj_hidden"])
-        if "frame_channels" in mc:
-            mc["frame_channels"] = tuple(mc["frame_channels"])
-        model_cfg = ModelConfig(**mc)
-        info = DataInfo(**cfg["data"])
-    except (TypeError, KeyError) as exc:
-        raise LangprefError(f"{path / CONFIG} is not a valid model description ({exc}); retrain the model") from None
+    model_cfg, info = _description(path, cfg)
     lang_source = str(path / LM_DIR) if cfg.get("lang_finetuned") else cfg["lang_model"]
     if cfg.get("lang_finetuned") and not (path / LM_DIR).is_dir():
         raise LangprefError(f"model {path} is incomplete: {LM_DIR}/ is missing; retrain the model")
@@ -322,6 +334,8 @@ def load_model(
             f"{missing[:3]}, unexpected {unexpected[:3]}); retrain the model"
         )
     model.config = cfg  # the whole config.json, for reports
+    if negation is not None:
+        model.negation = negation
     model.to(device)
     model.eval()
     if dataset is not None:

@@ -51,6 +51,14 @@ class ModelConfig:
     """Random shift of each training frame by up to this many pixels (padded at the border; DrQ's augmentation
     against a small dataset's overfitting); 0 = none. Helps where what is said depends on where things are relative to
     each other in the frame, hurts where it depends on their absolute image position."""
+    negation: bool = False
+    """Read a scoped negation of a request ("Don't go so fast.", "No need to rush.", "Stop hugging the table.") as
+    the opposite of the request without its cue, psi = -psi("Go fast.") (`langpref.language.negation`: the cues,
+    and what is left alone). Changes only how a trained model reads text, never training; saved in the checkpoint
+    and overridable where a model is loaded to read text (`langpref evaluate|embed|bank check --negation`). Off by
+    default: it helps a model whose bank taught it no negations (a small bank without augmentation) and lowers the
+    built-in models, which read negations better from their own large banks (docs/results.md, "Negation as a sign
+    flip in the latent space")."""
 
     def validate(self) -> None:
         if self.observations is not None:

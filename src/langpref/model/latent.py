@@ -4,10 +4,15 @@ model = load_model("runs/mw")                   # langpref.model.checkpoint
 phi = model.encode_dataset(dataset, "test")     # (N, D) trajectory embeddings
 phi = model.encode_rollouts([traj])             # (1, D) of trajectories in memory (new rollouts)
 psi = model.encode_texts(["Move faster."])       # (1, D) language embeddings
+psi = model.encode_texts(["Don't go so fast."])  # with model.negation on: -psi("Go so fast.")
 model.check_dataset(dataset)                    # LangprefError if env or observation layout differ
 
 A model that sees camera frames (`model.sees_images`) embeds a dataset's stored frames, and renders those of new
 simulated rollouts; every path goes through `encode_input` (see `langpref.model.inputs`).
+
+With `model.negation` on (`ModelConfig.negation`, saved in the checkpoint, overridable when loading), a text that
+`langpref.language.negation.detect` finds to be a scoped negation of a request is read as the opposite of the request
+without its cue: the two directions of a feature lie opposite each other in this space.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from torch import nn
 
 from langpref.errors import LangprefError
 from langpref.language.bank import DIRECTIONS
+from langpref.language.negation import detect_all
 from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder
 from langpref.model.inputs import EncoderInput, dataset_input, sees_images, trajectories_input
 from langpref.model.vision import ImageTrajectoryEncoder
@@ -49,7 +55,8 @@ class DataInfo:
 
 
 class LatentModel(nn.Module):
-    """Trajectory encoder + language encoder + the data facts; `prototypes` are the mean psi of each meaning."""
+    """Trajectory encoder + language encoder + the data facts; `prototypes` are the mean psi of each meaning;
+    `negation`: read a negated request as the opposite of the request (module docstring)."""
 
     def __init__(
         self,
@@ -57,12 +64,14 @@ class LatentModel(nn.Module):
         lang: LanguageEncoder,
         info: DataInfo,
         lang_model_name: str,
+        negation: bool = False,
     ):
         super().__init__()
         self.traj = traj
         self.lang = lang
         self.info = info
         self.lang_model_name = lang_model_name
+        self.negation = negation
         num_groups = 2 * len(info.feature_names)
         self.register_buffer("prototypes", torch.zeros(num_groups, traj.out.out_features))
 
@@ -214,7 +223,17 @@ class LatentModel(nn.Module):
 
     @torch.no_grad()
     def encode_texts(self, texts: Sequence[str]) -> torch.Tensor:
-        """psi (P, D) of utterances."""
+        """psi (P, D) of utterances; with `negation` on, psi = -psi(request without its cue) for each text that
+        `langpref.language.negation.detect` flags (one batch through the encoder either way)."""
+        if not self.negation:
+            return self._read(texts)
+        found = detect_all(texts)
+        psi = self._read([n.text if n.flip else t for n, t in zip(found, texts)])
+        sign = torch.tensor([-1.0 if n.flip else 1.0 for n in found], device=psi.device, dtype=psi.dtype)
+        return psi * sign.unsqueeze(1)
+
+    def _read(self, texts: Sequence[str]) -> torch.Tensor:
+        """psi (P, D) of texts as the language encoder reads them, nothing flipped."""
         was_training = self.training
         self.eval()
         psi = self.lang(list(texts))
@@ -223,8 +242,10 @@ class LatentModel(nn.Module):
 
     @torch.no_grad()
     def set_prototypes(self, phrasings) -> None:
-        """Mean psi of each (feature, direction) group of a `Phrasings` table (the training phrasings)."""
-        psi = self.encode_texts(phrasings.texts)
+        """Mean psi of each (feature, direction) group of a `Phrasings` table (the training phrasings), as the
+        encoder reads them, never flipped: the prototypes are what training made of the bank, and stay the same
+        whichever `negation` setting later reads with them."""
+        psi = self._read(phrasings.texts)
         for g, ids in enumerate(phrasings.group_ids):
             if len(ids):
                 self.prototypes[g] = psi[torch.as_tensor(ids, device=self.device)].mean(dim=0)

@@ -243,8 +243,7 @@ def run_reward_learning(
             if n == len(batch):
                 learner.fit()
             curves.kinds.append(kind.name)
-            if getattr(answer, "no_change", False):
-                curves.no_change.append(len(curves.kinds))
+            curves.no_change += [len(curves.kinds)] if getattr(answer, "no_change", False) else []
             curves.seconds.append(curves.seconds[-1] + seconds)
             curves.record(learner, space, eval_rows, R_eval, cfg.human.rationality, R_all)
     _score_final(curves, learner, space, w, cfg, R_eval, run_seed, generation, episodes)
