@@ -51,7 +51,7 @@ def test_the_same_sentence_about_two_trajectories_teaches_two_things(space):
 
 
 def test_no_change_says_the_shown_trajectory_is_nearly_the_best(space):
-    """"That's good, no change" about a trajectory moves the belief toward rewards under which it is the best, and
+    """ "That's good, no change" about a trajectory moves the belief toward rewards under which it is the best, and
     the paper's learner, which compares imagined improvements, learns nothing from it (no pairs, no failure)."""
     pool = space.split("train")
     learner = learner_of(space)
@@ -67,7 +67,11 @@ def test_no_change_says_the_shown_trajectory_is_nearly_the_best(space):
 
 def test_a_human_who_says_no_change_is_learned_from_by_both_learners(space):
     cfg = LearnRewardConfig(
-        feedback="language", queries=12, humans=2, seeds=1, human=HumanConfig(phrasing_split="train", no_change_logit=2.0)
+        feedback="language",
+        queries=12,
+        humans=2,
+        seeds=1,
+        human=HumanConfig(phrasing_split="train", no_change_logit=2.0),
     )
     for learner in ("paper", "answer-model"):
         out = learn_reward(space, replace(cfg, learner=learner))

@@ -175,7 +175,7 @@ def test_a_database_made_before_the_learner_option_continues_with_the_papers(eng
 
 @pytest.mark.parametrize("learner", ["paper", "answer-model"])
 def test_good_as_it_is_is_a_study2_answer_and_not_a_study1_one(engine, h, tmp_path, learner):
-    """"That's good, no change" (`{"feedback": {"no_change": true}}`): refused where Study 1 asks how to change, taken
+    """ "That's good, no change" (`{"feedback": {"no_change": true}}`): refused where Study 1 asks how to change, taken
     in Study 2 without the feedback gate (which refuses typed praise), stored as its text, and read back from the
     database as the same answer: the answer model's own meaning, no pairs for Eq. 9."""
     from langpref.language.bank import NO_CHANGE_FEEDBACK
@@ -199,7 +199,9 @@ def test_good_as_it_is_is_a_study2_answer_and_not_a_study1_one(engine, h, tmp_pa
             assert r.status_code == 200, r.text
             assert r.json()["understood"]["no_change"] is True
             kept = state.robot._learners[(pid, "language")][0]
-            rebuilt = StudyRobot(state.engine, state._history, cfg=state.cfg)._learner(_participant(state, pid), "language", 1)
+            rebuilt = StudyRobot(state.engine, state._history, cfg=state.cfg)._learner(
+                _participant(state, pid), "language", 1
+            )
     finally:
         state.videos.close()
     conn = sdb.connect(db)

@@ -28,7 +28,11 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
         "human.direction": {"help": docs["direction"] + out("toward-best")},
         "human.feature_rule": {"help": docs["feature_rule"] + out("largest-change")},
         "human.vague": {"help": docs["vague"] + out("vagueP")},
-        "human.no_change_logit": {"flag": "--human-no-change-logit", "metavar": "C", "help": docs["no_change_logit"] + out("nochangeC")},
+        "human.no_change_logit": {
+            "flag": "--human-no-change-logit",
+            "metavar": "C",
+            "help": docs["no_change_logit"] + out("nochangeC"),
+        },
         "reward.model": "--reward-model",
         "reward.hidden": "--reward-hidden",
         "reward.negative_split": None,

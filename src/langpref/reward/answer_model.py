@@ -158,9 +158,10 @@ class AnswerReader:
         return table.psi[keep], target
 
     def fit_confusion(self, space: LatentSpace, features: np.ndarray) -> np.ndarray:
-        """(2F + 1, 2F + 1) P(read as r | meant m): how often the held-out phrasings of each meaning are read (argmax) as
-        each meaning, with one pseudo-count on the diagonal and a tenth on every cell. Active selection scores the
-        information in what is *read*, so a meaning often misread is worth less to ask about."""
+        """(2F + 1, 2F + 1) P(read as r | meant m): how often the held-out phrasings of each meaning are read
+        (argmax) as each meaning, with one pseudo-count on the diagonal and a tenth on every cell; "no change" is
+        never misread. Active selection scores the information in what is *read*, so a meaning often misread is worth
+        less to ask about."""
         psi, target = self.held_out(space, features)
         m = len(self.prototypes)
         counts = np.eye(m) + 0.1
