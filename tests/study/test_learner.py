@@ -208,6 +208,10 @@ def test_good_as_it_is_is_a_study2_answer_and_not_a_study1_one(engine, h, tmp_pa
     text = conn.execute("SELECT text FROM feedback WHERE phase = 'pref_language'").fetchone()["text"]
     conn.close()
     assert text == NO_CHANGE_FEEDBACK
+    from langpref.study.export import export
+
+    export(db, tmp_path / "export")  # the answer with no reading of a feature exports like any other
+    assert NO_CHANGE_FEEDBACK in (tmp_path / "export" / "tables" / "feedback.csv").read_text()
     if learner == "answer-model":
         for x in (kept, rebuilt):
             assert x.answers[-1][2][x.no_change] == 1.0  # its own meaning, not a reading of the text
