@@ -83,7 +83,8 @@ async function refresh() {
         const li = document.createElement("li");
         li.className = "feedback-text";
         li.dir = "auto";  // each text isolated: right-to-left text never reorders the rest of the line
-        li.textContent = `${f.text}  [${f.understood_feature}/${f.understood_direction}]`;
+        const read = f.understood_feature ? `${f.understood_feature}/${f.understood_direction}` : "no change, a button";
+        li.textContent = `${f.text}  [${read}]`;
         ul.append(li);
       }
       fb.append(ul);
