@@ -147,6 +147,10 @@ def test_evaluate_and_embed_take_the_setting(trained, tiny_data, tmp_path, capsy
     read = json.loads(capsys.readouterr().out)
     opposite = {k: -v for k, v in said["scores"].items()}
     assert (read["scores"] == pytest.approx(opposite, abs=1e-5)) == (flag == "--negation")
+    if flag == "--negation":  # the reading says what the flip did
+        assert read["negation"] == {"flipped": True, "reason": "negated", "read_as": "Move faster."}
+    else:
+        assert "negation" not in read
     # with the flip, "Don't move faster." as slower orders every pair as "Move faster." as faster does, reversed
     plain = _evaluate(capsys, trained.out, tiny_data, tmp_path / "p.json", {"speed": {"increase": ["Move faster."]}})
     negated = {"speed": {"decrease": ["Don't move faster."]}}

@@ -219,7 +219,7 @@ def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) ->
     best = int(torch.argmax(cos))
     feature, direction = model.meanings[best]
     assert direction in DIRECTIONS
-    return {
+    out = {
         "text": text,
         "feature": feature,
         "direction": direction,
@@ -227,3 +227,9 @@ def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) ->
         "cosine": float(cos[best]),
         "scores": {f"{f}/{d}": float(c) for (f, d), c in zip(model.meanings, cos)},
     }
+    if getattr(model, "negation", False):  # what the negation setting did to this text (`langpref.language.negation`)
+        from langpref.language.negation import detect
+
+        found = detect(text)
+        out["negation"] = {"flipped": found.flip, "reason": found.reason, "read_as": found.text}
+    return out
