@@ -310,7 +310,7 @@ class StudyRobot:
         self._keep(p, method, learner, [*past, answer])
         if not isinstance(answer, LanguageAnswer):
             return None
-        return NO_CHANGE_READING if answer.no_change else self.engine.understand(answer.text)
+        return dict(NO_CHANGE_READING) if answer.no_change else self.engine.understand(answer.text)
 
     def confirm(self, p: Participant, method: str, answer: Any) -> dict[str, Any] | None:
         """What to ask about a language answer whose reading is uncertain (`flow.Robot.confirm`): None unless the
