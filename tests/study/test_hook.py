@@ -52,9 +52,11 @@ def hooked(engine, h, tmp_path):
         state.videos.close()
 
 
-def walk(client, h, until_kind: str | None = None) -> tuple[str, dict[str, str], list[tuple[dict, float]]]:
+def walk(client, h, until_kind: str | None = None, settle=None) -> tuple[str, dict[str, str], list[tuple[dict, float]]]:
     """A new participant answers steps (each response timed) until done, or until a step of `until_kind` comes:
-    (participant id, headers, [(step, seconds), ...])."""
+    (participant id, headers, [(step, seconds), ...]). `settle`, when given, is waited on after each response (out
+    of its timing): a test of what every run did lets the hook's queue drain, so that no run is dropped for room
+    (`per_participant`), however slowly the machine starts the hook's processes."""
     pid, headers = h.join(client)
     t0 = time.perf_counter()
     step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
@@ -65,6 +67,8 @@ def walk(client, h, until_kind: str | None = None) -> tuple[str, dict[str, str],
         assert r.status_code == 200, r.text
         step = r.json()
         steps.append((step, time.perf_counter() - t0))
+        if settle is not None:
+            assert settle()
     return pid, headers, steps
 
 
@@ -85,7 +89,7 @@ def test_hook_runs_once_per_shown_trajectory_with_its_environment(hooked, h, tmp
     out = tmp_path / "runs.jsonl"
     (tmp_path / "record_env.py").write_text(RECORD_ENV)
     state, client = hooked(python_command(tmp_path / "record_env.py", out))
-    pid, headers, steps = walk(client, h, until_kind="comparison")
+    pid, headers, steps = walk(client, h, until_kind="comparison", settle=lambda: state.hook.wait(timeout=60))
     assert client.get(f"/api/participants/{pid}/step", headers=headers).status_code == 200  # a reload: no replay
     assert state.hook.wait(timeout=60)
     runs = [json.loads(line) for line in out.read_text().splitlines()]
@@ -102,7 +106,7 @@ def test_hook_runs_once_per_shown_trajectory_with_its_environment(hooked, h, tmp
 def test_failing_and_missing_hooks_are_logged_and_counted(hooked, h, tmp_path, caplog):
     caplog.set_level(logging.WARNING, logger="langpref.study")
     state, client = hooked(python_command("-c", "import sys; print('robot offline'); sys.exit(1)"))
-    pid, _, steps = walk(client, h)
+    pid, _, steps = walk(client, h, settle=lambda: state.hook.wait(timeout=60))
     assert steps[-1][0]["kind"] == "done" and answers_stored(state, pid) == len(steps) - 1
     assert max(t for _, t in steps) < PROMPT_S
     assert state.hook.wait(timeout=60)
