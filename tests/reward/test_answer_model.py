@@ -56,7 +56,7 @@ def test_no_change_says_the_shown_trajectory_is_nearly_the_best(space):
     pool = space.split("train")
     learner = learner_of(space)
     position = int(np.argmin(learner.predict(space.phi[pool])))  # the worst under the prior's mean
-    good = LanguageAnswer(LanguageQuery(int(pool[position])), NO_CHANGE_FEEDBACK, no_change=True)
+    good = LanguageAnswer(LanguageQuery(int(pool[position])), NO_CHANGE_FEEDBACK)
     learner.observe("language", good)
     learner.fit()
     after = learner.predict(space.phi[pool])

@@ -60,13 +60,16 @@ class LanguageAnswer:
     """What a synthetic human meant (ground truth; never read by a method). `None` for a real participant."""
     direction: str | None = None
     """`increase` or `decrease`, what a synthetic human meant; `None` for a real participant."""
-    no_change: bool = False
-    """"That's good, no change": the shown trajectory is as the person wants it (`text` is then
-    `NO_CHANGE_FEEDBACK`). The answer-model learner reads it as its own meaning; Eq. 9 has nothing to learn from it."""
 
     def __post_init__(self) -> None:
         if not self.text.strip():
             raise LangprefError("language feedback is empty; give a sentence such as 'Move faster.'")
+
+    @property
+    def no_change(self) -> bool:
+        """ "That's good, no change" (the text `NO_CHANGE_FEEDBACK`, a button in the study): the shown trajectory is as
+        the person wants it. The answer-model learner reads it as its own meaning; Eq. 9 learns nothing from it."""
+        return self.text == NO_CHANGE_FEEDBACK
 
 
 class LanguageHuman:
@@ -134,7 +137,7 @@ class LanguageHuman:
         if self.vague > 0 and self.rng.random() < self.vague:  # draws nothing for the default human
             return LanguageAnswer(query, VAGUE_FEEDBACK[int(self.rng.integers(len(VAGUE_FEEDBACK)))])
         if self.no_change_logit is not None and self.rng.random() < self.no_change_probability(query.shown):
-            return LanguageAnswer(query, NO_CHANGE_FEEDBACK, no_change=True)
+            return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
         if self.feature_rule == "largest-change":
             gap = self.theta[self.best] - self.theta[query.shown]
             feature = int(np.argmax(np.abs(gap)))
@@ -231,7 +234,7 @@ def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
     MAX_FEEDBACK_RAW before trimming: the answer body stores the text as sent); or `{"no_change": true}`, "that's
     good, no change" (stored as the text `NO_CHANGE_FEEDBACK`, which also means it when sent as text)."""
     if isinstance(value, dict) and list(value) == ["no_change"] and value["no_change"] is True:
-        return LanguageAnswer(query, NO_CHANGE_FEEDBACK, no_change=True)
+        return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
     if not isinstance(value, str):
         raise LangprefError("'feedback' must be text, or {\"no_change\": true} when the trajectory is good as it is")
     if len(value) > MAX_FEEDBACK_RAW:
@@ -241,7 +244,7 @@ def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
         raise LangprefError('Please type your feedback before continuing (for example: "Move faster.").')
     if len(text) > MAX_FEEDBACK:
         raise LangprefError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
-    return LanguageAnswer(query, text, no_change=text == NO_CHANGE_FEEDBACK)
+    return LanguageAnswer(query, text)
 
 
 def to_record(answer: LanguageAnswer) -> dict[str, Any]:
@@ -249,7 +252,7 @@ def to_record(answer: LanguageAnswer) -> dict[str, Any]:
 
 
 def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
-    return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"], no_change=row["text"] == NO_CHANGE_FEEDBACK)
+    return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
 
 
 # ---- active query selection (`langpref.reward.selection`, imported when a strategy is used) --------------------

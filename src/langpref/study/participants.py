@@ -207,8 +207,8 @@ def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[st
             ans = parse_answer(data, step, state.cfg.kinds)
         except AnswerError as exc:
             raise HttpError(exc.status, str(exc)) from None
-        said = ans.value if isinstance(ans.value, LanguageAnswer) and not ans.value.no_change else None
-        if said is not None and not state.engine.gate.score(said.text).ok:
+        said = ans.value  # typed feedback passes the gate; "no change" is a button, not a text to read
+        if isinstance(said, LanguageAnswer) and not said.no_change and not state.engine.gate.score(said.text).ok:
             raise HttpError(400, NOT_FEEDBACK)
         if state.generated is not None and step.phase == "improve":
             try:
