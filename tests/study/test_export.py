@@ -132,3 +132,51 @@ def test_a_stored_lone_surrogate_does_not_stop_the_export(simulated_db, tmp_path
     assert "Study 1" in html and "3\ufffd" in html
     with open(tmp_path / "out" / "tables" / "survey_responses.csv", encoding="utf-8") as fh:
         assert sum('"3\\ud800"' in r["value"] for r in csv.DictReader(fh)) == 4  # the table as stored
+
+
+@pytest.fixture
+def empty_db(tmp_path):
+    """A study database with no participants yet (the export of it is quick)."""
+    db = tmp_path / "study.sqlite"
+    sdb.init_db(db, {"env": "button-press"})
+    return db
+
+
+def test_bank_additions_never_overwrite_the_database(empty_db, tmp_path, capsys):
+    """`--bank-additions study.sqlite` once wrote the bank over the database being read (every answer lost), with
+    exit 0: the database, under any name that reaches it, is refused with one line, `--force` or not."""
+    from langpref.cli import main
+
+    before = empty_db.read_bytes()
+    (tmp_path / "link.sqlite").symlink_to(empty_db)
+    (tmp_path / "hard.sqlite").hardlink_to(empty_db)
+    names = [str(empty_db), str(tmp_path / "link.sqlite"), str(tmp_path / "hard.sqlite"), f"{empty_db}-wal"]
+    names.append(str(tmp_path / "sub" / ".." / "study.sqlite"))
+    for name in names:
+        for force in ([], ["--force"]):
+            argv = ["study", "export", "--db", str(empty_db), "--out", str(tmp_path / "o"), "--bank-additions", name]
+            assert main([*argv, *force]) == 2, name
+            err = capsys.readouterr().err.strip()
+            assert "is the study database" in err and "\n" not in err
+    assert empty_db.read_bytes() == before
+    assert not (tmp_path / "o").exists()  # refused before anything is written
+
+
+def test_bank_additions_overwrite_an_existing_file_only_with_force(empty_db, tmp_path, capsys):
+    from langpref.cli import main
+
+    bank = tmp_path / "additions.json"
+    bank.write_text("the lab's edits\n")
+    argv = ["study", "export", "--db", str(empty_db), "--out", str(tmp_path / "o"), "--bank-additions", str(bank)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "already exists" in err and "--force" in err and "\n" not in err
+    assert bank.read_text() == "the lab's edits\n"
+    assert main([*argv, "--force", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["bank_additions"] == str(bank)
+    assert json.loads(bank.read_text())  # the (empty) additions, in the bank's schema
+    # nor a file the export itself writes, even new
+    for name in ("summary.json", "tables/answers.csv"):
+        argv = ["study", "export", "--db", str(empty_db), "--out", str(tmp_path / "p")]
+        assert main([*argv, "--bank-additions", str(tmp_path / "p" / name), "--force"]) == 2
+        assert "a file of the export" in capsys.readouterr().err

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from langpref import cli_config as cc
 from langpref.cli.common import JSON
-from langpref.cli_config import RERUN, command, config, emit, from_args, record
+from langpref.cli_config import RERUN, command, config, emit, from_args, opt, record
 from langpref.dataset.splits import SPLITS
 
 
@@ -107,7 +107,16 @@ def cmd_study_simulate(args: argparse.Namespace) -> None:
 @command(
     "study export",
     "CSV tables, analyses and figures of a study (HTML report + JSON)",
-    [config("langpref.study.config:ExportConfig"), RERUN, JSON],
+    [
+        config("langpref.study.config:ExportConfig"),
+        opt(
+            "--force",
+            action="store_true",
+            help="overwrite an existing --bank-additions file (never the study database)",
+        ),
+        RERUN,
+        JSON,
+    ],
     "Writes the tables, summary.json, learned_rewards.json, the figures and report.html into --out.",
 )
 def cmd_study_export(args: argparse.Namespace) -> None:
@@ -115,7 +124,7 @@ def cmd_study_export(args: argparse.Namespace) -> None:
     from langpref.study.export import export
 
     cfg = from_args(ExportConfig, args)
-    out = export(cfg.db, cfg.out, exclude=cfg.exclude, bank_additions_file=cfg.bank_additions)
+    out = export(cfg.db, cfg.out, exclude=cfg.exclude, bank_additions_file=cfg.bank_additions, force=args.force)
     record(args, Path(cfg.out) / "export.config.json", cfg)
     emit(
         out,

@@ -282,7 +282,7 @@ class ExportConfig:
     bank_additions: str | None = None
     """Also write the phrasings participants confirmed the meaning of (`--confirm-margin`) to this JSON file, in the
     bank's schema ({TASK: {feature: {increase: [...], decrease: [...]}}}), for the lab to review before adding any to
-    its bank."""
+    its bank. An existing file is refused without `--force`, and the study database always."""
 
 
 @dataclass

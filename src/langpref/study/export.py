@@ -33,13 +33,17 @@ def export(
     out: str | Path,
     exclude: Sequence[str | int] = (),
     bank_additions_file: str | Path | None = None,
+    force: bool = False,
 ) -> dict[str, Any]:
     """Write the CSVs, summary.json, learned_rewards.json, the figures and report.html of the study in `db_path` into
     `out`; the analyses leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids).
-    With `bank_additions_file`, also the confirmed phrasings as a bank file there (`bank_additions`)."""
+    With `bank_additions_file`, also the confirmed phrasings as a bank file there (`bank_additions`): an existing file
+    only with `force`, and never the database itself (or its journal) nor a file the export writes."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise LangprefError(f"--out {out} is a file; pass a directory (it is created if missing)")
+    if bank_additions_file is not None:
+        _check_bank_additions(Path(bank_additions_file), Path(db_path), out, force)
     conn = sdb.open_existing(db_path)
     try:
         tables = read_tables(conn)
@@ -47,8 +51,6 @@ def export(
     finally:
         conn.close()
     summary = analyse(tables, exclude)  # first: a bad --exclude writes nothing
-    if bank_additions_file is not None and Path(bank_additions_file).is_dir():
-        raise LangprefError(f"--bank-additions {bank_additions_file} is a directory; pass a JSON file to write")
     excluded = resolve_exclusions(tables["participants"], exclude)
     added = None
     try:
@@ -81,3 +83,30 @@ def export(
             else {}
         ),
     }
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether `a` and `b` name one file: the same path once resolved, or (hard links) the same inode."""
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return a.samefile(b)
+    except OSError:  # either is missing
+        return False
+
+
+def _check_bank_additions(path: Path, db_path: Path, out: Path, force: bool) -> None:
+    """Refuse, before anything is read or written, a `--bank-additions` file that would overwrite the database being
+    read (or its SQLite journal), a file of the export itself, or (without `force`) any existing file."""
+    guarded = [db_path.with_name(db_path.name + suffix) for suffix in ("", "-wal", "-shm", "-journal")]
+    if any(_same_file(path, g) for g in guarded):
+        raise LangprefError(f"--bank-additions {path} is the study database {db_path}; pass another JSON file")
+    if path.is_dir():
+        raise LangprefError(f"--bank-additions {path} is a directory; pass a JSON file to write")
+    own = {"summary.json", "learned_rewards.json", "report.html", "export.config.json", *(f"{n}.png" for n in FIGURES)}
+    out_dir = out.resolve()
+    where = path.resolve()
+    if (where.parent == out_dir and where.name in own) or out_dir / "tables" in where.parents:
+        raise LangprefError(f"--bank-additions {path} is a file of the export in {out}; pass another JSON file")
+    if path.exists() and not force:
+        raise LangprefError(f"--bank-additions {path} already exists; pass --force to overwrite it or another file")
