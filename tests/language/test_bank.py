@@ -408,3 +408,30 @@ def test_user_file_unknown_env_argument(tmp_path):
     path = _write(tmp_path, {"metaworld": {"speed": {"increase": ["Go faster."]}}})
     with pytest.raises(LangprefError, match="unknown task 'kitchen'"):
         load_user_utterances(path, "kitchen")
+
+
+@pytest.mark.parametrize(
+    "typed",
+    [
+        "That's good, no change.",
+        "that's good, no change.",  # was read as a feature and learned
+        "That\u2019s good, no change.",  # a phone's apostrophe: was refused by the feedback gate
+        "  THAT'S GOOD, NO CHANGE!  ",
+        "\u201cthat\u2018s good,  no change\u201d",
+        "That's good, no change",
+        "That's good, no change\u2026",
+    ],
+)
+def test_no_change_is_recognised_as_people_type_it(typed):
+    from langpref.language.bank import is_no_change
+
+    assert is_no_change(typed)
+
+
+@pytest.mark.parametrize(
+    "typed", ["that's good, no change needed", "That's good, no change?", "Not good, no change.", "good", ""]
+)
+def test_only_the_no_change_phrase_itself_is_it(typed):
+    from langpref.language.bank import is_no_change
+
+    assert not is_no_change(typed)

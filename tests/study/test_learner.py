@@ -217,3 +217,32 @@ def test_good_as_it_is_is_a_study2_answer_and_not_a_study1_one(engine, h, tmp_pa
             assert x.answers[-1][2][x.no_change] == 1.0  # its own meaning, not a reading of the text
     else:
         assert [len(b.weights) for b in kept.batches] == [0] == [len(b.weights) for b in rebuilt.batches]
+
+
+def test_no_change_typed_as_people_type_it_is_the_no_change_answer(engine, h, tmp_path):
+    """Typed in lower case it was read as a feature and learned; with a phone's apostrophe the feedback gate refused
+    it. Both are the no-change answer, stored as its canonical text, as the button's."""
+    from langpref.language.bank import NO_CHANGE_FEEDBACK
+
+    typed = ["that's good, no change.", "That\u2019s good, no change.", "  \u201cTHAT\u2019S GOOD, NO CHANGE\u201d "]
+    db = tmp_path / "typed.sqlite"
+    state = build_state(h.serve_config(db, learner="answer-model"), engine=engine, progress=False)
+    try:
+        with TestClient(create_app(state)) as client:
+            pid, headers = h.join(client)
+            for text in typed:
+                step = _walk(
+                    client, h, pid, headers, lambda s: s["phase"] == "pref_language" and s["kind"] == "language"
+                )
+                body = {"feedback": text, "client_ms": 5, "seq": step["seq"]}
+                r = client.post(f"/api/participants/{pid}/answer", json=body, headers=headers)
+                assert r.status_code == 200, r.text
+                assert r.json()["understood"]["no_change"] is True
+            learner = state.robot._learners[(pid, "language")][0]
+    finally:
+        state.videos.close()
+    assert [a[2][learner.no_change] for a in learner.answers] == [1.0] * len(typed)
+    conn = sdb.connect(db)
+    texts = [r["text"] for r in conn.execute("SELECT text FROM feedback WHERE phase = 'pref_language' ORDER BY seq")]
+    conn.close()
+    assert texts == [NO_CHANGE_FEEDBACK] * len(typed)

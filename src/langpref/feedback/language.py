@@ -31,7 +31,7 @@ from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
 from langpref.feedback.kind import RANDOM, FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
-from langpref.language.bank import DIRECTIONS, NO_CHANGE_FEEDBACK, VAGUE_FEEDBACK
+from langpref.language.bank import DIRECTIONS, NO_CHANGE_FEEDBACK, VAGUE_FEEDBACK, is_no_change
 
 if TYPE_CHECKING:
     from langpref.reward import RewardConfig
@@ -67,9 +67,10 @@ class LanguageAnswer:
 
     @property
     def no_change(self) -> bool:
-        """ "That's good, no change" (the text `NO_CHANGE_FEEDBACK`, a button in the study): the shown trajectory is as
-        the person wants it. The answer-model learner reads it as its own meaning; Eq. 9 learns nothing from it."""
-        return self.text == NO_CHANGE_FEEDBACK
+        """ "That's good, no change" (the text `NO_CHANGE_FEEDBACK`, a button in the study, or that phrase as typed:
+        `is_no_change`): the shown trajectory is as the person wants it. The answer-model learner reads it as its own
+        meaning; Eq. 9 learns nothing from it."""
+        return is_no_change(self.text)
 
 
 class LanguageHuman:
@@ -232,7 +233,8 @@ def language_pairs(
 def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
     """The body's `feedback`: text, trimmed, not empty, at most MAX_FEEDBACK characters (and at most
     MAX_FEEDBACK_RAW before trimming: the answer body stores the text as sent); or `{"no_change": true}`, "that's
-    good, no change" (stored as the text `NO_CHANGE_FEEDBACK`, which also means it when sent as text)."""
+    good, no change" (stored as the text `NO_CHANGE_FEEDBACK`, which also means it when typed, in any case, with a
+    typographic apostrophe or without its full stop: `is_no_change`; it is then stored as that text too)."""
     if isinstance(value, dict) and list(value) == ["no_change"] and value["no_change"] is True:
         return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
     if not isinstance(value, str):
@@ -244,7 +246,7 @@ def parse(value: Any, query: LanguageQuery) -> LanguageAnswer:
         raise LangprefError('Please type your feedback before continuing (for example: "Move faster.").')
     if len(text) > MAX_FEEDBACK:
         raise LangprefError(f"Your feedback is {len(text)} characters long; please keep it under {MAX_FEEDBACK}.")
-    return LanguageAnswer(query, text)
+    return LanguageAnswer(query, NO_CHANGE_FEEDBACK if is_no_change(text) else text)
 
 
 def to_record(answer: LanguageAnswer) -> dict[str, Any]:

@@ -41,7 +41,26 @@ encoder reads them as the zero vector."""
 NO_CHANGE_FEEDBACK = "That's good, no change."
 """The answer "that's good, no change" (a button in the study, `no_change` in a language answer): the shown trajectory
 is as the person wants it. Recorded with this text; never read by the language model (the feedback gate refuses
-praise without a direction when it is typed)."""
+praise without a direction when it is typed). Typed, it is recognised as `is_no_change` reads it."""
+_QUOTES = str.maketrans({"\u2019": "'", "\u2018": "'", "\u02bc": "'", "\u2032": "'", "`": "'", "\u00b4": "'"})
+_AROUND = " \t\r\n\u00a0\"'\u201c\u201d\u00ab\u00bb"
+_FINAL = ".!\u2026\u3002\uff01"
+_NO_CHANGE_KEY = "that's good, no change"
+
+
+def is_no_change(text: str) -> bool:
+    """Whether typed `text` is the phrase `NO_CHANGE_FEEDBACK` as people type it: in any case, with a typographic
+    apostrophe (a phone's "That\u2019s"), quoted, with spaces around it or doubled inside, and with or without its
+    final full stop (or "!", "..."). Only the phrase itself: "that's good, no change needed" or "that's good, no
+    change?" are not it."""
+    if text == NO_CHANGE_FEEDBACK:
+        return True
+    if len(text) > 4 * len(NO_CHANGE_FEEDBACK):
+        return False
+    key = unicodedata.normalize("NFKC", text).translate(_QUOTES).strip(_AROUND).rstrip(_FINAL).strip(_AROUND)
+    return " ".join(key.split()).lower() == _NO_CHANGE_KEY
+
+
 SPLIT_SHARES = (0.6, 0.2, 0.2)  # the paper's real-robot bank: 297/99/100 phrasings
 
 _APOSTROPHES = {"'", "\u2019", "\u2018", "`"}
@@ -350,6 +369,7 @@ __all__ = [
     "load_bank",
     "load_user_utterances",
     "normalise",
+    "is_no_change",
     "check_bank",
     "split_bank",
 ]
