@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
 
 import pytest
 
@@ -108,6 +109,49 @@ def test_deep_nesting_is_a_one_line_400_wherever_it_is(client, h):
             assert r.status_code == 400, (level, r.status_code, r.text[:200])
             assert set(r.json()) == {"error"} and "nested too deeply" in r.json()["error"]
     assert client.get(f"/api/participants/{pid}/step", headers=headers).json()["seq"] == step["seq"]
+
+
+def test_a_body_made_to_be_slow_is_refused_before_the_participant_lock(client, h, study_state):
+    """21,000 empty lists fit in 63 KB and took 210 ms to handle while holding the participant's lock stripe (which
+    other participants share): such bodies are refused (one line) while that lock is held elsewhere, so none of their
+    work happens under it; a valid answer is then taken."""
+    from langpref.study.guard import MAX_VALUES
+
+    pid, headers = h.join(client)
+    step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
+    lists = ",".join(["[]"] * 21_000)
+    many = json.dumps({**h.answer_for(step), "extra": list(range(MAX_VALUES))})
+    bodies = [f"[{lists}]", f'{{"feedback": [{lists}], "client_ms": 1}}', f'{{"answers": {{"age": [{lists}]}}}}', many]
+    assert all(len(b) < 64 * 1024 for b in bodies)
+    url, sent = f"/api/participants/{pid}/answer", {**headers, "Content-Type": "application/json"}
+    answered, done = [], threading.Event()
+
+    def send():
+        try:
+            answered.extend(client.post(url, content=body.encode(), headers=sent) for body in bodies)
+        finally:
+            done.set()
+
+    with study_state.lock(pid):  # an answer of another participant of the stripe is being handled
+        threading.Thread(target=send, daemon=True).start()
+        assert done.wait(60), "a body refused for its shape waited for the participant's lock"
+    assert [r.status_code for r in answered] == [400] * len(bodies), [r.text[:100] for r in answered]
+    for r in answered:
+        assert set(r.json()) == {"error"} and "\n" not in r.json()["error"]
+    assert "too many values" in answered[1].json()["error"] and "too many values" in answered[3].json()["error"]
+    r = client.post(url, json=h.answer_for(step), headers=headers)
+    assert r.status_code == 200 and r.json()["seq"] == step["seq"] + 1, r.text
+
+
+def test_shape_is_checked_in_bounded_steps():
+    from langpref.study.guard import HttpError, check_shape
+
+    with pytest.raises(HttpError, match="too many values"):
+        check_shape([[] for _ in range(10**6)])  # refused by its length, none of its items looked at
+    with pytest.raises(HttpError, match="nested too deeply"):
+        check_shape({"a": [[[1]]]}, max_depth=3)
+    check_shape({"a": [[[1]]]}, max_depth=4)
+    check_shape({"a": list(range(99))}, max_values=100)
 
 
 def test_depth_is_measured_without_recursion():

@@ -2,8 +2,10 @@
 
 - a body over `MAX_BODY`: by its `Content-Length` before any of it is read, and a body without one (chunked) counted
   as it streams in, stopping at the limit (`read_body`), so a large upload never sits in memory;
-- JSON nested deeper than `MAX_DEPTH` (`decode_json`; measured without recursion) and text with lone UTF-16
-  surrogates (they cannot be stored as UTF-8; `langpref.study.flow.clean_text` refuses them);
+- JSON nested deeper than `MAX_DEPTH` or holding more than `MAX_VALUES` values (`decode_json`; measured without
+  recursion, the count stopping at the limit), and text with lone UTF-16 surrogates (they cannot be stored as UTF-8;
+  `langpref.study.flow.clean_text` refuses them). An answer's body is decoded and checked before the participant's
+  lock is taken, so a body made to be slow (21,000 empty lists fit in 64 KiB) holds no other participant up;
 - a `Host` header that is not one of this study's names (`HostCheck`): a page of another site that a DNS-rebinding
   attack points at the server would otherwise reach it as "same origin";
 - a POST whose `Origin` (or `Referer`) is another site's page (`cross_site`);
@@ -26,6 +28,9 @@ MAX_BODY = 64 * 1024
 """Largest request body taken, in bytes."""
 MAX_DEPTH = 32
 """Deepest nesting of lists and objects a JSON body may have (the contract needs 3)."""
+MAX_VALUES = 1000
+"""Most values a JSON body may hold, counting every list item and object member at every level (the largest answer
+of the contract, the Study-2 survey of a study of several kinds, holds well under 200)."""
 LOCAL_HOSTS = ("localhost", "127.0.0.1", "::1")
 
 
@@ -74,8 +79,27 @@ def depth(value: Any) -> int:
     return deepest
 
 
+def check_shape(value: Any, max_depth: int = MAX_DEPTH, max_values: int = MAX_VALUES) -> None:
+    """Refuse (400) `value` nested deeper than `max_depth` or holding more than `max_values` list items and object
+    members in all. Without recursion, and in at most `max_values` steps: a container is counted by its length
+    before any of its items is looked at."""
+    todo, seen = [(value, 1)], 0
+    while todo:
+        item, level = todo.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        if level > max_depth:
+            raise HttpError(400, f"the body is nested too deeply (more than {max_depth} levels)")
+        seen += len(children)
+        if seen > max_values:
+            raise HttpError(400, f"the body holds too many values (more than {max_values}); send one answer")
+        todo.extend((c, level + 1) for c in children if isinstance(c, (dict, list)))
+
+
 def decode_json(body: bytes, allow_empty: bool = False) -> Any:
-    """The JSON of a body (at most `MAX_BODY` bytes, nested at most `MAX_DEPTH` deep), or a 4xx HttpError."""
+    """The JSON of a body (at most `MAX_BODY` bytes, nested at most `MAX_DEPTH` deep, at most `MAX_VALUES` values:
+    `check_shape`), or a 4xx HttpError."""
     if len(body) > MAX_BODY:
         raise _too_large()
     if allow_empty and not body.strip():
@@ -87,8 +111,7 @@ def decode_json(body: bytes, allow_empty: bool = False) -> Any:
     except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError, and integers of over 4300 digits
         line = " ".join(str(exc).split())[:80]
         raise HttpError(400, f"the body is not valid JSON ({exc.__class__.__name__}: {line})") from None
-    if depth(data) > MAX_DEPTH:
-        raise HttpError(400, f"the body is nested too deeply (more than {MAX_DEPTH} levels)")
+    check_shape(data)
     return data
 
 

@@ -198,11 +198,13 @@ def get_step(state: StudyApp, pid: str, token: str | None) -> dict[str, Any]:
 def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[str, Any]:
     """Take an answer to the current step: check it, advance the flow (the robot learns), store it all in one
     transaction, and return the next step. A failure leaves the robot as the stored answers say."""
+    data = decode_json(body)  # before the lock: its size, depth and number of values bound the work under it
+    if not isinstance(data, dict):
+        raise HttpError(400, "the body must be a JSON object")
     conn = state.connect()
     p, prow = authenticate(state, conn, pid, token)  # before the lock: unknown ids never reach it
     with state.lock(pid):
         step, row = state.current_step(conn, pid)
-        data = decode_json(body)
         try:
             ans = parse_answer(data, step, state.cfg.kinds)
         except AnswerError as exc:
