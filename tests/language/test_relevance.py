@@ -40,12 +40,14 @@ def test_a_bank_phrasing_scores_one(gate):
 
 
 def test_small_talk_above_the_floor_is_refused_as_off_topic(gate):
-    rel = gate.score("Good evening, everyone!")
+    # "Good evening, everyone!" was refused here through "good morning", one of the off-topic texts removed because
+    # they copied a reporting set's (issue 42, item 1); it now passes, just above its nearest off-topic text.
+    rel = gate.score("Good afternoon!")
     assert rel.score >= 0.35  # the floor alone would let it through
     assert rel.off_topic > rel.score and not rel.ok
     with pytest.raises(NotFeedbackError, match="something other than feedback") as err:
-        gate.check("Good evening, everyone!")
-    assert "good morning" in str(err.value) and "\n" not in str(err.value)
+        gate.check("Good afternoon!")
+    assert "how are you doing" in str(err.value) and "\n" not in str(err.value)
 
 
 def test_the_off_topic_texts_copy_no_heldout_text():

@@ -105,11 +105,17 @@ def test_has_a_comment():
     assert "_comment" in _sealed()
 
 
-def test_not_feedback():
-    texts = json.loads(NOT_FEEDBACK.read_text(encoding="utf-8"))["texts"]
+@pytest.mark.parametrize("name", ["not_feedback.json", "not_feedback_v2.json"])
+def test_not_feedback(name):
+    doc = json.loads((ROOT / "heldout" / "sealed" / name).read_text(encoding="utf-8"))
+    texts = doc["texts"]
     assert len(texts) == 60
     assert all(isinstance(t, str) and t for t in texts)
     assert len({t.lower() for t in texts}) == len(texts)
+
+
+def test_the_first_not_feedback_file_is_marked_spent_for_the_gate():
+    assert "SPENT for the feedback gate" in json.loads(NOT_FEEDBACK.read_text(encoding="utf-8"))["_comment"]
 
 
 # Who may name the sealed set: its own folder, this test, and prose (Markdown: the reporting command line is written in
@@ -258,3 +264,134 @@ def test_disjoint_from_the_shipped_bank(task):
     assert len(bank) > 20, "the bank came back (nearly) empty; the scan did not find its phrasings"
     clashes = sorted(p for p in _phrasings(_sealed()[task]) if normalise(p) in bank)
     assert not clashes, f"{task}: sealed phrasings also in the shipped bank: {clashes}"
+
+
+# Overlap tripwire (issue 42, item 1). Every held-out file, named one by one; `test_every_held_out_file_is_named`
+# fails when a new one is added to heldout/ without being named here.
+NOT_FEEDBACK_V2 = ROOT / "heldout" / "sealed" / "not_feedback_v2.json"
+HELD_OUT = (
+    ROOT / "heldout" / "utterances.json",
+    ROOT / "heldout" / "not_feedback.json",
+    ROOT / "heldout" / "negated" / "utterances.json",
+    SEALED,
+    NOT_FEEDBACK,
+    NOT_FEEDBACK_V2,
+)
+# Every bank shipped in the repository: the built-in tasks' (split) and the examples' (the plugin's split, the
+# drawer's unsplit: `langpref import` splits it, so any of its phrasings may be a train phrasing).
+BANKS = (
+    ROOT / "src" / "langpref" / "tasks" / "metaworld" / "utterances.json",
+    ROOT / "src" / "langpref" / "tasks" / "robosuite" / "utterances.json",
+    ROOT / "examples" / "plugin" / "src" / "langpref_reach" / "utterances.json",
+    ROOT / "examples" / "own_robot" / "utterances.json",
+)
+# A data file under src/ (the gate's off-topic texts, any later one) must not copy a held-out text even loosely: at 0.8
+# the helper also takes a changed word in a longer text ("what is the capital of Spain" / "... of Australia"), and a
+# text of two or more words inside another ("write me a poem" / "write me a poem about autumn") is one too.
+DATA_NEAR_COPY_RATIO = 0.8
+
+
+def _src_data_files() -> list[Path]:
+    """Every JSON file in a `data` folder under src/."""
+    return sorted(p for p in (ROOT / "src").rglob("*.json") if "data" in p.relative_to(ROOT / "src").parts[:-1])
+
+
+def _texts_of(obj) -> list[str]:
+    """Every text of a data or utterance file: the strings under keys not starting with `_` (comments), in lists."""
+    if isinstance(obj, str):
+        return [obj]
+    if isinstance(obj, dict):
+        return [t for k, v in obj.items() if not str(k).startswith("_") for t in _texts_of(v)]
+    if isinstance(obj, list):
+        return [t for v in obj for t in _texts_of(v)]
+    return []
+
+
+def _held_out_texts() -> dict[str, list[str]]:
+    return {p.relative_to(ROOT).as_posix(): _texts_of(json.loads(p.read_text(encoding="utf-8"))) for p in HELD_OUT}
+
+
+def _key(text: str) -> str:
+    """The bank's normalisation, or for a text of punctuation or symbols only the text itself without spaces."""
+    return normalise(text) or "".join(text.split())
+
+
+def _copies(ours: str, held: str) -> bool:
+    """Whether `ours` is an exact or near copy of `held`: the same after normalisation, or (when both have Latin
+    words) within `DATA_NEAR_COPY_RATIO` by the near-copy helper, or two or more words of one inside the other."""
+    from langpref.language.near_copies import normalise as words
+    from langpref.language.near_copies import similarity
+
+    if _key(ours) == _key(held):
+        return True
+    a, b = words(ours), words(held)
+    if not a or not b:  # no Latin words (symbols, other scripts): only an exact copy counts
+        return False
+    short, long = sorted((a, b), key=len)
+    return similarity(ours, held) >= DATA_NEAR_COPY_RATIO or (len(short.split()) >= 2 and f" {short} " in f" {long} ")
+
+
+def _bank_train_texts(path: Path) -> list[str]:
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    return _texts_of(doc["train"] if "train" in doc else doc)
+
+
+def test_every_held_out_file_is_named():
+    on_disk = {ROOT / f for f in _repository_files() if f.startswith("heldout/") and f.endswith(".json")}
+    assert on_disk == set(HELD_OUT), f"held-out files not named in HELD_OUT: {sorted(on_disk - set(HELD_OUT))}"
+
+
+def test_every_bank_is_named():
+    found = {ROOT / f for f in _repository_files() if f.endswith("utterances.json") and not f.startswith("heldout/")}
+    assert found == set(BANKS), f"banks not named in BANKS: {sorted(found - set(BANKS))}"
+
+
+def test_no_data_file_under_src_copies_a_held_out_text():
+    """No text of any data file under src/ (the gate's off-topic texts) is an exact or near copy of a held-out text:
+    a set that shares texts with what the code ships measures recall of those texts."""
+    data = _src_data_files()
+    assert ROOT / "src" / "langpref" / "language" / "data" / "off_topic.json" in data
+    held = _held_out_texts()
+    clashes = [
+        f"{path.relative_to(ROOT)}: {ours!r} ~ {name}: {text!r}"
+        for path in data
+        for ours in _texts_of(json.loads(path.read_text(encoding="utf-8")))
+        for name, texts in held.items()
+        for text in texts
+        if _copies(ours, text)
+    ]
+    assert not clashes, "data under src/ copies held-out texts:\n" + "\n".join(clashes)
+
+
+def test_no_held_out_text_is_in_any_banks_train_split():
+    """No held-out text, of any task, is (after normalisation) a train phrasing of any bank."""
+    held = _held_out_texts()
+    clashes = []
+    for bank in BANKS:
+        train = {_key(t) for t in _bank_train_texts(bank)}
+        assert len(train) >= 50, f"{bank}: the scan found (nearly) no train phrasings"
+        clashes += [
+            f"{bank.relative_to(ROOT)} train: {text!r} ({name})"
+            for name, texts in held.items()
+            for text in texts
+            if _key(text) in train
+        ]
+    assert not clashes, "held-out texts in a bank's train split:\n" + "\n".join(clashes)
+
+
+@pytest.mark.parametrize(
+    "ours,held,copies",
+    [
+        ("I had pasta for lunch", "I had pasta for lunch.", True),
+        ("what is the capital of Spain?", "What is the capital of Australia?", True),
+        ("write me a poem", "Write me a poem about autumn.", True),
+        ("hola, ¿qué tal?", "Hola, ¿qué tal?", True),
+        ("谢谢", "谢谢", True),
+        ("?", "...", False),
+        ("こんにちは", "谢谢", False),
+        ("nice to meet you", "nice", False),
+        ("good morning", "Did you watch the game last night?", False),
+    ],
+)
+def test_the_overlap_tripwire_catches_copies_only(ours, held, copies):
+    assert _copies(ours, held) is copies

@@ -13,8 +13,13 @@ numbers, punctuation; no held-out phrasing is such) and it scores below `UNKNOWN
 to one of the gate's off-topic texts (`data/off_topic.json`: greetings, questions about the study, bare answers,
 praise without a direction, unrelated statements and requests, other languages) than to every bank phrasing. The
 off-topic rule was checked on `heldout/` only: it refuses none of the 192 held-out phrasings (the smallest margin
-is 0.12) and 24 of its 25 texts that are not feedback, against 21 and 23 by the floor alone. `make bench` reports
-both sides: held-out phrasings let through, `heldout/not_feedback.json` refused.
+is 0.12) and 24 of its 25 texts that are not feedback, against 21 and 23 by the floor alone. Chosen again on
+2026-12-03 (issue 42, item 1), after the 19 off-topic texts that copied a reporting-only set were removed (25 are
+left) and four train phrasings that a reporting-only set holds word for word left the banks: on `heldout/` (its
+`utterances.json`, `not_feedback.json` and `negated/`) the counts and the lowest scores are the same, so both floors
+and the rule stay. A reporting-only set is never used to choose any of this, and a test fails if a text of a data
+file here copies a held-out one. `make bench` reports both sides: held-out phrasings let through,
+`heldout/not_feedback.json` refused.
 """
 
 from __future__ import annotations
