@@ -139,6 +139,36 @@ def test_the_export_holds_every_participants_learned_reward(engine, h, tmp_path,
             assert set(r["feature_weights"]) <= set(engine.space.feature_names) and r["feature_weights"]
         else:
             assert r["feature_weights"] is None
+    _the_export_takes_the_rewards_to_the_robot(engine, out, saved, tmp_path, learner)
+
+
+def _the_export_takes_the_rewards_to_the_robot(engine, out, saved, tmp_path, learner):
+    """The export's answers.jsonl holds every answer, and each participant's reward (and a pooled one per method)
+    is a saved reward `langpref.reward.load` takes, equal to the learner's state after their last answer."""
+    from langpref.cli import main
+    from langpref.reward import load
+
+    lines = [json.loads(line) for line in (tmp_path / "out" / "answers.jsonl").read_text().splitlines()]
+    assert out["num_answers"] == len(lines) == 16
+    assert {(a["participant"], a["kind"]) for a in lines} == {
+        (p, k) for p in ("P1", "P2") for k in ("language", "comparison")
+    }
+    assert len(out["rewards"]) == 4 and [p["method"] for p in out["pooled"]] == ["language", "comparison"]
+    xi_of = {(f"P{r['number']}", r["method"]): r["latent_weights"] for r in saved["rewards"]}
+    traj = engine.dataset.load(int(engine.study[0]))
+    for entry in out["rewards"]:
+        reward = load(entry["path"])
+        xi = xi_of[(entry["participant"], entry["method"])]
+        assert reward.task == engine.env and np.allclose(reward.params["xi"], xi)
+        value = reward.trajectory_reward(traj.observations, traj.actions)
+        assert np.isclose(value, engine.space.phi[int(engine.study[0])] @ np.asarray(xi), rtol=1e-4, atol=1e-6)
+        assert set(reward.doc["wants"]["features"]) == set(engine.space.feature_names)
+    for entry in out["pooled"]:
+        assert load(entry["path"]).doc["learned_from"]["participants"] == ["P1", "P2"] and entry["answers"] == 8
+    # the answers file is what learn-reward --answers reads
+    argv = ["learn-reward", "--model", saved["model"], "--data", saved["data"], "--learner", learner]
+    answers = str(tmp_path / "out" / "answers.jsonl")
+    assert main([*argv, "--answers", answers, "--feedback", "mixed", "--participant", "P2", "--json"]) == 0
 
 
 @pytest.mark.parametrize(

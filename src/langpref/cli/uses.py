@@ -10,6 +10,7 @@ from typing import Any
 from langpref import cli_config as cc
 from langpref.cli.common import JSON, TASK, run_config_experiment
 from langpref.cli_config import RERUN, beside, command, command_of, config, emit, from_args, opt, path, record
+from langpref.errors import LangprefError
 from langpref.experiments.registry import EXPERIMENTS, Experiment, get_experiment
 from langpref.extras import require
 
@@ -152,8 +153,19 @@ def cmd_improve(args: argparse.Namespace) -> None:
             default=None,
             metavar="DIR",
             help="write each run's r_xi into DIR (reward.json is "
-            "the first run's) for the Gymnasium wrapper langpref.reward.saved.LearnedReward",
+            "the first run's) for `langpref.reward.load`, `langpref label` and the Gymnasium wrapper "
+            "langpref.reward.saved.LearnedReward; with synthetic humans, each is learned from a random hidden reward",
         ),
+        path(
+            "--answers",
+            default=None,
+            metavar="FILE",
+            help="learn from real people's recorded answers (JSON Lines: a `study export`'s answers.jsonl, or "
+            "docs/answers.md's format) instead of synthetic humans: one reward per participant, saved with "
+            "--save-reward; --queries, --humans and --seeds do not apply",
+        ),
+        opt("--participant", default=None, metavar="P", help="with --answers: only this participant's answers"),
+        opt("--pooled", action="store_true", help="with --answers: one reward from every participant's answers"),
         path("--figure", default=None, help="also draw the curves into this PNG"),
         JSON,
         RERUN,
@@ -167,6 +179,10 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
     cfg = from_args(LearnRewardConfig, args)
     cfg.validate()
+    if args.answers is not None:
+        return _learn_from_answers(args, cfg)
+    if args.participant is not None or args.pooled:
+        raise LangprefError("--participant and --pooled choose among recorded answers: pass --answers FILE")
     if args.figure:
         require("plots", "learn-reward --figure")  # before the runs, not after them
     space = _space(args)
@@ -217,6 +233,79 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
                 if "optimized_true_reward" in r
                 else ""
             )
+        ),
+    )
+
+
+def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
+    """`learn-reward --answers FILE`: a reward per participant (or one, or pooled) from recorded answers."""
+    from langpref.dataset.storage import load_dataset
+    from langpref.feedback.answers import read_answers
+    from langpref.reward.recorded import file_name, learn_from_answers
+    from langpref.reward.saved import check_saveable, save_learned_reward
+    from langpref.reward.wants import describe, what_it_wants
+
+    if args.participant is not None and args.pooled:
+        raise LangprefError("pass --participant P or --pooled, not both")
+    if args.perfect_latent:
+        raise LangprefError(
+            "--answers learns a reward on a trained model's latent space: pass --model, not --perfect-latent"
+        )
+    if args.save_reward is not None:
+        check_saveable(args.model)  # before the model loads, not after
+    dataset = load_dataset(args.data)
+    answers = read_answers(args.answers, len(dataset), dataset.feature_names, dataset.episode_names)
+    space = _space(args)
+    learned, skipped = learn_from_answers(space, answers, cfg, args.participant, args.pooled)
+    rewards = []
+    for i, group in enumerate(learned):
+        wants = what_it_wants(group.learner.predict(space.phi), space.theta, space.feature_names)
+        entry = {
+            "name": group.name,
+            "answers": group.answers,
+            "participants": list(group.participants),
+            "wants": wants,
+            "summary": describe(wants),
+        }
+        if args.save_reward is not None:
+            extra = {
+                "learned_from": {
+                    "answers": str(Path(args.answers).resolve()),
+                    "group": group.name,
+                    "num_answers": group.answers,
+                    "participants": list(group.participants),
+                }
+            }
+            path = save_learned_reward(
+                group.learner,
+                args.save_reward,
+                env=space.env,
+                model=args.model,
+                name=file_name(group.name),
+                default=i == 0,
+                space=space,
+                extra=extra,
+            )
+            entry["path"] = str(path)
+        rewards.append(entry)
+    result = {
+        "answers": len(answers),
+        "left_out": skipped,
+        "feedback": cfg.feedback,
+        "learner": cfg.learner,
+        "rewards": rewards,
+        **({"save_reward": str(args.save_reward)} if args.save_reward is not None else {}),
+    }
+    emit(
+        result,
+        args.json,
+        lambda r: "\n".join(
+            [f"{r['answers']} answers ({r['left_out']} of other kinds left out), learner {r['learner']}"]
+            + [
+                f"  {e['name']} ({e['answers']} answers): {e['summary']}" + (f" -> {e['path']}" if "path" in e else "")
+                for e in r["rewards"]
+            ]
+            + ([] if "save_reward" in r else ["(pass --save-reward DIR to keep the rewards)"])
         ),
     )
 

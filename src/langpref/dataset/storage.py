@@ -209,6 +209,10 @@ class Dataset:
     def load(self, index: int) -> Trajectory:
         return load_trajectory(self.root, index, self.meta)
 
+    def episode_names(self) -> list[str | None]:
+        """The recording's episode name of each trajectory (`source`; None for a simulated one), read from disk."""
+        return [self.load(i).source for i in range(len(self))]
+
     def trajectories(self, split: str | None = None) -> list[Trajectory]:
         indices = range(len(self)) if split is None else self.split(split)
         return [self.load(i) for i in indices]

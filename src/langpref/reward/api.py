@@ -8,8 +8,10 @@
 
 `observations` is (T, obs_dim) and `actions` (T, A), one trajectory as the task's Gymnasium env gives it (the
 observation before each action). A saved reward (`langpref learn-reward --save-reward DIR`) holds r_xi's parameters
-and a reference to the checkpoint whose trajectory encoder makes phi (its path and the checksum of its weights):
-the checkpoint must stay where it was; only its trajectory encoder is read (`langpref.reward.steps`).
+and a reference to the checkpoint whose trajectory encoder makes phi (its path relative to the reward's folder, its
+absolute path and the checksum of its weights): a reward copied together with its model (the same relative layout)
+loads anywhere, and `load(PATH, model=DIR)` points at the model elsewhere. Only the trajectory encoder is read
+(`langpref.reward.steps`).
 
 Per step. phi(tau) is the time mean of per-step embeddings e_t, and phi_t the mean of e_1..e_t. The reward of the
 trajectory so far is v_t = r_xi(phi_t) (`progress`), and step t's share of the trajectory reward is
@@ -140,16 +142,38 @@ class Reward:
         return np.diff(paid, prepend=0.0) / T
 
 
-def load(path: str | Path) -> Reward:
+def model_of(path: Path, doc: dict[str, Any], model: str | Path | None = None) -> Path:
+    """The checkpoint a saved reward reads phi with: `model` when given, else the one at its recorded path relative
+    to the reward's folder (a reward moved together with its model), else at its recorded absolute path."""
+    if model is not None:
+        return Path(model)
+    recorded = doc["model"]
+    relative = recorded.get("relative")
+    candidates = ([path.parent / relative] if relative else []) + [Path(recorded["path"])]
+    for candidate in candidates:
+        if candidate.is_dir():
+            return candidate
+    raise LangprefError(
+        f"the model of the reward {path} is not at {candidates[0]}"
+        + (f" nor at {candidates[1]}" if len(candidates) > 1 else "")
+        + ": copy it there beside the reward, or pass its folder (`model=` / `--model`)"
+    )
+
+
+def load(path: str | Path, model: str | Path | None = None) -> Reward:
     """The reward saved at `path` (a `--save-reward` directory, whose reward.json is the first run's, or a
-    reward-NAME.json file), with the trajectory encoder of the checkpoint it was learned on. One-line errors for
-    a missing or foreign file, a format version newer than this langpref reads, and a checkpoint that changed
-    since."""
+    reward-NAME.json file), with the trajectory encoder of the checkpoint it was learned on: `model`, or the one it
+    recorded (`model_of`: relative to the reward first, so a reward copied together with its model loads). One-line
+    errors for a missing or foreign file, a format version newer than this langpref reads, and a checkpoint other
+    than (or changed since) the one the reward was learned with."""
     path, doc = read_reward_file(path)
-    model = Path(doc["model"]["path"])
+    model = model_of(path, doc, model)
     encoder = StepEncoder.from_checkpoint(model)
     if encoder.sha256 != doc["model"].get("sha256"):
-        raise LangprefError(f"the checkpoint {model} has changed since the reward {path} was saved; learn it again")
+        raise LangprefError(
+            f"the checkpoint {model} is not the one the reward {path} was learned with (or has changed since); "
+            "learn the reward again with this model"
+        )
     if (encoder.obs_dim, encoder.action_dim) != (int(doc["obs_dim"]), int(doc["action_dim"])):
         raise LangprefError(f"the reward {path} and its checkpoint {model} disagree on the observation/action sizes")
     params = {k: np.asarray(v, dtype=np.float64) for k, v in doc["params"].items()}

@@ -49,6 +49,7 @@ from langpref.reward.answer_model import (
 from langpref.reward.cost import query_costs
 from langpref.reward.curves import Curves, summarise_curves
 from langpref.reward.learner import RewardConfig, RewardLearner
+from langpref.reward.learners import get_learner
 from langpref.reward.metrics import value_order_correlation
 from langpref.reward.steps import SuccessEpisodes
 
@@ -255,10 +256,8 @@ def run_reward_learning(
 def _make_learner(
     cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray, seed: int
 ) -> RewardLearner | AnswerModelLearner:
-    """The learner of `cfg.learner`: the paper's (Eq. 9) or the answer-model learner."""
-    if cfg.learner == "answer-model":
-        return AnswerModelLearner(space, pool, cfg.answer_model, cfg.reward.negative_split, seed=seed)
-    return RewardLearner(space.dim, cfg.reward, seed=seed)
+    """The learner of `cfg.learner` (`langpref.reward.learners`)."""
+    return get_learner(cfg.learner).make(space, pool, cfg, seed)
 
 
 def _make_humans(
@@ -291,7 +290,7 @@ def _learn_from(
     """Give `answer` to the learner (not fit yet); the extra modelled seconds it cost (a confirmation asked of the
     person, answer-model learner with `confirm_margin` only)."""
     if cfg.learner != "answer-model":
-        learner.add(kind.pairs(space, answer, cfg.reward, rng_neg))
+        get_learner(cfg.learner).teach(learner, space, kind, answer, cfg, rng_neg)
         return 0.0
     asked, meaning = False, None
     if cfg.confirm_margin is not None and ANSWER_KINDS[kind.name].confirmable:

@@ -16,7 +16,7 @@ depends on the history through phi_t: a dense, exact shaping of T r_xi(tau), not
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+import os
 from pathlib import Path
 from typing import Any
 
@@ -46,25 +46,30 @@ def check_saveable(model: str | Path | None) -> dict:
     return cfg
 
 
-def save_learned_reward(
-    learner, out: str | Path, *, env: str, model: str | Path | None, name: str = "reward", default: bool = False
+def write_reward(
+    out: str | Path,
+    name: str,
+    *,
+    kind: str,
+    params: dict[str, list],
+    reward_config: dict[str, Any],
+    env: str,
+    model: str | Path,
+    queries: int,
+    wants: dict[str, Any] | None = None,
+    extra: dict[str, Any] | None = None,
+    default: bool = False,
 ) -> Path:
-    """Write a learner's r_xi as OUT/reward-NAME.json (and as OUT/reward.json when `default`): the paper learner's
-    parameters, or the answer-model learner's posterior-mean reward as the linear r = xi . phi it is (up to a
-    constant, which shifts every trajectory alike)."""
+    """Write a reward r_xi of `kind` with `params` as OUT/reward-NAME.json (and as OUT/reward.json when `default`).
+    The model is referred to by its path relative to OUT (so that the two move together) beside its absolute path
+    and the checksum of its weights; `wants` is what the reward wants in the task's features
+    (`langpref.reward.wants`); `extra` adds fields (where the answers came from)."""
     from langpref import __version__
     from langpref.model.checkpoint import WEIGHTS
 
     cfg = check_saveable(model)
     model = Path(model).resolve()
-    if hasattr(learner, "latent_weights"):  # the answer-model learner: linear in phi, up to a constant
-        kind, params = "linear", {"xi": learner.latent_weights().tolist()}
-        reward_config = {"learner": "answer-model", **asdict(learner.cfg)}
-    else:
-        kind = learner.cfg.model
-        values = [p.detach().cpu().numpy().astype(np.float64).tolist() for p in learner.params]
-        params = dict(zip(("xi",) if kind == "linear" else ("w1", "b1", "w2"), values))
-        reward_config = dict(vars(learner.cfg))
+    out = Path(out)
     doc = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -72,27 +77,73 @@ def save_learned_reward(
         "task": env,
         "kind": kind,
         "params": params,
-        "model": {"path": str(model), "sha256": cfg["files"][WEIGHTS]["sha256"]},
+        "model": {
+            "path": str(model),
+            "relative": os.path.relpath(model, out.resolve()),
+            "sha256": cfg["files"][WEIGHTS]["sha256"],
+        },
         "normalisation": cfg.get("normalisation", {}),
         "observation_deltas": bool(cfg["model"].get("observation_deltas", False)),
         "obs_dim": cfg["data"]["obs_dim"],
         "action_dim": cfg["data"]["action_dim"],
         "dataset_horizon": cfg["data"]["horizon"],
-        "queries": learner.num_queries,
+        "features": list(cfg["data"]["feature_names"]),
+        "queries": int(queries),
         "reward_config": reward_config,
+        **({"wants": wants} if wants is not None else {}),
+        **(extra or {}),
     }
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     path = out / f"reward-{name}.json"
     text = json.dumps(doc) + "\n"
-    path.write_text(text)
-    if default:
-        (out / DEFAULT_NAME).write_text(text)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+        if default:
+            (out / DEFAULT_NAME).write_text(text)
+    except OSError as exc:
+        raise LangprefError(
+            f"cannot write the reward into {out} ({exc.strerror or exc}); pass another folder"
+        ) from None
     return path
 
 
-SavedReward = Reward
-"""The loaded reward under its earlier name (`langpref.reward.api.Reward`)."""
+def save_learned_reward(
+    learner,
+    out: str | Path,
+    *,
+    env: str,
+    model: str | Path | None,
+    name: str = "reward",
+    default: bool = False,
+    space=None,
+    extra: dict[str, Any] | None = None,
+) -> Path:
+    """Write a learner's r_xi as its learner type saves it (`langpref.reward.learners`; `write_reward`): the paper
+    learner's parameters, or the answer-model learner's posterior-mean reward as the linear r = xi . phi it is. With
+    `space` (the latent space of the dataset it was learned on), also what the reward wants in the task's
+    features."""
+    from langpref.reward.learners import learner_type_of
+
+    check_saveable(model)
+    kind, params, reward_config = learner_type_of(learner).saved(learner)
+    wants = None
+    if space is not None:
+        from langpref.reward.wants import what_it_wants
+
+        wants = what_it_wants(learner.predict(space.phi), space.theta, space.feature_names)
+    return write_reward(
+        out,
+        name,
+        kind=kind,
+        params=params,
+        reward_config=reward_config,
+        env=env,
+        model=model,
+        queries=learner.num_queries,
+        wants=wants,
+        extra=extra,
+        default=default,
+    )
 
 
 def _import_gym():
@@ -110,6 +161,12 @@ class LearnedReward(_import_gym().Wrapper):
     def __init__(self, env, reward: str | Path | Reward):
         super().__init__(env)
         self.reward = reward if isinstance(reward, Reward) else load(reward)
+        task = getattr(getattr(env.unwrapped, "task", None), "name", None)
+        if task is not None and task != self.reward.task:
+            raise LangprefError(
+                f"the reward {self.reward.path} was learned on task {self.reward.task!r}, not on this env's task "
+                f"{task!r}: use langpref/{self.reward.task}, or learn a reward on {task!r}"
+            )
         shape = getattr(env.observation_space, "shape", None)
         if shape != (self.reward.obs_dim,) or env.action_space.shape != (self.reward.action_dim,):
             raise LangprefError(

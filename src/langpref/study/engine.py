@@ -35,6 +35,7 @@ from langpref.improve import improvement_step
 from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
+from langpref.reward.learners import LearnerSettings, get_learner
 from langpref.study.config import StudyConfig
 from langpref.study.flow import Confirmed, Participant
 from langpref.study.learners import Meanings, learned_reward
@@ -130,6 +131,12 @@ class StudyEngine:
 
         dataset = load_dataset(data_dir)
         return cls(load_model(model_dir, device="cpu", dataset=dataset), dataset, cfg)
+
+    @cached_property
+    def settings(self) -> LearnerSettings:
+        """The learners' settings: the study's reward settings; the answer-model learner's T_read as the engine
+        fitted it once (the same fit the learner would make)."""
+        return LearnerSettings(self.reward_cfg, AnswerModelConfig(reading_temperature=self.meanings.temperature))
 
     @cached_property
     def meanings(self) -> Meanings:
@@ -237,32 +244,29 @@ class StudyRobot:
 
     def _fresh(self, p: Participant, method: str) -> Learner:
         seed = int(self._rng(p, 3, self.cfg.kinds.index(method)).integers(2**31))
-        engine = self.engine
-        if self.cfg.learner == "answer-model":
-            # T_read as the engine fitted it once (the same fit the learner would make)
-            cfg = AnswerModelConfig(reading_temperature=engine.meanings.temperature)
-            return AnswerModelLearner(engine.space, engine.study, cfg, engine.reward_cfg.negative_split, seed=seed)
-        return RewardLearner(engine.space.dim, engine.reward_cfg, seed=seed)
+        return get_learner(self.cfg.learner).make(self.engine.space, self.engine.study, self.engine.settings, seed)
 
     def _add(
         self, learner: Learner, p: Participant, method: str, number: int, answer: Any, confirmed: Confirmed | None
     ) -> None:
-        """Answer `number` of `method` into the learner; language read with its whitespace collapsed, as the text cache
-        keys it, or as the meaning the participant `confirmed` ("none of these": not learned from). The answer-model
-        learner folds each answer in at once (its resampling depends on when it fits); the paper's is fit by the
-        caller, once after a replay (its loss is convex: the same minimum)."""
+        """Answer `number` of `method` into the learner (`langpref.reward.learners`); language read with its
+        whitespace collapsed, as the text cache keys it, or as the meaning the participant `confirmed` ("none of
+        these": not learned from). The answer-model learner folds each answer in at once (its resampling depends on
+        when it fits); the paper's is fit by the caller, once after a replay (its loss is convex: the same
+        minimum)."""
         if confirmed is not None and confirmed.meaning is None:
             return
-        meaning = None if confirmed is None else confirmed.meaning
-        answer = self.as_read(answer)
+        meaning = None
+        if confirmed is not None:
+            m = int(confirmed.meaning)
+            meaning = (int(self.engine.meanings.features[m // 2]), m % 2)
+        engine = self.engine
+        rng = self._rng(p, 4, number)
+        get_learner(self.cfg.learner).teach(
+            learner, engine.space, get_kind(method), self.as_read(answer), engine.settings, rng, meaning
+        )
         if isinstance(learner, AnswerModelLearner):
-            learner.observe(method, answer, meaning=meaning)
             learner.fit()
-        else:
-            psi = None if meaning is None else self.engine.meanings.psi[meaning]
-            kind = get_kind(method)
-            extra = {} if psi is None else {"psi": psi}
-            learner.add(kind.pairs(self.engine.space, answer, self.engine.reward_cfg, self._rng(p, 4, number), **extra))
 
     def _learner(self, p: Participant, method: str, answered: int) -> Learner:
         """The learner of (participant, method) that has seen the first `answered` stored answers (kept)."""

@@ -4,6 +4,7 @@ report with PNG figures (Sec. 5.2, Fig. 7-9, Table 1 and Appendix E's time-per-q
     DIR/tables/*.csv     one per database table (token hashes left out)
     DIR/summary.json     the numbers of the report
     DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`langpref.study.learned`)
+    DIR/answers.jsonl    every Study-2 answer, DIR/rewards/ every participant's reward (`langpref.study.rewards`)
     DIR/report.html      tables and figures, self-contained apart from the PNGs beside it
     DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time
 
@@ -24,6 +25,7 @@ from langpref.study.analysis.report import report_html
 from langpref.study.analysis.stats import analyse
 from langpref.study.analysis.tables import free_texts, read_tables, resolve_exclusions, table_columns, write_csvs
 from langpref.study.learned import bank_additions, learned_rewards
+from langpref.study.rewards import write_study_rewards
 
 __all__ = ["FIGURES", "export"]
 
@@ -34,11 +36,13 @@ def export(
     exclude: Sequence[str | int] = (),
     bank_additions_file: str | Path | None = None,
     force: bool = False,
+    model: str | Path | None = None,
 ) -> dict[str, Any]:
     """Write the CSVs, summary.json, learned_rewards.json, the figures and report.html of the study in `db_path` into
     `out`; the analyses leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids).
     With `bank_additions_file`, also the confirmed phrasings as a bank file there (`bank_additions`): an existing file
-    only with `force`, and never the database itself (or its journal) nor a file the export writes."""
+    only with `force`, and never the database itself (or its journal) nor a file the export writes. Also the answers
+    and rewards of `langpref.study.rewards` (its model: `model`, else where the study ran)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise LangprefError(f"--out {out} is a file; pass a directory (it is created if missing)")
@@ -63,6 +67,7 @@ def export(
             bank, added = bank_additions(tables, summary.get("env") or "", excluded)
             Path(bank_additions_file).parent.mkdir(parents=True, exist_ok=True)
             Path(bank_additions_file).write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
+        taken = write_study_rewards(tables, out, excluded, model)
         report = report_html(summary, figs, free_texts(tables, excluded))
         (out / "report.html").write_text(report, encoding="utf-8", errors="replace")
     except OSError as exc:
@@ -77,6 +82,7 @@ def export(
         "participants": summary["participants"],
         "finished": summary["finished"],
         "excluded": len(summary["excluded"]),
+        **taken,
         **(
             {"bank_additions": str(bank_additions_file), "bank_additions_phrasings": added}
             if bank_additions_file is not None
@@ -103,10 +109,12 @@ def _check_bank_additions(path: Path, db_path: Path, out: Path, force: bool) -> 
         raise LangprefError(f"--bank-additions {path} is the study database {db_path}; pass another JSON file")
     if path.is_dir():
         raise LangprefError(f"--bank-additions {path} is a directory; pass a JSON file to write")
-    own = {"summary.json", "learned_rewards.json", "report.html", "export.config.json", *(f"{n}.png" for n in FIGURES)}
+    own = {"summary.json", "learned_rewards.json", "answers.jsonl", "report.html", "export.config.json"}
+    own |= {f"{n}.png" for n in FIGURES}
     out_dir = out.resolve()
     where = path.resolve()
-    if (where.parent == out_dir and where.name in own) or out_dir / "tables" in where.parents:
+    inside = {out_dir / "tables", out_dir / "rewards"} & set(where.parents)
+    if (where.parent == out_dir and where.name in own) or inside:
         raise LangprefError(f"--bank-additions {path} is a file of the export in {out}; pass another JSON file")
     if path.exists() and not force:
         raise LangprefError(f"--bank-additions {path} already exists; pass --force to overwrite it or another file")

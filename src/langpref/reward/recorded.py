@@ -1,0 +1,116 @@
+"""Rewards from recorded answers of real people (`langpref learn-reward --answers FILE`): no synthetic human, no
+hidden reward; each answer is taught to the learner in the order it was given, as Study 2 teaches it
+(`langpref.reward.learners`), and the learned r_xi is what the lab takes to its policy (`--save-reward`).
+
+One reward per participant by default; one participant's (`participant`), or one over everybody's answers
+(`pooled`). The answers of the kinds the learner is asked to learn from (`LearnRewardConfig.feedback`: one kind, or
+`mixed` for language and comparisons in one learner) are taught; the others are counted and left out. Every random
+choice (the learner's start, the paper learner's implicit negatives) is drawn from `LearnRewardConfig.seed`, the
+group's name and the answer's position, so the same file and seed give the same reward.
+"""
+
+from __future__ import annotations
+
+import re
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from langpref.errors import LangprefError
+from langpref.feedback.answers import RecordedAnswer
+from langpref.feedback.kind import MIXED, MIXED_KINDS, get_kind
+from langpref.feedback.space import LatentSpace
+from langpref.language.bank import DIRECTIONS
+from langpref.reward.learners import get_learner
+from langpref.reward.loop import LearnRewardConfig
+
+POOLED = "pooled"
+
+
+@dataclass
+class LearnedFrom:
+    """A reward learned from one group of answers: its name (the participant, or `pooled`), the learner after the
+    group's last answer, and what it was taught."""
+
+    name: str
+    learner: Any
+    answers: int
+    participants: tuple[str, ...]
+
+
+def taught_kinds(feedback: str) -> tuple[str, ...]:
+    """The kinds of answers a `--feedback` learns from."""
+    return tuple(MIXED_KINDS) if feedback == MIXED else (feedback,)
+
+
+def groups(
+    answers: Sequence[RecordedAnswer], participant: str | None = None, pooled: bool = False
+) -> dict[str, list[RecordedAnswer]]:
+    """name -> answers, in file order: one group per participant, the one `participant`, or all `pooled`."""
+    if participant is not None:
+        chosen = [a for a in answers if a.participant == participant]
+        if not chosen:
+            names = sorted({a.participant for a in answers})
+            raise LangprefError(
+                f"no answers of participant {participant!r}; the file has {', '.join(names[:8])}"
+                + (" ..." if len(names) > 8 else "")
+            )
+        return {participant: chosen}
+    if pooled:
+        return {POOLED: list(answers)}
+    out: dict[str, list[RecordedAnswer]] = {}
+    for a in answers:
+        out.setdefault(a.participant, []).append(a)
+    return out
+
+
+def learn_group(
+    space: LatentSpace,
+    name: str,
+    answers: Sequence[RecordedAnswer],
+    cfg: LearnRewardConfig,
+    pool: np.ndarray | None = None,
+) -> LearnedFrom:
+    """The learner of `cfg.learner` taught `answers` one by one, refit after each (module docstring), over the
+    trajectories `pool` (default `cfg.query_split`'s: where the answer-model learner looks for the best one)."""
+    learner_type = get_learner(cfg.learner)
+    pool = space.split(cfg.query_split) if pool is None else pool
+    key = zlib.crc32(name.encode("utf-8"))
+    learner = learner_type.make(space, pool, cfg, int(np.random.default_rng([cfg.seed, key]).integers(2**31)))
+    features = list(space.feature_names)
+    for i, a in enumerate(answers):
+        meaning = None if a.meaning is None else (features.index(a.meaning[0]), DIRECTIONS.index(a.meaning[1]))
+        rng = np.random.default_rng([cfg.seed, key, 4, i])
+        learner_type.teach(learner, space, get_kind(a.kind), a.answer, cfg, rng, meaning)
+        learner.fit()
+    return LearnedFrom(name, learner, len(answers), tuple(dict.fromkeys(a.participant for a in answers)))
+
+
+def learn_from_answers(
+    space: LatentSpace,
+    answers: Sequence[RecordedAnswer],
+    cfg: LearnRewardConfig,
+    participant: str | None = None,
+    pooled: bool = False,
+) -> tuple[list[LearnedFrom], int]:
+    """A reward per group of `answers` (`groups`) of the kinds `cfg.feedback` learns from; and how many answers of
+    other kinds were left out. A one-line error when no answer of those kinds is left."""
+    kinds = taught_kinds(cfg.feedback)
+    taught = [a for a in answers if a.kind in kinds]
+    if not taught:
+        found = sorted({a.kind for a in answers})
+        raise LangprefError(
+            f"no {' or '.join(kinds)} answers among the {len(answers)} recorded ({', '.join(found)}); "
+            f"pass --feedback {found[0] if len(found) == 1 else MIXED}"
+        )
+    learned = [learn_group(space, name, group, cfg) for name, group in groups(taught, participant, pooled).items()]
+    return learned, len(answers) - len(taught)
+
+
+def file_name(name: str) -> str:
+    """A participant's name as the NAME of reward-NAME.json (letters, digits, `-`, `_`, `.`)."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "participant"
+    return safe[:80]
