@@ -232,6 +232,80 @@ def test_one_code_restores_a_bounded_number_of_sessions_a_minute(client, h, stud
     assert statuses == [200] * MAX_RESUMES_PER_CODE + [429] * (15 - MAX_RESUMES_PER_CODE)
 
 
+def _wrong_codes(url: str, forwarded: list[str | None]) -> list[int]:
+    """The statuses of wrong resume codes sent to a real server, each with its X-Forwarded-For (None: without)."""
+    import httpx
+
+    with httpx.Client(base_url=url, timeout=30) as c:
+        return [
+            c.post(
+                "/api/participants/resume",
+                json={"code": "BBBBB-BBBBB"},
+                headers={"X-Forwarded-For": xff} if xff else {},
+            ).status_code
+            for xff in forwarded
+        ]
+
+
+def test_forwarded_addresses_count_only_from_the_proxies_the_lab_names(engine, h, tmp_path):
+    """30 wrong codes from this machine, each with another X-Forwarded-For, were 30 clients to the server (uvicorn
+    takes the header from loopback by default) and never a 429: without --trusted-proxy the connection's address is
+    the client; with it, the address its proxy forwards is."""
+    from dataclasses import replace
+
+    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.state import MAX_RESUME_FAILURES
+
+    rotating = [f"198.51.100.{i}" for i in range(30)]
+    n = MAX_RESUME_FAILURES
+    state = build_state(h.serve_config(tmp_path / "direct.sqlite"), engine=engine, progress=False)
+    try:
+        with BackgroundServer(state) as url:
+            assert _wrong_codes(url, rotating) == [404] * n + [429] * (30 - n)
+    finally:
+        state.videos.close()
+    cfg = replace(h.serve_config(tmp_path / "proxied.sqlite"), trusted_proxies=("127.0.0.1",))
+    cfg.validate()
+    state = build_state(cfg, engine=engine, progress=False)
+    try:
+        with BackgroundServer(state) as url:
+            assert _wrong_codes(url, rotating) == [404] * 30  # 30 participants behind the proxy, one code each
+            # one of them, whatever it puts before the address the proxy appends; the others are not held back
+            spoofed = [f"203.0.113.{i}, 192.0.2.9" for i in range(n + 1)]
+            assert _wrong_codes(url, [*spoofed, "192.0.2.10", None]) == [404] * n + [429, 404, 404]
+    finally:
+        state.videos.close()
+
+
+def test_trusted_proxies_name_the_client_only_from_a_named_proxy():
+    from langpref.study.guard import TrustedProxies
+
+    none = TrustedProxies()
+    assert none.client("127.0.0.1", ["10.1.2.3"]) == "127.0.0.1" and none.client(None, ["10.1.2.3"]) is None
+    local = TrustedProxies(["127.0.0.1", "::1", "10.0.0.0/24"])
+    assert local.client("127.0.0.1", ["198.51.100.7"]) == "198.51.100.7"
+    assert local.client("::ffff:127.0.0.1", ["198.51.100.7"]) == "198.51.100.7"
+    assert local.client("::1", ["203.0.113.1, 198.51.100.7, 10.0.0.5"]) == "198.51.100.7"  # chain of two proxies
+    assert local.client("127.0.0.1", ["203.0.113.1", "[2001:db8::1]:4711"]) == "2001:db8::1"
+    assert local.client("127.0.0.1", ["1.2.3.4:80"]) == "1.2.3.4"
+    assert local.client("127.0.0.1", []) == "127.0.0.1" and local.client("127.0.0.1", [" , "]) == "127.0.0.1"
+    assert local.client("192.0.2.1", ["198.51.100.7"]) == "192.0.2.1"  # not a proxy: its header is ignored
+
+
+def test_a_trusted_proxy_that_is_no_address_is_refused_in_one_line(h, tmp_path):
+    from dataclasses import replace
+
+    from langpref.errors import LangprefError
+
+    cfg = replace(h.serve_config(tmp_path / "x.sqlite"), trusted_proxies=("127.0.0.1", " 10.0.0.0/8 ", "::1"))
+    cfg.validate()
+    assert cfg.trusted_proxies == ("127.0.0.1", "10.0.0.0/8", "::1")
+    for bad in ("*", "proxy.lab.example", "10.0.0.0/99", ""):
+        with pytest.raises(LangprefError, match="--trusted-proxy") as exc:
+            replace(cfg, trusted_proxies=(bad,)).validate()
+        assert "\n" not in str(exc.value)
+
+
 def test_rate_limiter_forgets_old_events_and_bounds_its_keys():
     limiter = RateLimiter(2, window_s=60.0, max_keys=3)
     limiter.add("a", now=0.0)

@@ -1,7 +1,7 @@
 """The documented TLS reverse proxy (src/langpref/study/deploy/nginx-study.conf) passes `nginx -t`, and a study
 behind it works: a participant joins and answers over HTTPS, with the browser's Origin accepted; a cross-site page's
-POST is refused. Cross-site requests are refused without a proxy too. Needs Debian's nginx (skipped without it, except
-under CI) and openssl."""
+POST is refused; a client cannot pass itself off as another address to the resume-code limit. Cross-site requests are
+refused without a proxy too. Needs Debian's nginx (skipped without it, except under CI) and openssl."""
 
 from __future__ import annotations
 
@@ -101,8 +101,11 @@ def test_cross_site_posts_are_refused(client, h):
 
 def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine, h, tmp_path):
     from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.state import MAX_RESUME_FAILURES
 
-    cfg = replace(h.serve_config(tmp_path / "p.sqlite"), allowed_hosts=("study.lab.example",))  # as documented
+    cfg = replace(  # as documented: its public name, and nginx named as the proxy whose X-Forwarded-For counts
+        h.serve_config(tmp_path / "p.sqlite"), allowed_hosts=("study.lab.example",), trusted_proxies=("127.0.0.1",)
+    )
     state = build_state(cfg, engine=engine, progress=False)
     with BackgroundServer(state) as url:
         upstream = int(url.rsplit(":", 1)[1])
@@ -139,6 +142,17 @@ def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine,
                 # the public name passes through the proxy; a DNS-rebinding page's name does not
                 assert c.get("/healthz", headers={"Host": "study.lab.example"}).status_code == 200
                 assert c.get("/healthz", headers={"Host": "rebind.evil.example"}).status_code == 400
+                # nginx replaces the X-Forwarded-For a client sends: wrong resume codes count against its address
+                # however the client names itself
+                wrong = [
+                    c.post(
+                        "/api/participants/resume",
+                        json={"code": "BBBBB-BBBBB"},
+                        headers={**page, "X-Forwarded-For": f"198.51.100.{i}"},
+                    ).status_code
+                    for i in range(MAX_RESUME_FAILURES + 1)
+                ]
+                assert wrong == [404] * MAX_RESUME_FAILURES + [429]
             r = httpx.get(f"http://127.0.0.1:{http}/study", follow_redirects=False)
             assert r.status_code == 301 and r.headers["location"].startswith("https://")
         finally:

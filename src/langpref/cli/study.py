@@ -31,6 +31,13 @@ from langpref.dataset.splits import SPLITS
                     "action": "extend",
                     "default": [],
                 },
+                # repeatable: --trusted-proxy 127.0.0.1 --trusted-proxy ::1 (or 127.0.0.1,::1)
+                "trusted_proxies": {
+                    "flag": "--trusted-proxy",
+                    "metavar": "ADDR[,ADDR...]",
+                    "action": "extend",
+                    "default": [],
+                },
                 "prerender": {
                     "help": "Do not render the study videos ahead at start: each is made when a participant first "
                     "needs it (they may then wait for it)."

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from langpref.errors import LangprefError
+from langpref.study.guard import TrustedProxies
 from langpref.study.hook import parse_command
 
 METHODS = ("language", "comparison")
@@ -213,6 +214,10 @@ class ServeConfig:
     `http://labpc.local:8000`. A request for any other name is refused (a DNS-rebinding page's)."""
     on_show_timeout: float = 60.0
     """Seconds an `on_show` run may take before it is killed and reported as timed out."""
+    trusted_proxies: tuple[str, ...] = ()
+    """Reverse proxies (addresses or networks: 127.0.0.1, 10.0.0.0/24) whose X-Forwarded-For header names the
+    client, whom wrong resume codes are counted against. None by default: the address that connects is the client,
+    whatever it sends. Behind the shipped nginx site: `--trusted-proxy 127.0.0.1`."""
     study: StudyConfig = field(default_factory=StudyConfig)
     video: VideoConfig = field(default_factory=VideoConfig)
 
@@ -239,6 +244,15 @@ class ServeConfig:
         for name in self.allowed_hosts:
             if not name.strip() or "/" in name or any(c.isspace() for c in name):
                 raise LangprefError(f"--allowed-hosts {name!r}: give a host name such as labpc.local, not a URL")
+        proxies = []
+        for value in self.trusted_proxies or ():
+            try:
+                proxies.append(TrustedProxies.check(value))
+            except ValueError:
+                raise LangprefError(
+                    f"--trusted-proxy {value!r}: give the proxy's address or network, e.g. 127.0.0.1 or 10.0.0.0/24"
+                ) from None
+        self.trusted_proxies = tuple(proxies)
         if not self.on_show_timeout > 0:
             raise LangprefError(f"--on-show-timeout must be > 0 seconds, got {self.on_show_timeout}")
         self.study.validate()

@@ -10,7 +10,8 @@
   attack points at the server would otherwise reach it as "same origin";
 - a POST whose `Origin` (or `Referer`) is another site's page (`cross_site`);
 - too many wrong resume codes from one client (`RateLimiter`, keyed by `client_key`): one client cannot lock resume
-  for the others.
+  for the others. The client is the address that connects; `X-Forwarded-For` names it only when that address is a
+  proxy the lab named (`TrustedProxies`, `--trusted-proxy`), so no client can pass itself off as many.
 """
 
 from __future__ import annotations
@@ -242,3 +243,54 @@ class RateLimiter:
                     self._events.popitem(last=False)
             self._events.move_to_end(key)
             times.append(now)
+
+
+class TrustedProxies:
+    """The reverse proxies (addresses or networks, `--trusted-proxy`) whose `X-Forwarded-For` header names the client.
+    None by default: the address that connects is the client, whatever header it sends (any process on the server's
+    machine, or any client of a proxy that passes the header on, could otherwise name a new address per request)."""
+
+    def __init__(self, proxies: Iterable[str] = ()):
+        self.networks = tuple(ipaddress.ip_network(p.strip(), strict=False) for p in proxies)
+
+    @staticmethod
+    def check(value: str) -> str:
+        """`value` as an address or network (`127.0.0.1`, `10.0.0.0/24`, `::1`); ValueError otherwise."""
+        value = value.strip()
+        return str(ipaddress.ip_network(value, strict=False) if "/" in value else ipaddress.ip_address(value))
+
+    def trusts(self, host: str | None) -> bool:
+        """Whether `host` (an address) is one of the named proxies."""
+        if not self.networks or not host:
+            return False
+        try:
+            address = ipaddress.ip_address(host)
+        except ValueError:
+            return False
+        if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+            address = address.ipv4_mapped
+        return any(address.version == net.version and address in net for net in self.networks)
+
+    def client(self, peer: str | None, forwarded: Iterable[str] = ()) -> str | None:
+        """Who sent a request that reached the server from `peer` with `X-Forwarded-For` values `forwarded`: `peer`
+        unless it is a named proxy; then the last address of the chain that is not one (each proxy appends the
+        address it was reached from, so the addresses after the first untrusted one are the proxies' own)."""
+        if not self.trusts(peer):
+            return peer
+        hops = [_forwarded_host(h) for value in forwarded for h in value.split(",")]
+        hops = [h for h in hops if h]
+        for hop in reversed(hops):
+            if not self.trusts(hop):
+                return hop
+        return hops[0] if hops else peer
+
+
+def _forwarded_host(hop: str) -> str:
+    """An address of X-Forwarded-For without the port some proxies add: `[::1]:80` -> `::1`, `1.2.3.4:80` ->
+    `1.2.3.4` (an IPv6 address without brackets is taken whole)."""
+    hop = hop.strip()[:100]
+    if hop.startswith("["):
+        return hop[1 : hop.find("]")] if "]" in hop else hop[1:]
+    if hop.count(":") == 1:
+        return hop.split(":", 1)[0]
+    return hop

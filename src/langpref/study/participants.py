@@ -55,7 +55,9 @@ def participant_router(state: StudyApp) -> APIRouter:
     @router.post("/api/participants/resume")
     async def resume_session(request: Request):
         body = await read_body(request)
-        return await run_in_threadpool(resume, state, body, request.client.host if request.client else None)
+        peer = request.client.host if request.client else None
+        client = state.proxies.client(peer, request.headers.getlist("x-forwarded-for"))
+        return await run_in_threadpool(resume, state, body, client)
 
     @router.get("/api/participants/{pid}/step")
     def current(pid: str, request: Request):
@@ -153,8 +155,9 @@ def create_participant(state: StudyApp, body: bytes) -> dict[str, Any]:
 
 def resume(state: StudyApp, body: bytes, client: str | None = None) -> dict[str, Any]:
     """`{"code": "XXXXX-XXXXX"}` -> a new token of the participant with that resume code (their other tokens
-    keep working). Wrong codes are limited per client (`client`: its address), so codes cannot be guessed by
-    trying and one client's wrong codes never block another's right one."""
+    keep working). Wrong codes are limited per client (`client`: its address, as the connection or a trusted proxy
+    says: `TrustedProxies`), so codes cannot be guessed by trying and one client's wrong codes never block another's
+    right one."""
     data = decode_json(body)
     code = (
         sdb.normalise_resume_code(data.get("code", ""))

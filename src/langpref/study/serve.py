@@ -122,6 +122,7 @@ def build_state(
         generated=generated,
         allowed_hosts=cfg.allowed_hosts,
         bind_host=cfg.host,
+        trusted_proxies=cfg.trusted_proxies,
     )
 
 
@@ -152,6 +153,9 @@ def _uvicorn_server(app, log_level: str = "warning"):
             lifespan="off",
             timeout_keep_alive=30,
             timeout_graceful_shutdown=2,
+            # the client is the address that connects: uvicorn would take X-Forwarded-For from any local process;
+            # the study reads it itself, from the proxies named with --trusted-proxy only (guard.TrustedProxies)
+            proxy_headers=False,
         )
     )
 

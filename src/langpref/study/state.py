@@ -2,7 +2,8 @@
 
 It holds the database path (one connection per thread), the engine and the robot (a reward learner per participant),
 the video cache, the admin token, the `--on-show` hook, Study 1's generated candidates, the checks of Host and
-Origin, and the per-participant locks and rate limits that keep concurrent requests apart.
+Origin, the proxies trusted to name the client, and the per-participant locks and rate limits that keep concurrent
+requests apart.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from langpref.study.config import StudyConfig
 from langpref.study.engine import StudyEngine, StudyRobot
 from langpref.study.flow import Confirmed, Participant, Step
 from langpref.study.generated import Generator
-from langpref.study.guard import HostCheck, HttpError, RateLimiter
+from langpref.study.guard import HostCheck, HttpError, RateLimiter, TrustedProxies
 from langpref.study.hook import ShowHook
 from langpref.study.videos import VideoCache
 
@@ -52,6 +53,7 @@ class StudyApp:
         generated: Generator | None = None,
         allowed_hosts: tuple[str, ...] = (),
         bind_host: str | None = None,
+        trusted_proxies: tuple[str, ...] = (),
     ):
         self.db_path = str(db_path)
         self.engine = engine
@@ -72,6 +74,7 @@ class StudyApp:
         self.video_waiters = 0  # requests waiting for a video; changed only on the event loop
         self.allowed_origins = {o.rstrip("/").lower() for o in allowed_origins}
         self.hosts = HostCheck(allowed_hosts, bind_host, self.allowed_origins)
+        self.proxies = TrustedProxies(trusted_proxies)  # whose X-Forwarded-For names the client
 
     def connect(self):
         """This thread's connection, kept open: closing the last connection of a WAL database checkpoints it
