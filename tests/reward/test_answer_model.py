@@ -183,7 +183,9 @@ ADDED_SINCE_GOLDEN = {"kendall_tau", "kendall_tau_std", "epic_distance", "epic_d
 def test_the_paper_learner_reproduces_its_output_byte_for_byte():
     """The JSON of four paper-learner runs, written by the code before the reward/ package and the answer-model
     learner existed (tests/fixtures/learn_reward_paper_golden.json), is what the learner writes today: every key
-    of the golden file byte for byte, beside only the keys added since (`ADDED_SINCE_GOLDEN`)."""
+    of the golden file byte for byte, beside only the keys added since (`ADDED_SINCE_GOLDEN`). Its language runs
+    were written again on 2026-12-03, when two held-out phrasings left Meta-World's train bank (the human and the
+    implicit negatives draw from it); the comparison run, which reads no bank, was unchanged byte for byte."""
     from pathlib import Path
 
     golden = json.loads((Path(__file__).parents[1] / "fixtures" / "learn_reward_paper_golden.json").read_text())
