@@ -27,7 +27,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURES = ROOT / "tests" / "fixtures" / "lerobot"
 DATASETS = ("tiny", "tiny-images")
-COLUMNS = ("langpref.reward_share", "langpref.reward_progress", "langpref.episode_reward")
+COLUMNS = ("langpref.reward_share", "langpref.reward_progress", "langpref.episode_reward", "next.reward")
 
 
 def write_random_reward(
@@ -112,6 +112,7 @@ def _verify_one(original: Path, labelled: Path) -> dict:
             else:
                 same &= value == other
         ep = int(b["episode_index"])
+        same &= float(b["next.reward"]) == float(b[COLUMNS[0]])  # LeRobot's reward name holds the reward share
         shares[ep] = shares.get(ep, 0.0) + float(b[COLUMNS[0]])
         totals[ep] = float(b[COLUMNS[2]])
     for ep, total in totals.items():

@@ -114,6 +114,26 @@ def test_info_and_stats_list_the_new_columns(labelled):
     assert np.allclose([m[0] for m in episodes.column(f"stats/{EPISODE}/mean").to_pylist()], totals)
 
 
+def test_lerobots_reward_and_rabc_progress_are_written(labelled):
+    """LeRobot's `next.reward` holds r_t; the RA-BC sidecar's progress rises by each frame's reward, on [0, 1]."""
+    info = json.loads((labelled / "meta/info.json").read_text())
+    assert info["features"]["next.reward"] == {"dtype": "float32", "shape": [1], "names": None}
+    data = pq.read_table(labelled / DATA)
+    assert np.array_equal(data.column("next.reward").to_numpy(), data.column(SHARE).to_numpy())
+    side = pq.read_table(labelled / "sarm_progress.parquet")
+    assert side.column_names == ["index", "episode_index", "frame_index", "progress_sparse"]
+    assert side.column("index").to_pylist() == data.column("index").to_pylist()
+    progress = side.column("progress_sparse").to_numpy().astype(np.float64)
+    assert progress.min() == pytest.approx(0.0) and progress.max() == pytest.approx(1.0)
+    episode = side.column("episode_index").to_numpy()
+    share = data.column(SHARE).to_numpy().astype(np.float64)
+    for ep in np.unique(episode):
+        rows = episode == ep
+        rises = np.diff(progress[rows])
+        scale = rises[np.argmax(np.abs(share[rows][1:]))] / share[rows][1:][np.argmax(np.abs(share[rows][1:]))]
+        assert scale > 0 and np.allclose(rises, share[rows][1:] * scale, atol=1e-5)
+
+
 def test_langprefs_reader_reads_the_copy_as_the_original(labelled):
     before, after = read_lerobot(TINY), read_lerobot(labelled)
     assert [e.name for e in after] == [e.name for e in before]

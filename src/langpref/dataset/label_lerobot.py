@@ -10,6 +10,13 @@ What changes, against the layout `langpref.dataset.lerobot` describes:
                                      frames (exact quantiles; lerobot estimates them from histograms)
     meta/episodes/chunk-*/*.parquet  the same statistics per episode, as `stats/<column>/<stat>` columns
     meta/langpref_label.json         what was labelled with which reward
+    sarm_progress.parquet            per frame `index`, `episode_index`, `frame_index`, `progress_sparse`: the sidecar
+                                     LeRobot's reward-aligned behaviour cloning reads (`lerobot-train --use_rabc=true`)
+
+LeRobot names a frame's reward `next.reward` (float32, shape (1,)): the copy has it, r_t (the reward share), unless
+the dataset has its own, which is kept. RA-BC weighs a frame by how much its progress rises over the next action
+chunk; `progress_sparse` is the episode's learned reward earned so far (the running sum of r_t), scaled to [0, 1]
+over the whole dataset, so a chunk's rise is the reward its frames earn over the dataset's range of such sums.
 
 Videos are hard-linked (copied where that fails) and every other file is copied as it is. Original columns are not
 rewritten value by value: the copy's table is the original Arrow table with columns appended, so their bytes are
@@ -27,7 +34,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from langpref.dataset.label import COLUMNS, EPISODE, bar, check_sizes, episode_columns, link_or_copy
+from langpref.dataset.label import COLUMNS, EPISODE, SHARE, bar, check_sizes, episode_columns, link_or_copy
 from langpref.dataset.lerobot import (
     EPISODES_DIR,
     INFO_PATH,
@@ -40,6 +47,10 @@ from langpref.dataset.lerobot import (
 )
 from langpref.errors import LangprefError
 
+NEXT_REWARD = "next.reward"
+"""LeRobot's name of a frame's reward."""
+PROGRESS_SIDECAR = "sarm_progress.parquet"
+"""The per-frame progress file LeRobot's RA-BC reads beside a dataset."""
 STATS_PATH = Path("meta/stats.json")
 QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 """The quantiles lerobot 0.4 keeps in its statistics, as q01, q10, q50, q90, q99."""
@@ -65,6 +76,7 @@ def label_lerobot(
         raise LangprefError(f"{src / INFO_PATH}: feature {taken[0]!r} exists (labelled before): label the original")
     sizes = [int(np.prod(features[k].get("shape") or [1])) for k in (state_key, action_key)]
     check_sizes(reward, sizes[0], sizes[1], f"{src}'s {state_key} and {action_key}")
+    written = {name: name for name in COLUMNS} | ({} if NEXT_REWARD in features else {NEXT_REWARD: SHARE})
     episodes = _read_episodes_meta(src, "")
     template = _template(info, "data_path", src / INFO_PATH)
     by_file: dict[Path, list[dict[str, Any]]] = {}
@@ -74,33 +86,47 @@ def label_lerobot(
     labels: dict[int, dict[str, np.ndarray]] = {}
     ticks = bar(None, f"label {src.name}", len(episodes), progress)
     for rel, eps in sorted(by_file.items()):
-        labels.update(_label_data_file(src / rel, out / rel, eps, reward, (state_key, action_key), features))
+        labels.update(_label_data_file(src / rel, out / rel, eps, reward, (state_key, action_key), features, written))
         ticks.update(len(eps))
     ticks.close()
     _copy_rest(src, out, set(by_file))
-    _write_info(info, out / INFO_PATH)
-    _write_stats(src / STATS_PATH, out / STATS_PATH, labels)
-    _write_episode_stats(src, out, labels)
+    _write_info(info, out / INFO_PATH, list(written))
+    _write_stats(src / STATS_PATH, out / STATS_PATH, labels, list(written))
+    _write_episode_stats(src, out, labels, list(written))
+    _write_progress(out / PROGRESS_SIDECAR, labels)
     frames = sum(len(cols[EPISODE]) for cols in labels.values())
-    return {"frames": frames, "episode_rewards": [float(labels[ep["episode_index"]][EPISODE][0]) for ep in episodes]}
+    return {
+        "frames": frames,
+        "episode_rewards": [float(labels[ep["episode_index"]][EPISODE][0]) for ep in episodes],
+        "columns": list(written),
+        "progress_sidecar": PROGRESS_SIDECAR,
+    }
 
 
 # ---- data files ----------------------------------------------------------------------------------------------------
 
 
 def _label_data_file(
-    src: Path, dst: Path, episodes: list[dict[str, Any]], reward: Any, keys: tuple[str, str], features: dict
+    src: Path,
+    dst: Path,
+    episodes: list[dict[str, Any]],
+    reward: Any,
+    keys: tuple[str, str],
+    features: dict,
+    written: dict[str, str],
 ) -> dict[int, dict[str, np.ndarray]]:
-    """Write `dst`: the data file `src` with the label columns of its `episodes`; returns those columns per episode
-    (in frame order). Every row of the file must belong to one of them."""
+    """Write `dst`: the data file `src` with the label columns of its `episodes` (`written`: column -> the label it
+    holds); returns the labels per episode (in frame order) and each frame's `index`. Every row of the file must
+    belong to one of them."""
     table = _read_parquet(src, None, "data file")
-    for key in ("episode_index", "frame_index", *keys):
+    for key in ("index", "episode_index", "frame_index", *keys):
         if key not in table.column_names:
             raise LangprefError(f"{src}: column '{key}' missing from the data file")
     obs, act = (_to_matrix(table.column(k), src, k, features.get(k)) for k in keys)
     episode = table.column("episode_index").to_numpy()
     frame = table.column("frame_index").to_numpy()
-    columns = {name: np.full(table.num_rows, np.nan, dtype=np.float32) for name in COLUMNS}
+    frame_ids = table.column("index").to_numpy()
+    columns = {name: np.full(table.num_rows, np.nan, dtype=np.float32) for name in written}
     covered = np.zeros(table.num_rows, dtype=bool)
     out: dict[int, dict[str, np.ndarray]] = {}
     for ep in episodes:
@@ -111,9 +137,10 @@ def _label_data_file(
                 f"{src}: episode {index} has {len(rows)} frames, the episodes metadata says {ep['length']}"
             )
         rows = rows[np.argsort(frame[rows], kind="stable")]
-        out[index] = episode_columns(reward, obs[rows], act[rows])
-        for name, values in out[index].items():
-            columns[name][rows] = values
+        labels = episode_columns(reward, obs[rows], act[rows])
+        for name, label in written.items():
+            columns[name][rows] = labels[label]
+        out[index] = {**labels, NEXT_REWARD: labels[SHARE], "index": frame_ids[rows]}
         covered[rows] = True
     if not covered.all():
         stray = int(episode[np.flatnonzero(~covered)[0]])
@@ -188,9 +215,9 @@ def _copy_rest(src: Path, out: Path, written: set[Path]) -> None:
             shutil.copy2(path, dst)
 
 
-def _write_info(info: dict[str, Any], path: Path) -> None:
-    """meta/info.json with the label columns as features (indented as lerobot writes it)."""
-    info = dict(info, features={**info["features"], **{name: dict(FEATURE) for name in COLUMNS}})
+def _write_info(info: dict[str, Any], path: Path, names: list[str]) -> None:
+    """meta/info.json with the label columns `names` as features (indented as lerobot writes it)."""
+    info = dict(info, features={**info["features"], **{name: dict(FEATURE) for name in names}})
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(info, indent=4, ensure_ascii=False), encoding="utf-8")
 
@@ -210,7 +237,7 @@ def column_stats(values: np.ndarray) -> dict[str, list]:
     return stats
 
 
-def _write_stats(src: Path, dst: Path, labels: dict[int, dict[str, np.ndarray]]) -> None:
+def _write_stats(src: Path, dst: Path, labels: dict[int, dict[str, np.ndarray]], names: list[str]) -> None:
     """meta/stats.json with the label columns' statistics over all frames (written even when `src` had none)."""
     stats: dict[str, Any] = {}
     if src.is_file():
@@ -218,18 +245,18 @@ def _write_stats(src: Path, dst: Path, labels: dict[int, dict[str, np.ndarray]])
             stats = json.loads(src.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise LangprefError(f"{src}: not readable JSON ({' '.join(str(exc).split())})") from exc
-    for name in COLUMNS:
+    for name in names:
         stats[name] = column_stats(np.concatenate([cols[name] for cols in labels.values()]))
     dst.parent.mkdir(parents=True, exist_ok=True)
     dst.write_text(json.dumps(stats, indent=4, ensure_ascii=False), encoding="utf-8")
 
 
-def _write_episode_stats(src: Path, out: Path, labels: dict[int, dict[str, np.ndarray]]) -> None:
+def _write_episode_stats(src: Path, out: Path, labels: dict[int, dict[str, np.ndarray]], names: list[str]) -> None:
     """Each meta/episodes parquet file with `stats/<column>/<stat>` columns of the label columns, per episode."""
     for path in sorted((src / EPISODES_DIR).glob("chunk-*/file-*.parquet")):
         table = _read_parquet(path, None, "episodes metadata")
         indices = table.column("episode_index").to_pylist()
-        for name in COLUMNS:
+        for name in names:
             per_episode = [column_stats(labels[i][name]) for i in indices]
             for stat in per_episode[0]:
                 kind = pa.list_(pa.int64() if stat == "count" else pa.float64())
@@ -237,3 +264,21 @@ def _write_episode_stats(src: Path, out: Path, labels: dict[int, dict[str, np.nd
         dst = out / path.relative_to(src)
         dst.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, dst, compression=_compression(pq.ParquetFile(path)))
+
+
+def _write_progress(path: Path, labels: dict[int, dict[str, np.ndarray]]) -> None:
+    """The RA-BC sidecar (module docstring): per frame its `index`, `episode_index`, `frame_index` and
+    `progress_sparse`, the running sum of r_t scaled to [0, 1] over every frame of the dataset."""
+    order = sorted(labels)
+    earned = {i: np.cumsum(labels[i][SHARE].astype(np.float64)) for i in order}
+    low = min(float(v.min()) for v in earned.values())
+    span = max(max(float(v.max()) for v in earned.values()) - low, 1e-12)
+    table = pa.table(
+        {
+            "index": pa.array(np.concatenate([labels[i]["index"] for i in order]).astype(np.int64)),
+            "episode_index": pa.array(np.concatenate([np.full(len(earned[i]), i) for i in order]).astype(np.int64)),
+            "frame_index": pa.array(np.concatenate([np.arange(len(earned[i])) for i in order]).astype(np.int64)),
+            "progress_sparse": pa.array(np.concatenate([(earned[i] - low) / span for i in order]).astype(np.float32)),
+        }
+    )
+    pq.write_table(table, path)
