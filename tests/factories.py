@@ -221,3 +221,26 @@ def parsers():
 
     walk(build_parser(), [])
     return out
+
+
+def untrained_checkpoint(out: Path, seed: int = 0) -> Path:
+    """A real (untrained) Meta-World checkpoint at `out`: its trajectory encoder is what a saved reward reads."""
+    from dataclasses import asdict
+
+    import torch
+
+    from langpref.model.checkpoint import build_model, save_model
+    from langpref.model.config import ModelConfig
+    from langpref.model.encoders import step_input_dim
+    from langpref.model.latent import DataInfo
+    from langpref.tasks import get_task
+
+    spec = get_task("metaworld")
+    layout = [asdict(f) for f in spec.obs_layout]
+    info = DataInfo("metaworld", list(spec.features), layout, spec.obs_dim, spec.action_dim, 8, 1, [0.0] * 3, [1.0] * 3)
+    torch.manual_seed(seed)
+    dim = step_input_dim(spec.obs_dim, spec.action_dim, True)
+    rng = np.random.default_rng(seed)
+    cfg = ModelConfig(latent_dim=8, max_length=12)
+    model = build_model(cfg, info, rng.normal(size=dim) * 0.1, 0.5 + rng.random(dim))
+    return save_model(model, out, model_cfg=cfg, lang_finetuned=False)

@@ -1,5 +1,6 @@
 """The guide pages run as written: every code block of docs/start-to-finish.md, in order, in a fresh folder, at a
-smaller size (`TINY`: each replacement must still find its text, so the page and this test cannot drift apart)."""
+smaller size (`TINY`: each replacement must still find its text, so the page and this test cannot drift apart), and
+the README's snippets on a saved reward."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from tests.factories import untrained_checkpoint, write_dataset
 
 ROOT = Path(__file__).parents[2]
 GUIDE = ROOT / "docs" / "start-to-finish.md"
@@ -60,3 +63,22 @@ def test_start_to_finish_runs_as_written(tmp_path):
         "reward-pooled.json",
     ]
     assert (tmp_path / "recordings" / "drawer-labelled").is_dir() and (tmp_path / "runs" / "drawer-ppo.zip").is_file()
+
+
+def test_the_readmes_reward_snippets_run(tmp_path):
+    """The README's Python blocks on a saved reward, as written, beside a reward saved by `learn-reward` (SAC's
+    steps cut to a few); the LeRobot one runs in LeRobot's own venv (`make lerobot-check`)."""
+    from langpref.cli import main
+
+    blocks = [code for lang, code in code_blocks(ROOT / "README.md") if lang == "python"]
+    runnable = [b for b in blocks if "langpref.reward" in b and "lerobot" not in b]
+    assert len(runnable) == 2 and all("lerobot" in b for b in blocks if b not in runnable)
+    data = write_dataset(tmp_path / "data", env="metaworld", n=24, horizon=8, like_task=True)
+    model = untrained_checkpoint(tmp_path / "model")
+    argv = ["learn-reward", "--model", str(model), "--data", str(data), "--feedback", "language", "--queries", "2"]
+    assert main([*argv, "--humans", "1", "--seeds", "1", "--save-reward", str(tmp_path / "rewards")]) == 0
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    for code in runnable:
+        code = code.replace("total_timesteps=100_000", "total_timesteps=64")
+        done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)
+        assert done.returncode == 0, f"{code}\n{done.stderr[-3000:]}"

@@ -5,11 +5,9 @@ reward, and the saved reward travels with its model and refuses another task."""
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
 
 import numpy as np
 import pytest
-import torch
 from scipy.stats import kendalltau
 
 from langpref.cli import main
@@ -20,7 +18,7 @@ from langpref.feedback.kind import get_kind
 from langpref.feedback.space import toy_latent_space
 from langpref.reward import LearnRewardConfig
 from langpref.reward.recorded import learn_from_answers
-from tests.factories import write_dataset
+from tests.factories import untrained_checkpoint, write_dataset
 
 UP = {"feature": "height", "direction": "increase"}
 W = np.array([0.2, 1.0, -0.6])
@@ -68,31 +66,12 @@ def test_answers_of_other_kinds_are_left_out_and_a_missing_participant_is_one_li
         learn_from_answers(space, answers, LearnRewardConfig(feedback="language"), participant="P9")
 
 
-def _model(out, seed: int):
-    """A real (untrained) Meta-World checkpoint at `out`: its trajectory encoder is what a saved reward reads."""
-    from langpref.model.checkpoint import build_model, save_model
-    from langpref.model.config import ModelConfig
-    from langpref.model.encoders import step_input_dim
-    from langpref.model.latent import DataInfo
-    from langpref.tasks import get_task
-
-    spec = get_task("metaworld")
-    layout = [asdict(f) for f in spec.obs_layout]
-    info = DataInfo("metaworld", list(spec.features), layout, spec.obs_dim, spec.action_dim, 8, 1, [0.0] * 3, [1.0] * 3)
-    torch.manual_seed(seed)
-    dim = step_input_dim(spec.obs_dim, spec.action_dim, True)
-    rng = np.random.default_rng(seed)
-    cfg = ModelConfig(latent_dim=8, max_length=12)
-    model = build_model(cfg, info, rng.normal(size=dim) * 0.1, 0.5 + rng.random(dim))
-    return save_model(model, out, model_cfg=cfg, lang_finetuned=False)
-
-
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
     """A lab's folder: a Meta-World-shaped dataset, a real (untrained) checkpoint in lab/model, recorded answers."""
     root = tmp_path_factory.mktemp("lab")
     data = write_dataset(root / "data", env="metaworld", n=24, horizon=8, like_task=True)
-    _model(root / "lab" / "model", 0)
+    untrained_checkpoint(root / "lab" / "model", 0)
     answers = root / "answers.jsonl"
     lines = [
         {"kind": "language", "shown": 1, "text": "Move faster.", "participant": "P1"},
@@ -105,7 +84,7 @@ def lab(tmp_path_factory):
     return root, data, answers
 
 
-def test_learn_reward_from_answers_saves_rewards_that_move_with_their_model(lab, tmp_path, capsys):
+def test_learn_reward_from_answers_saves_rewards_that_move_with_theiruntrained_checkpoint(lab, tmp_path, capsys):
     import shutil
 
     import gymnasium as gym
@@ -130,7 +109,7 @@ def test_learn_reward_from_answers_saves_rewards_that_move_with_their_model(lab,
         assert np.isclose(reward.compute_reward(obs, act).sum(), reward.trajectory_reward(obs, act))
         assert reward.doc["learned_from"]["participants"] == ["P1"] and reward.doc["queries"] == 3
         with pytest.raises(LangprefError, match="not the one the reward"):
-            load(moved / "rewards" / "reward-P1.json", model=_model(tmp_path / "other", 1))
+            load(moved / "rewards" / "reward-P1.json", model=untrained_checkpoint(tmp_path / "other", 1))
         # a reward of another task with the same observation sizes is refused by the wrapper in one line
         doc = json.loads((moved / "rewards" / "reward-P1.json").read_text())
         (moved / "rewards" / "reward-drawer.json").write_text(json.dumps({**doc, "task": "drawer-open"}))
