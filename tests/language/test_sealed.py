@@ -346,6 +346,16 @@ def test_every_bank_is_named():
     assert found == set(BANKS), f"banks not named in BANKS: {sorted(found - set(BANKS))}"
 
 
+def _data_texts(path: Path) -> list[str]:
+    """The texts of a data file under src/. The comparative corpus's lexicon holds word lists ("slow down", "a bit ")
+    that any feedback contains, and whole sentences (its `indirect` forms): its whole sentences are its texts here,
+    and the sentences it makes are checked as a corpus (`test_the_comparative_corpus_copies_no_held_out_text`)."""
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    if path.name == "comparative_concepts.json":
+        return [t for c in doc["concepts"].values() for d in ("increase", "decrease") for t in c[d]["indirect"]]
+    return _texts_of(doc)
+
+
 def test_no_data_file_under_src_copies_a_held_out_text():
     """No text of any data file under src/ (the gate's off-topic texts) is an exact or near copy of a held-out text:
     a set that shares texts with what the code ships measures recall of those texts."""
@@ -355,7 +365,7 @@ def test_no_data_file_under_src_copies_a_held_out_text():
     clashes = [
         f"{path.relative_to(ROOT)}: {ours!r} ~ {name}: {text!r}"
         for path in data
-        for ours in _texts_of(json.loads(path.read_text(encoding="utf-8")))
+        for ours in _data_texts(path)
         for name, texts in held.items()
         for text in texts
         if _copies(ours, text)
@@ -395,3 +405,30 @@ def test_no_held_out_text_is_in_any_banks_train_split():
 )
 def test_the_overlap_tripwire_catches_copies_only(ours, held, copies):
     assert _copies(ours, held) is copies
+
+
+def test_the_comparative_corpus_copies_no_held_out_text_nor_any_val_or_test_phrasing():
+    """The corpus the `comparative` language model is built from (issue 40, item 1; its shipped seed and size) holds
+    no exact or near copy (`langpref.language.near_copies`, ratio 0.9) of a held-out text, of a built-in bank's or
+    the plugin's val or test phrasing, or of any phrasing of the drawer's unsplit bank, beyond the built-in banks'
+    own train phrasings that it takes as they are (every built-in model trains on those). No text of it is an exact
+    copy of a held-out text at all."""
+    from langpref.language.corpus import build_corpus, copies
+    from langpref.language.near_copies import NEAR_COPY_RATIO
+
+    corpus = build_corpus()
+    texts = sorted({e.text for e in corpus})
+    assert len(texts) > 3000 and any(e.source.startswith("bank:") for e in corpus)
+    train = {_key(t) for bank in BANKS[:2] for t in _bank_train_texts(bank)}
+    held = [t for texts_ in _held_out_texts().values() for t in texts_]
+    others = []
+    for bank in BANKS:
+        doc = json.loads(bank.read_text(encoding="utf-8"))
+        others += _texts_of({k: v for k, v in doc.items() if k in ("val", "test")} if "train" in doc else doc)
+    exact = {_key(t) for t in held} & {_key(t) for t in texts}
+    assert not exact, f"{len(exact)} corpus texts are held-out texts"
+    near_held = sorted(t for t in copies(texts, held, NEAR_COPY_RATIO) if _key(t) not in train)
+    near_bank = sorted(t for t in copies(texts, others, NEAR_COPY_RATIO) if _key(t) not in train)
+    # our texts only: a failure must not print a held-out text
+    assert not near_held, f"corpus texts that nearly copy a held-out text: {near_held}"
+    assert not near_bank, f"corpus texts that nearly copy a bank's val/test phrasing: {near_bank}"
