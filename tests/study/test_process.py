@@ -1,6 +1,7 @@
-"""The server as a process: SIGTERM stops it within a few seconds even while a video is being made, and neither a
-SIGTERM nor a SIGKILL leaves a process of it behind (the render worker watches its parent). What can be checked before
-the model is loaded (a taken port, a directory as --db) is refused at once, and --host 0.0.0.0 warns."""
+"""The server as a process: SIGTERM stops it in well under a second even while a video is being made and pages wait
+for videos, keeping every answer it acknowledged, and neither a SIGTERM nor a SIGKILL leaves a process of it behind
+(the render worker watches its parent). What can be checked before the model is loaded (a taken port, a directory as
+--db) is refused at once, and --host 0.0.0.0 warns."""
 
 from __future__ import annotations
 
@@ -48,6 +49,79 @@ def test_sigterm_stops_the_server_in_seconds_and_leaves_nothing(h, tmp_path):
     proc.stdout.close()
     assert took < 5.0, took
     assert proc.returncode == 0
+    deadline = time.time() + 5
+    while alive(every) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not alive(every), "processes of the server are left after SIGTERM"
+
+
+def test_sigterm_is_prompt_with_video_requests_waiting_and_keeps_every_acknowledged_answer(h, tmp_path):
+    """A stop took 3.3-5.5 s: uvicorn's graceful stop waited for the requests waiting for a video (up to 2 s each),
+    then the interpreter's teardown of torch, MuJoCo and EGL took one or more seconds. Now the waiting requests are
+    answered at once and the process ends after its cleanup; an answer acknowledged before is in the database."""
+    import sqlite3
+    import threading
+
+    db = tmp_path / "prompt.sqlite"
+    proc, url = h.run_server(db, "--video-width", "160", "--video-height", "120", log=tmp_path / "prompt.log")
+    every: set[int] = set()
+    acknowledged: list[tuple[str, int]] = []
+    answering, gone = threading.Event(), threading.Event()
+
+    def participant():  # answers step after step until the server is gone
+        try:
+            with httpx.Client(base_url=url, timeout=30) as c:
+                pid, headers = h.join(c)
+                while not gone.is_set():
+                    step = c.get(f"/api/participants/{pid}/step", headers=headers).json()
+                    if step["kind"] == "done":
+                        return
+                    r = c.post(f"/api/participants/{pid}/answer", json=h.answer_for(step), headers=headers)
+                    if r.status_code == 200:
+                        acknowledged.append((pid, step["seq"]))
+                        answering.set()
+        except httpx.HTTPError:
+            pass
+
+    def page(name: str):  # a page waiting for a video: it asks again while the video is being made
+        try:
+            with httpx.Client(base_url=url, timeout=30) as c:
+                while not gone.is_set() and c.get(name).status_code == 503:
+                    pass
+        except httpx.HTTPError:
+            pass
+
+    threads = [threading.Thread(target=participant, daemon=True) for _ in range(2)]
+    for t in threads:
+        t.start()
+    assert answering.wait(60), "no answer was taken"
+    with httpx.Client(base_url=url, timeout=30) as c:
+        pid, headers = h.join(c)
+        shown = c.get(f"/api/participants/{pid}/step", headers=headers).json()
+        while not shown["videos"]:
+            shown = c.post(f"/api/participants/{pid}/answer", json=h.answer_for(shown), headers=headers).json()
+        name = shown["videos"][0]
+        names = [name.replace(name[len("/videos/traj") :][:6], f"{i:06d}") for i in range(16)]
+        pages = [threading.Thread(target=page, args=(n,), daemon=True) for n in names]
+        for t in pages:
+            t.start()
+        deadline = time.time() + 60
+        while c.get("/api/admin/status", headers=h.admin).json()["videos"]["waiting_requests"] == 0:
+            assert time.time() < deadline, "no request waited for a video"
+        every = descendants(proc.pid)
+    t = time.time()
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=30)
+    took = time.time() - t
+    gone.set()
+    proc.stdout.close()
+    assert proc.returncode == 0 and took < 2.0, took
+    for thread in threads:
+        thread.join(30)
+    conn = sqlite3.connect(db)
+    stored = set(conn.execute("SELECT participant_id, seq FROM answers").fetchall())
+    conn.close()
+    assert acknowledged and set(acknowledged) <= stored
     deadline = time.time() + 5
     while alive(every) and time.time() < deadline:
         time.sleep(0.05)

@@ -69,8 +69,9 @@ def cmd_study_serve(args: argparse.Namespace) -> None:
     from langpref.study.config import ServeConfig
 
     with needs("study", "langpref study serve"):
-        from langpref.study.serve import resolve_study_config, serve
-    serve(from_args(ServeConfig, args, study=resolve_study_config(args.db, cc.args_of(args, "study."))))
+        from langpref.study.serve import exit_now, resolve_study_config, serve
+    if serve(from_args(ServeConfig, args, study=resolve_study_config(args.db, cc.args_of(args, "study.")))):
+        exit_now(0)  # stopped by SIGTERM and cleaned up: the interpreter's own teardown would take seconds
 
 
 @command(

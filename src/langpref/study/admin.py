@@ -144,7 +144,7 @@ def server_status(state: StudyApp) -> dict[str, Any]:
     conn = state.connect()
     counts = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in sdb.TABLES}
     return {
-        "videos": state.videos.progress(),
+        "videos": {**state.videos.progress(), "waiting_requests": state.video_waiters},
         "rows": counts,
         "engine": state.engine.describe(),
         "hooks": state.hook.status() if state.hook else None,

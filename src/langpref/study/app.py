@@ -84,7 +84,8 @@ def add_error_handlers(app: FastAPI) -> None:
 
 def add_request_guard(app: FastAPI, state: StudyApp) -> None:
     """Before a request: refuse a Host the server does not answer to, and a cross-site write. After it: the security
-    headers, and `Cache-Control: no-store` on the API."""
+    headers, `Cache-Control: no-store` on the API, and `Connection: close` once the server is stopping (a client
+    that asks again at once would otherwise keep its connection, and the stop, going)."""
 
     @app.middleware("http")
     async def _headers(request: Request, call_next):
@@ -104,4 +105,6 @@ def add_request_guard(app: FastAPI, state: StudyApp) -> None:
             response.headers.setdefault(key, value)
         if request.scope["path"].startswith("/api/"):  # not request.url: it caches every URL parsed
             response.headers.setdefault("Cache-Control", "no-store")
+        if state.stopping.is_set():  # the server is stopping: no next request on this connection to wait for
+            response.headers["Connection"] = "close"
         return response

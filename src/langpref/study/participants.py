@@ -293,19 +293,21 @@ async def video(state: StudyApp, request: Request):
     """`GET /videos/NAME`: the file once it is made; until then 503 with Retry-After, after a short wait.
 
     Async and never blocking: a video that is not made yet holds no worker thread (80 such requests once froze every
-    other endpoint); it waits here a little, then the client is told to come back. The name is read from the path
-    itself: the route's pattern ends in `$`, which lets a trailing newline through.
+    other endpoint); it waits here a little (not once the server is stopping), then the client is told to come back.
+    The name is read from the path itself: the route's pattern ends in `$`, which lets a trailing newline through.
     """
     index = state.videos.index_of(request.scope["path"].removeprefix("/videos/"))
     if index is None:
         raise HttpError(404, "no such video")
     status, info = state.videos.request(index)
-    if status in ("pending", "generating") and state.video_waiters < MAX_VIDEO_WAITERS:
+    waiting = status in ("pending", "generating") and not state.stopping.is_set()
+    if waiting and state.video_waiters < MAX_VIDEO_WAITERS:
         state.video_waiters += 1
         try:
             loop = asyncio.get_running_loop()
             deadline = loop.time() + VIDEO_WAIT_S
-            while status in ("pending", "generating") and loop.time() < deadline:
+            # a stop does not wait for the video: the answer comes at once, and the page asks again later
+            while status in ("pending", "generating") and loop.time() < deadline and not state.stopping.is_set():
                 await asyncio.sleep(0.05)
                 status, info = state.videos.request(index)
         finally:

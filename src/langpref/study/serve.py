@@ -144,8 +144,14 @@ def bind(host: str, port: int) -> socket.socket:
 def _uvicorn_server(app, log_level: str = "warning"):
     import uvicorn
 
-    # a stop waits at most 2 s for requests in flight (none waits long: videos are not waited for in threads)
-    return uvicorn.Server(
+    class StudyServer(uvicorn.Server):
+        def handle_exit(self, sig, frame) -> None:  # SIGTERM, SIGINT: the requests waiting for a video answer now
+            app.state.study.stopping.set()
+            super().handle_exit(sig, frame)
+
+    # a stop waits at most 2 s for requests in flight: answers (a few ms each); a request waiting for a video is
+    # answered at once (`StudyApp.stopping`)
+    return StudyServer(
         uvicorn.Config(
             app,
             log_level=log_level,
@@ -211,12 +217,30 @@ def network_warning(host: str) -> str | None:
     )
 
 
-def serve(cfg: ServeConfig) -> None:
-    """Run the study server until interrupted (SIGINT) or stopped (SIGTERM: it exits within a few seconds)."""
+def exit_now(code: int = 0) -> None:
+    """End the process at once, skipping the interpreter's own teardown (torch's, MuJoCo's and EGL's libraries take
+    a second or more, 3-5 s on a busy machine): for `langpref study serve` once `serve` has cleaned up after a
+    SIGTERM. Every answer acknowledged was committed to the database (WAL: durable against a process ending)."""
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
+def serve(cfg: ServeConfig) -> bool:
+    """Run the study server until interrupted (SIGINT) or stopped (SIGTERM: its render workers and hook runs killed,
+    answers in flight finished; well under a second). True when a SIGTERM stopped it (the command line then ends
+    the process with `exit_now`)."""
     previous = (
         signal.signal(signal.SIGTERM, _on_sigterm) if threading.current_thread() is threading.main_thread() else None
     )
     state = sock = None
+    stopped = False
     try:
         # everything that can be checked without the model first: a taken port or a bad --db fails in a second
         cfg.validate()
@@ -255,6 +279,7 @@ def serve(cfg: ServeConfig) -> None:
         state.videos.start(prerender=cfg.prerender)
         _uvicorn_server(create_app(state)).run(sockets=[sock])
     except _Stopped:
+        stopped = True
         print("stopped (SIGTERM)", file=sys.stderr, flush=True)
     finally:
         if state is not None:
@@ -267,6 +292,7 @@ def serve(cfg: ServeConfig) -> None:
             sock.close()
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+    return stopped
 
 
 class BackgroundServer:
@@ -292,6 +318,7 @@ class BackgroundServer:
         return self.url
 
     def __exit__(self, *exc) -> None:
+        self.state.stopping.set()
         self.server.should_exit = True
         self.thread.join(timeout=30)
         self.sock.close()

@@ -72,6 +72,9 @@ class StudyApp:
         self.resumes = RateLimiter(MAX_RESUMES_PER_CODE)
         self._local = threading.local()
         self.video_waiters = 0  # requests waiting for a video; changed only on the event loop
+        self.stopping = threading.Event()
+        """Set when the server begins to stop: a request waiting for a video is answered (503) at once, so that the
+        server's graceful stop waits only for answers in flight."""
         self.allowed_origins = {o.rstrip("/").lower() for o in allowed_origins}
         self.hosts = HostCheck(allowed_hosts, bind_host, self.allowed_origins)
         self.proxies = TrustedProxies(trusted_proxies)  # whose X-Forwarded-For names the client
