@@ -337,3 +337,77 @@ def _human_models(out: dict) -> str:
                     f"test {acc['test']:.3f} ({acc['test_phrasings']})"
                 )
     return "\n".join(lines)
+
+
+@command(
+    "lang-model build",
+    "build the language model `comparative` (minilm trained on comparative feedback) into the cache, with progress",
+    [
+        opt("name", choices=["comparative"], help="the model to build"),
+        opt("--seed", type=int, default=0, help="seed of the corpus and the training (default 0, the cached one)"),
+        opt("--steps", type=int, default=None, help="optimiser steps (default: PretrainConfig.steps)"),
+        opt("--lr", type=float, default=None, help="learning rate (default: PretrainConfig.lr)"),
+        opt("--temperature", type=float, default=None, help="contrastive temperature (default: PretrainConfig's)"),
+        opt("--per-meaning", type=int, default=None, help="made sentences per concept and direction"),
+        opt(
+            "--val-concepts",
+            default=None,
+            metavar="C1,C2,...",
+            help="choose settings: hold these concepts out of training and report how the model sorts their sentences "
+            "by meaning and direction before and during training (needs --out; nothing goes into the cache)",
+        ),
+        path("--out", default=None, help="build into this directory instead of the cache"),
+        opt("--force", action="store_true", help="build again even when the cached model exists"),
+        JSON,
+    ],
+    "Makes the comparative-feedback corpus (a hand-written lexicon of concepts made into sentences from the seed, and "
+    "the built-in banks' train splits) and trains all-MiniLM-L6-v2 on it with a contrastive loss over meaning and "
+    "direction (langpref.language.pretrain). `langpref train --lang-model comparative` builds it by itself when it "
+    "is missing. With --val-concepts, a settings run: the named concepts are held out and read.",
+)
+def cmd_lang_model_build(args: argparse.Namespace) -> None:
+    import dataclasses
+    import time
+
+    from langpref.language.models import comparative_dir
+    from langpref.language.pretrain import PretrainConfig, build, pretrain, read_record
+
+    given = {"seed": args.seed, "steps": args.steps, "lr": args.lr, "temperature": args.temperature}
+    given["per_meaning"] = args.per_meaning
+    cfg = PretrainConfig(**{k: v for k, v in given.items() if v is not None})
+    cfg.validate()
+    if args.val_concepts:
+        from langpref.language.corpus import build_corpus, concept_split, load_lexicon
+
+        held = [c.strip() for c in args.val_concepts.split(",") if c.strip()]
+        unknown = sorted(set(held) - set(load_lexicon()["concepts"]))
+        if unknown:
+            raise LangprefError(f"--val-concepts: unknown concept(s) {', '.join(unknown)}")
+        if args.out is None:
+            raise LangprefError("--val-concepts needs --out (a settings run never goes into the cache)")
+        start = time.perf_counter()
+        train, val = concept_split(build_corpus(cfg.seed, cfg.per_meaning), held)
+        _, history = pretrain(train, cfg, val=val)
+        out = {
+            "config": dataclasses.asdict(cfg),
+            "val_concepts": held,
+            "train_sentences": len(train),
+            "val_sentences": len(val),
+            "val": [h for h in history if "meaning" in h],
+            "seconds": round(time.perf_counter() - start, 1),
+        }
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "val.json").write_text(json.dumps(out, indent=2) + "\n")
+        emit(out, args.json, lambda o: "\n".join(f"step {h['step']}: {h}" for h in o["val"]))
+        return
+    target = args.out or comparative_dir(cfg.seed)
+    if cfg != PretrainConfig(seed=cfg.seed) and args.out is None:
+        raise LangprefError("settings other than the defaults build only with --out (the cache holds the defaults)")
+    if (target / "model.safetensors").is_file() and not args.force:
+        record = read_record(target) or {}
+        out = {"path": str(target), "built": False, "record": record}
+    else:
+        record = build(target, cfg)
+        out = {"path": str(target), "built": True, "record": record}
+    out["size_mb"] = round(sum(f.stat().st_size for f in target.iterdir() if f.is_file()) / 2**20, 1)
+    emit(out, args.json, lambda o: f"{'built' if o['built'] else 'already built'}: {o['path']} ({o['size_mb']} MB)")

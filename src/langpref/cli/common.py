@@ -17,6 +17,7 @@ CUDA where there is one, else the CPU."""
 GROUPS = {
     "experiment": ("the paper's experiments, one command each", "experiment", "EXPERIMENT"),
     "bank": ("a task's bank of phrasings before a study: check and augment it", "bank_command", "SUBCOMMAND"),
+    "lang-model": ("language models langpref builds itself: build one", "lang_model_command", "SUBCOMMAND"),
     "study": ("the web app for user studies with real people (paper Sec. 5.2)", "study_command", "SUBCOMMAND"),
 }
 

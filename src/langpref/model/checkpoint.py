@@ -183,12 +183,13 @@ def save_model(
 def lang_model_info(name: str, transformer: torch.nn.Module) -> dict[str, Any]:
     """What names the pretrained language model a checkpoint was built on: its registered name (or the hub name or
     path as given), the architecture, and a checksum of its weights (the pretrained ones, for a frozen model that
-    is loaded again from its name)."""
-    from langpref.language.models import canonical_name
+    is loaded again from its name); for a language model langpref built (`comparative`), the model it started from
+    (`built_from`) and its build's settings and corpus."""
+    from langpref.language.models import built_record, canonical_name
     from langpref.model.encoders import transformer_state_fingerprint
 
     cfg = transformer.config
-    return {
+    info = {
         "name": canonical_name(name),
         "model_type": getattr(cfg, "model_type", None),
         "hidden_size": int(getattr(cfg, "hidden_size", getattr(cfg, "d_model", 0))),
@@ -196,6 +197,11 @@ def lang_model_info(name: str, transformer: torch.nn.Module) -> dict[str, Any]:
         "vocab_size": int(getattr(cfg, "vocab_size", 0)),
         "weights_sum": transformer_state_fingerprint(transformer),
     }
+    record = built_record(name)
+    if record is not None:  # a model langpref built: what it started from, on which corpus, how
+        info["built_from"] = record.get("built_from")
+        info["build"] = {k: record.get(k) for k in ("config", "corpus", "objective")}
+    return info
 
 
 def check_lang_model(path: Path, cfg: dict[str, Any], asked: str | None) -> None:
