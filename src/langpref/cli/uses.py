@@ -179,10 +179,8 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
     cfg = from_args(LearnRewardConfig, args)
     cfg.validate()
-    if args.answers is not None:
+    if args.answers is not None or args.participant is not None or args.pooled:
         return _learn_from_answers(args, cfg)
-    if args.participant is not None or args.pooled:
-        raise LangprefError("--participant and --pooled choose among recorded answers: pass --answers FILE")
     if args.figure:
         require("plots", "learn-reward --figure")  # before the runs, not after them
     space = _space(args)
@@ -239,63 +237,17 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
 def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
     """`learn-reward --answers FILE`: a reward per participant (or one, or pooled) from recorded answers."""
-    from langpref.dataset.storage import load_dataset
-    from langpref.feedback.answers import read_answers
-    from langpref.reward.recorded import file_name, learn_from_answers
-    from langpref.reward.saved import check_saveable, save_learned_reward
-    from langpref.reward.wants import describe, what_it_wants
+    from langpref.reward.recorded import rewards_from_answers
 
+    if args.answers is None:
+        raise LangprefError("--participant and --pooled choose among recorded answers: pass --answers FILE")
     if args.participant is not None and args.pooled:
         raise LangprefError("pass --participant P or --pooled, not both")
     if args.perfect_latent:
-        raise LangprefError(
-            "--answers learns a reward on a trained model's latent space: pass --model, not --perfect-latent"
-        )
-    if args.save_reward is not None:
-        check_saveable(args.model)  # before the model loads, not after
-    dataset = load_dataset(args.data)
-    answers = read_answers(args.answers, len(dataset), dataset.feature_names, dataset.episode_names)
-    space = _space(args)
-    learned, skipped = learn_from_answers(space, answers, cfg, args.participant, args.pooled)
-    rewards = []
-    for i, group in enumerate(learned):
-        wants = what_it_wants(group.learner.predict(space.phi), space.theta, space.feature_names)
-        entry = {
-            "name": group.name,
-            "answers": group.answers,
-            "participants": list(group.participants),
-            "wants": wants,
-            "summary": describe(wants),
-        }
-        if args.save_reward is not None:
-            extra = {
-                "learned_from": {
-                    "answers": str(Path(args.answers).resolve()),
-                    "group": group.name,
-                    "num_answers": group.answers,
-                    "participants": list(group.participants),
-                }
-            }
-            path = save_learned_reward(
-                group.learner,
-                args.save_reward,
-                env=space.env,
-                model=args.model,
-                name=file_name(group.name),
-                default=i == 0,
-                space=space,
-                extra=extra,
-            )
-            entry["path"] = str(path)
-        rewards.append(entry)
-    result = {
-        "answers": len(answers),
-        "left_out": skipped,
-        "feedback": cfg.feedback,
-        "learner": cfg.learner,
-        "rewards": rewards,
-        **({"save_reward": str(args.save_reward)} if args.save_reward is not None else {}),
-    }
+        raise LangprefError("--answers learns on a trained model's latent space: pass --model, not --perfect-latent")
+    result = rewards_from_answers(
+        args.answers, args.data, args.model, cfg, args.participant, args.pooled, args.save_reward, lambda: _space(args)
+    )
     emit(
         result,
         args.json,

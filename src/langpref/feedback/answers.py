@@ -121,53 +121,62 @@ class _Resolver:
         raise LangprefError(f"{where}: a trajectory is a dataset index or an episode name, not {value!r}")
 
 
+def _language(obj: dict[str, Any], where: str, resolve: _Resolver) -> LanguageAnswer:
+    query = LanguageQuery(resolve(obj.get("shown"), where))
+    if obj.get("no_change") is True:
+        return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
+    text = obj.get("text")
+    if not isinstance(text, str) or not text.strip():
+        raise LangprefError(f"{where}: a language answer needs 'text' (what was said) or \"no_change\": true")
+    if len(text) > MAX_FEEDBACK:
+        raise LangprefError(f"{where}: 'text' is {len(text)} characters; at most {MAX_FEEDBACK}")
+    return LanguageAnswer(query, " ".join(text.split()))
+
+
+def _comparison(obj: dict[str, Any], where: str, resolve: _Resolver) -> ComparisonAnswer:
+    shown = obj.get("shown")
+    if not isinstance(shown, list) or len(shown) != 2:
+        raise LangprefError(f"{where}: a comparison's 'shown' is the pair shown, [first, second]")
+    a, b = resolve(shown[0], where), resolve(shown[1], where)
+    if a == b:
+        raise LangprefError(f"{where}: a comparison shows two different trajectories, got {a} twice")
+    choice = obj.get("choice")
+    if isinstance(choice, bool) or choice not in (0, 1):
+        raise LangprefError(f"{where}: 'choice' must be 0 (the first shown was preferred) or 1 (the second)")
+    return ComparisonAnswer(ComparisonQuery(a, b), int(choice))
+
+
+def _meaning(obj: dict[str, Any], where: str, features: Sequence[str]) -> tuple[str, str] | None:
+    meaning = obj.get("meaning")
+    if meaning is None:
+        return None
+    if (
+        not isinstance(meaning, dict)
+        or meaning.get("feature") not in features
+        or meaning.get("direction") not in DIRECTIONS
+    ):
+        raise LangprefError(
+            f'{where}: \'meaning\' is {{"feature": one of {", ".join(features)}, "direction": increase or decrease}}'
+        )
+    return meaning["feature"], meaning["direction"]
+
+
 def _parse_line(obj: Any, where: str, line: int, resolve: _Resolver, features: Sequence[str]) -> RecordedAnswer:
     if not isinstance(obj, dict):
         raise LangprefError(f"{where}: an answer is a JSON object, got {type(obj).__name__}")
     kind = obj.get("kind")
     if kind not in kind_names():
         raise LangprefError(f"{where}: 'kind' must be one of {', '.join(kind_names())}, got {kind!r}")
-    shown = obj.get("shown")
     if kind == "language":
-        query = LanguageQuery(resolve(shown, where))
-        if obj.get("no_change") is True:
-            answer = LanguageAnswer(query, NO_CHANGE_FEEDBACK)
-        else:
-            text = obj.get("text")
-            if not isinstance(text, str) or not text.strip():
-                raise LangprefError(f"{where}: a language answer needs 'text' (what was said) or \"no_change\": true")
-            if len(text) > MAX_FEEDBACK:
-                raise LangprefError(f"{where}: 'text' is {len(text)} characters; at most {MAX_FEEDBACK}")
-            answer = LanguageAnswer(query, " ".join(text.split()))
+        answer = _language(obj, where, resolve)
     elif kind == "comparison":
-        if not isinstance(shown, list) or len(shown) != 2:
-            raise LangprefError(f"{where}: a comparison's 'shown' is the pair shown, [first, second]")
-        a, b = resolve(shown[0], where), resolve(shown[1], where)
-        if a == b:
-            raise LangprefError(f"{where}: a comparison shows two different trajectories, got {a} twice")
-        choice = obj.get("choice")
-        if isinstance(choice, bool) or choice not in (0, 1):
-            raise LangprefError(f"{where}: 'choice' must be 0 (the first shown was preferred) or 1 (the second)")
-        answer = ComparisonAnswer(ComparisonQuery(a, b), int(choice))
+        answer = _comparison(obj, where, resolve)
     else:
         try:
             answer = get_kind(kind).from_record(obj)
         except (KeyError, TypeError, ValueError) as exc:
             raise LangprefError(f"{where}: not a {kind} answer ({exc})") from None
-    meaning = obj.get("meaning")
-    if meaning is not None:
-        if (
-            not isinstance(meaning, dict)
-            or meaning.get("feature") not in features
-            or meaning.get("direction") not in DIRECTIONS
-        ):
-            raise LangprefError(
-                f'{where}: \'meaning\' is {{"feature": one of {", ".join(features)}, "direction": increase or '
-                "decrease}"
-            )
-        meaning = (meaning["feature"], meaning["direction"])
-    participant = obj.get("participant", ANONYMOUS)
-    number = obj.get("number")
+    participant, number = obj.get("participant", ANONYMOUS), obj.get("number")
     if not isinstance(participant, str | int) or isinstance(participant, bool) or str(participant) == "":
         raise LangprefError(f"{where}: 'participant' must be a name or a number")
     if number is not None and (isinstance(number, bool) or not isinstance(number, int)):
@@ -179,7 +188,7 @@ def _parse_line(obj: Any, where: str, line: int, resolve: _Resolver, features: S
         str(participant),
         None if method is None else str(method),
         number,
-        meaning,
+        _meaning(obj, where, features),
         None if time is None else str(time),
         line,
     )

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import re
 import zlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -114,3 +115,51 @@ def file_name(name: str) -> str:
     """A participant's name as the NAME of reward-NAME.json (letters, digits, `-`, `_`, `.`)."""
     safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "participant"
     return safe[:80]
+
+
+def rewards_from_answers(
+    answers_file: str | Path,
+    data: str | Path,
+    model: str | Path,
+    cfg: LearnRewardConfig,
+    participant: str | None,
+    pooled: bool,
+    save_to: str | Path | None,
+    open_space: Callable[[], LatentSpace],
+) -> dict[str, Any]:
+    """`learn-reward --answers`: the answers of `answers_file` read against the dataset `data` (before the model is
+    opened: a bad file costs no model load), a reward per group learned in the space `open_space()` gives, each
+    described by what it wants and, with `save_to`, saved for `langpref.reward.load`."""
+    from langpref.dataset.storage import load_dataset
+    from langpref.feedback.answers import read_answers
+    from langpref.reward.saved import check_saveable, save_learned_reward
+    from langpref.reward.wants import describe, what_it_wants
+
+    if save_to is not None:
+        check_saveable(model)
+    dataset = load_dataset(data)
+    answers = read_answers(answers_file, len(dataset), dataset.feature_names, dataset.episode_names)
+    space = open_space()
+    learned, skipped = learn_from_answers(space, answers, cfg, participant, pooled)
+    rewards = []
+    for i, group in enumerate(learned):
+        wants = what_it_wants(group.learner.predict(space.phi), space.theta, space.feature_names)
+        entry = {"name": group.name, "answers": group.answers, "participants": list(group.participants)}
+        entry |= {"wants": wants, "summary": describe(wants)}
+        if save_to is not None:
+            source = {"answers": str(Path(answers_file).resolve()), "group": group.name, "num_answers": group.answers}
+            extra = {"learned_from": {**source, "participants": list(group.participants)}}
+            path = save_learned_reward(
+                group.learner,
+                save_to,
+                env=space.env,
+                model=model,
+                name=file_name(group.name),
+                default=i == 0,
+                space=space,
+                extra=extra,
+            )
+            entry["path"] = str(path)
+        rewards.append(entry)
+    out = {"answers": len(answers), "left_out": skipped, "feedback": cfg.feedback, "learner": cfg.learner}
+    return {**out, "rewards": rewards, **({"save_reward": str(save_to)} if save_to is not None else {})}

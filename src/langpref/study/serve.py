@@ -232,6 +232,26 @@ def exit_now(code: int = 0) -> None:
     os._exit(code)
 
 
+def _announce(cfg: ServeConfig, state, sock: socket.socket, admin_token: str | None) -> None:
+    """What the lab reads at start: the study, the hook, Study 1's generator (started here), the two addresses."""
+    host, port = sock.getsockname()[:2]
+    shown = f"[{host}]" if ":" in host else host
+    url = f"http://{shown}:{port}"
+    print(
+        f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), database {cfg.db}",
+        file=sys.stderr,
+    )
+    if state.hook is not None:
+        print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
+    if state.generated is not None:
+        where = state.generated.store.root
+        print(f"study 1: new trajectories made in the simulator, stored in {where}", file=sys.stderr)
+        state.generated.start()
+    print(f"participants: {url}/", flush=True)
+    token = state.admin_token if admin_token is None else "(as given)"
+    print(f"admin:        {url}/admin   token: {token}", flush=True)
+
+
 def serve(cfg: ServeConfig) -> bool:
     """Run the study server until interrupted (SIGINT) or stopped (SIGTERM: its render workers and hook runs killed,
     answers in flight finished; well under a second). True when a SIGTERM stopped it (the command line then ends
@@ -255,27 +275,7 @@ def serve(cfg: ServeConfig) -> bool:
         torch.set_num_threads(max(1, cfg.torch_threads))
         limit_blas_threads(max(1, cfg.torch_threads))
         state = build_state(cfg, admin_token=admin_token)
-        host, port = sock.getsockname()[:2]
-        shown = f"[{host}]" if ":" in host else host
-        url = f"http://{shown}:{port}"
-        print(
-            f"study of {state.engine.env}: {len(state.engine.study)} trajectories ({cfg.study.split}), "
-            f"database {cfg.db}",
-            file=sys.stderr,
-        )
-        if state.hook is not None:
-            print(f"on show: {state.hook.command} (timeout {cfg.on_show_timeout:g} s)", file=sys.stderr)
-        if state.generated is not None:
-            print(
-                f"study 1: new trajectories made in the simulator, stored in {state.generated.store.root}",
-                file=sys.stderr,
-            )
-            state.generated.start()
-        print(f"participants: {url}/", flush=True)
-        print(
-            f"admin:        {url}/admin   token: {state.admin_token if admin_token is None else '(as given)'}",
-            flush=True,
-        )
+        _announce(cfg, state, sock, admin_token)
         state.videos.start(prerender=cfg.prerender)
         _uvicorn_server(create_app(state)).run(sockets=[sock])
     except _Stopped:
