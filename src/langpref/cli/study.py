@@ -125,20 +125,30 @@ def cmd_study_simulate(args: argparse.Namespace) -> None:
         RERUN,
         JSON,
     ],
-    "Writes the tables, summary.json, learned_rewards.json, the figures and report.html into --out.",
+    "Writes the tables, summary.json, learned_rewards.json, the figures and report.html into --out; answers.jsonl "
+    "(every answer, for `learn-reward --answers`) and rewards/METHOD/reward-P<N>.json (each participant's reward, "
+    "and a pooled one, for `langpref.reward.load`, `label` and the Gymnasium wrapper).",
 )
 def cmd_study_export(args: argparse.Namespace) -> None:
     from langpref.study.config import ExportConfig
     from langpref.study.export import export
 
     cfg = from_args(ExportConfig, args)
-    out = export(cfg.db, cfg.out, exclude=cfg.exclude, bank_additions_file=cfg.bank_additions, force=args.force)
+    out = export(
+        cfg.db, cfg.out, exclude=cfg.exclude, bank_additions_file=cfg.bank_additions, force=args.force, model=cfg.model
+    )
     record(args, Path(cfg.out) / "export.config.json", cfg)
     emit(
         out,
         args.json,
         lambda o: (
             f"wrote {o['report']} ({o['participants']} participants, {o['finished']} "
-            f"finished), {len(o['tables'])} tables and {len(o['figures'])} figures in {o['out']}"
+            f"finished), {len(o['tables'])} tables and {len(o['figures'])} figures in {o['out']}\n"
+            f"{o['num_answers']} answers in {o['answers']}; "
+            + (
+                f"{len(o['rewards'])} participant rewards and {len(o['pooled'])} pooled in {o['out']}/rewards"
+                if "rewards_skipped" not in o
+                else f"no rewards: {o['rewards_skipped']}"
+            )
         ),
     )

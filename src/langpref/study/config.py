@@ -297,6 +297,8 @@ class ExportConfig:
     """Also write the phrasings participants confirmed the meaning of (`--confirm-margin`) to this JSON file, in the
     bank's schema ({TASK: {feature: {increase: [...], decrease: [...]}}}), for the lab to review before adding any to
     its bank. An existing file is refused without `--force`, and the study database always."""
+    model: str | None = None
+    """The study's model folder, where it is no longer where the study ran (the saved rewards refer to it)."""
 
 
 @dataclass
