@@ -80,7 +80,18 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     assert set(read) >= {"feature", "direction", "confidence"}
     # evaluate's reading accuracy is embed's reading of each phrasing, scored against the file's label
     assert hurry == float((read["feature"], read["direction"]) == ("speed", "increase"))
-    assert len(res["misread"]) == 1 - hurry
+    assert len(res["misread"]) == 1 - hurry and read["out_of_task"] is None
+
+    # several texts in one model load; one about what Meta-World does not measure says so, small talk is refused
+    texts = ["Hurry up!", "Open the drawer further.", "I had soup today."]
+    code, out, err = run(capsys, "embed", "--model", str(model), *texts, "--json")
+    assert code == 0, err
+    readings = json.loads(out)["readings"]
+    assert [r["text"] for r in readings] == texts and readings[0]["out_of_task"] is None
+    assert (
+        readings[1]["out_of_task"]["concept"] == "opening" and "does not measure" in readings[1]["out_of_task"]["message"]
+    )
+    assert "error" in readings[2] and "feature" in readings[2]
 
     code, out, err = run(
         capsys, "visualize", "--model", str(model), "--data", str(tiny_data), "--out", str(tmp_path / "v.png")

@@ -140,6 +140,10 @@ def test_feedback_messages_say_what_to_do(client, h, study_state):
         r = client.post(url, json={"feedback": nonsense, "client_ms": 1, "seq": seq}, headers=headers)
         is_error(r, 400)
         assert "does not read as feedback" in r.json()["error"]
+    # about what the task (Meta-World's button press) does not measure: asked again, in the task's own terms
+    r = client.post(url, json={"feedback": "Open the drawer further.", "client_ms": 1, "seq": seq}, headers=headers)
+    is_error(r, 400)
+    assert "does not measure" in r.json()["error"] and "distance to button" in r.json()["error"]
     assert snapshot(study_state) == before
     text = ("Move a little faster please. " * 17).strip()
     assert len(text) <= 500

@@ -192,6 +192,50 @@ def _texts(file: str) -> list[str]:
 
 
 @command(
+    "bank scope",
+    "how often feedback is said to be about something the task does not measure",
+    [
+        opt("--split", default="val", choices=["val", "test"], help="the banks' split to measure on (choose on val)"),
+        path(
+            "--task-file",
+            action="append",
+            default=None,
+            help="a task file whose bank joins the built-in ones (repeatable; default examples/own_robot/task.toml "
+            "when it exists)",
+        ),
+        SEED,
+        JSON,
+    ],
+    "Each bank's own phrasings of --split (real feedback) and the other banks' phrasings of --split about concepts it "
+    "lacks, through the scope check (langpref.language.scope) built on each bank's train split, at several margins; "
+    "and the margin that keeps real feedback said outside at 5% or less on every bank with the most of the others "
+    "said so. Counts only, no text.",
+)
+def cmd_bank_scope(args: argparse.Namespace) -> None:
+    from langpref.language.banksource import open_bank
+    from langpref.language.scope import measure
+
+    files = args.task_file or [p for p in ["examples/own_robot/task.toml"] if Path(p).is_file()]
+    banks = {name: open_bank(name, seed=args.seed) for name in ("metaworld", "robosuite")}
+    for f in files:
+        source = open_bank(f, seed=args.seed)
+        banks[source.task] = source
+    out = measure(banks, args.split)
+    emit(out, args.json, _scope_text)
+
+
+def _scope_text(o: dict) -> str:
+    lines = [f"scope check on the {o['split']} phrasings (margin in use {o['margin_in_use']})"]
+    for name, r in o["banks"].items():
+        cells = ", ".join(
+            f"{m}: {v['real_said_outside']:.1%} / {v['lacked_said_outside']:.1%}" for m, v in r["by_margin"].items()
+        )
+        lines.append(f"  {name} ({r['real']} own, {r['lacked']} about what it lacks): {cells}")
+    lines.append(f"margin chosen by the rule: {o['chosen_margin']}  (cells: own said outside / others said outside)")
+    return "\n".join(lines)
+
+
+@command(
     "bank gate",
     "how the feedback gate treats texts: feedback it must let through, other text it should refuse",
     [

@@ -194,7 +194,7 @@ def evaluate_text(o: dict) -> str:
     "which feature and direction the model reads into a sentence",
     [
         MODEL,
-        opt("text", help='free-form feedback, e.g. "you\'re way too slow"'),
+        opt("text", nargs="+", help='free-form feedback, e.g. "you\'re way too slow" (several: one model load)'),
         NEGATION,
         JSON,
         lambda p: setattr(
@@ -208,20 +208,43 @@ def evaluate_text(o: dict) -> str:
     "Nearest bank meaning by cosine: the mean psi of each feature/direction's training phrasings; confidence is "
     "a softmax over the cosines at temperature 0.1. A sentence that does not read as feedback on the robot's "
     "motion (relevance: its highest cosine to a bank phrasing in the pretrained MiniLM space, below the gate's "
-    "floor) is refused with an error.",
+    "floor) is refused with an error; one about something the task does not measure (`langpref.language.scope`) "
+    'says so in `out_of_task`. Several texts: {"readings": [one reading per text]}, a refused one with `error`.',
 )
 def cmd_embed(args: argparse.Namespace) -> None:
-    from langpref.language.relevance import FeedbackGate
+    from langpref.language.relevance import FeedbackGate, NotFeedbackError
     from langpref.model.evaluate import embed_text
 
     model, _ = load(args, with_data=False)
-    out = embed_text(model, args.text)  # an empty text fails here, before the gate is built
-    out["relevance"] = round(FeedbackGate(model.info.env).check(args.text).score, 4)
-    emit(
-        out,
-        args.json,
-        lambda o: f"{o['feature']}/{o['direction']} (confidence {o['confidence']:.2f}, cosine {o['cosine']:.2f})",
-    )
+    readings = [embed_text(model, text) for text in args.text]  # an empty text fails here, before the gate is built
+    gate = FeedbackGate(model.info.env)
+    for out in readings:
+        try:
+            out["relevance"] = round(gate.check(out["text"], scope=False).score, 4)
+        except NotFeedbackError as exc:
+            if len(readings) == 1:
+                raise
+            out["error"] = str(exc)
+            continue
+        scope = gate.scope(out["text"])
+        out["out_of_task"] = scope.as_dict() if scope is not None and scope.outside else None
+        if out["out_of_task"]:
+            out["out_of_task"]["message"] = gate.out_of_task_message(out["text"], scope)
+    emit(readings[0] if len(readings) == 1 else {"readings": readings}, args.json, lambda o: _readings_text(readings))
+
+
+def _readings_text(readings: list[dict]) -> str:
+    lines = []
+    for o in readings:
+        head = f"{o['text'][:50]!r}: " if len(readings) > 1 else ""
+        if "error" in o:
+            lines.append(f"{head}refused: {o['error']}")
+            continue
+        line = f"{o['feature']}/{o['direction']} (confidence {o['confidence']:.2f}, cosine {o['cosine']:.2f})"
+        if o.get("out_of_task"):
+            line = f"about {o['out_of_task']['concept']}, which this task does not measure (else read as {line})"
+        lines.append(head + line)
+    return "\n".join(lines)
 
 
 @command(

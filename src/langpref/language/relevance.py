@@ -28,6 +28,7 @@ import json
 import re
 import threading
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,10 @@ OFF_TOPIC = Path(__file__).resolve().parent / "data" / "off_topic.json"
 
 class NotFeedbackError(LangprefError):
     """The text does not read as feedback on the robot's motion."""
+
+
+class OutOfTaskError(NotFeedbackError):
+    """The text is feedback on the robot's motion, but about something the task does not measure."""
 
 
 @dataclass(frozen=True)
@@ -79,9 +84,16 @@ class FeedbackGate:
         self._torch = torch
         self._lock = threading.Lock()
         self.env = env
+        self._features: dict[str, str] = {}
+        """phrasing -> its feature, where known (the scope check needs it)."""
         if phrasings is None:
             bank = load_bank(env)
-            phrasings = [t for split in ("train", "val", "test") for t, _, _ in bank.all_of_split(split)]
+            found = [(t, f) for split in ("train", "val", "test") for t, f, _ in bank.all_of_split(split)]
+            self._features = dict(found)
+            self.feature_names = tuple(bank.features)
+            phrasings = [t for t, _ in found]
+        else:
+            self.feature_names = ()
         self.phrasings = sorted(set(phrasings))
         self._bank = self._embed(self.phrasings)
         self.off_topic = json.loads(OFF_TOPIC.read_text(encoding="utf-8"))["texts"]
@@ -101,8 +113,38 @@ class FeedbackGate:
         known = any(w in self._vocab for w in words)
         return Relevance(text, float(sims[best]), self.phrasings[best], known, float(off[near]), self.off_topic[near])
 
-    def check(self, text: str) -> Relevance:
-        """The text's relevance, or a one-line `NotFeedbackError` a person can act on."""
+    @cached_property
+    def scope_check(self):
+        """The check of what this bank's task measures (`langpref.language.scope`), built on first use; None for a
+        gate of bare phrasings (no features known)."""
+        if not self._features:
+            return None
+        from langpref.language.scope import ScopeCheck
+
+        texts = sorted(self._features)
+        return ScopeCheck.build(self.feature_names, texts, [self._features[t] for t in texts], self._embed_cached)
+
+    def _embed_cached(self, texts: list[str]) -> np.ndarray:
+        from langpref.language.scope import cached_embeddings
+
+        return cached_embeddings(texts, self._embed, GATE_LANG_MODEL)
+
+    def scope(self, text: str):
+        """Where `text` stands against what the task measures (`langpref.language.scope.Scope`), or None."""
+        check = self.scope_check
+        return None if check is None else check.scope(self._embed([" ".join(str(text).split())])[0])
+
+    def out_of_task_message(self, text: str, scope) -> str:
+        """One line a person can act on, for a text about something the task does not measure."""
+        measures = ", ".join(f.replace("_", " ") for f in self.feature_names)
+        return (
+            f"{text[:60]!r} reads as a request about {scope.words}, which this task does not measure; say how it "
+            f"should change in what it does measure ({measures})"
+        )
+
+    def check(self, text: str, scope: bool = True) -> Relevance:
+        """The text's relevance, or a one-line `NotFeedbackError` a person can act on; with `scope`, an
+        `OutOfTaskError` for a text about something the task does not measure."""
         rel = self.score(text)
         if not rel.ok and rel.off_topic >= rel.score and rel.score >= RELEVANCE_FLOOR:
             raise NotFeedbackError(
@@ -115,6 +157,9 @@ class FeedbackGate:
                 f"{rel.text[:60]!r} does not read as feedback on how the robot moves (closest known phrasing "
                 f"{rel.nearest!r}, similarity {rel.score:.2f}); say how it should move differently, e.g. {EXAMPLE}"
             )
+        found = self.scope(rel.text) if scope else None
+        if found is not None and found.outside:
+            raise OutOfTaskError(self.out_of_task_message(rel.text, found))
         return rel
 
 

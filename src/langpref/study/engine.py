@@ -123,6 +123,7 @@ class StudyEngine:
         self._understanding = _CachedModel(model, self.cache)
         self.gate = FeedbackGate(self.env)
         self.understand("Move faster.")  # fail at start, not with the first participant, if prototypes are missing
+        _ = self.gate.scope_check  # built (and its corpus embedded) now, not on the first answer
 
     @classmethod
     def load(cls, model_dir: str | Path, data_dir: str | Path, cfg: StudyConfig) -> StudyEngine:

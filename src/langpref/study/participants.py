@@ -198,6 +198,16 @@ def get_step(state: StudyApp, pid: str, token: str | None) -> dict[str, Any]:
     return step_json(state, step, prow["resume_code"], p)
 
 
+def _check_feedback(gate, text: str) -> None:
+    """Typed feedback that is not about the robot's motion, or is about something the task does not measure, is
+    asked again (400) before anything is stored."""
+    if not gate.score(text).ok:
+        raise HttpError(400, NOT_FEEDBACK)
+    scope = gate.scope(text)
+    if scope is not None and scope.outside:
+        raise HttpError(400, gate.out_of_task_message(text, scope))
+
+
 def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[str, Any]:
     """Take an answer to the current step: check it, advance the flow (the robot learns), store it all in one
     transaction, and return the next step. A failure leaves the robot as the stored answers say."""
@@ -213,8 +223,8 @@ def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[st
         except AnswerError as exc:
             raise HttpError(exc.status, str(exc)) from None
         said = ans.value  # typed feedback passes the gate; "no change" is a button, not a text to read
-        if isinstance(said, LanguageAnswer) and not said.no_change and not state.engine.gate.score(said.text).ok:
-            raise HttpError(400, NOT_FEEDBACK)
+        if isinstance(said, LanguageAnswer) and not said.no_change:
+            _check_feedback(state.engine.gate, said.text)
         if state.generated is not None and step.phase == "improve":
             try:
                 for index in step.shown:  # an answer about a trajectory still being made is not taken yet
