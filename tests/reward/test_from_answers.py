@@ -79,6 +79,7 @@ def lab(tmp_path_factory):
         {"kind": "language", "shown": 5, "no_change": True, "participant": "P1"},
         {"kind": "comparison", "shown": [2, 4], "choice": 0, "participant": "P2"},
         {"kind": "language", "shown": 6, "text": "Slow down.", "participant": "P2"},
+        {"kind": "language", "shown": 7, "text": "Open the drawer further.", "participant": "P2"},
     ]
     answers.write_text("".join(json.dumps(line) + "\n" for line in lines))
     return root, data, answers
@@ -97,6 +98,7 @@ def test_learn_reward_from_answers_saves_rewards_that_move_with_theiruntrained_c
     assert main([*argv, "--feedback", "mixed", "--save-reward", str(root / "lab" / "rewards"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert [r["name"] for r in out["rewards"]] == ["P1", "P2"] and [r["answers"] for r in out["rewards"]] == [3, 2]
+    assert out["answers"] == 6 and out["out_of_task"] == 1  # the drawer: not something Meta-World measures
     wants = out["rewards"][0]["wants"]
     assert set(wants["features"]) == {"height", "speed", "distance_to_button"} and len(wants["best"]) == 3
     # the lab's folder copied elsewhere, the original gone: the reward finds its model beside it

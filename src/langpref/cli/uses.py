@@ -252,7 +252,10 @@ def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
         result,
         args.json,
         lambda r: "\n".join(
-            [f"{r['answers']} answers ({r['left_out']} of other kinds left out), learner {r['learner']}"]
+            [
+                f"{r['answers']} answers ({r['left_out']} of other kinds and {r['out_of_task']} about what the task "
+                f"does not measure left out), learner {r['learner']}"
+            ]
             + [
                 f"  {e['name']} ({e['answers']} answers): {e['summary']}" + (f" -> {e['path']}" if "path" in e else "")
                 for e in r["rewards"]

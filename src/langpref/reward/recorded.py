@@ -111,6 +111,20 @@ def learn_from_answers(
     return learned, len(answers) - len(taught)
 
 
+def in_task(answers: Sequence[RecordedAnswer], task: str) -> tuple[list[RecordedAnswer], int]:
+    """The answers without the sentences about something the task does not measure (`langpref.language.scope`,
+    unless the person confirmed a meaning), and how many were left out: a learner would read them as one of the
+    task's features, which the person never asked for."""
+    from langpref.language.relevance import FeedbackGate
+
+    sentences = [a for a in answers if a.kind == "language" and a.meaning is None and not a.answer.no_change]
+    if not sentences:
+        return list(answers), 0
+    gate = FeedbackGate(task)
+    outside = {id(a) for a in sentences if (s := gate.scope(a.answer.text)) is not None and s.outside}
+    return [a for a in answers if id(a) not in outside], len(outside)
+
+
 def file_name(name: str) -> str:
     """A participant's name as the NAME of reward-NAME.json (letters, digits, `-`, `_`, `.`)."""
     safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "participant"
@@ -139,6 +153,7 @@ def rewards_from_answers(
         check_saveable(model)
     dataset = load_dataset(data)
     answers = read_answers(answers_file, len(dataset), dataset.feature_names, dataset.episode_names)
+    answers, outside = in_task(answers, dataset.env)
     space = open_space()
     learned, skipped = learn_from_answers(space, answers, cfg, participant, pooled)
     rewards = []
@@ -161,5 +176,6 @@ def rewards_from_answers(
             )
             entry["path"] = str(path)
         rewards.append(entry)
-    out = {"answers": len(answers), "left_out": skipped, "feedback": cfg.feedback, "learner": cfg.learner}
+    out = {"answers": len(answers) + outside, "left_out": skipped, "out_of_task": outside}
+    out |= {"feedback": cfg.feedback, "learner": cfg.learner}
     return {**out, "rewards": rewards, **({"save_reward": str(save_to)} if save_to is not None else {})}
