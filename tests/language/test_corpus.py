@@ -1,6 +1,6 @@
 """The comparative-feedback corpus (langpref.language.corpus) and how a feature is tied to its concepts
-(langpref.language.ties). Held-out texts are checked in test_sealed.py, the one test that may read every held-out
-file."""
+(langpref.language.ties). The corpus against every held-out text is checked by the one test that may read all of
+heldout/ (the overlap tripwire beside the reporting set's schema tests)."""
 
 from __future__ import annotations
 
