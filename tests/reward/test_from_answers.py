@@ -95,8 +95,10 @@ def test_learn_reward_from_answers_saves_rewards_that_move_with_theiruntrained_c
 
     root, data, answers = lab
     argv = ["learn-reward", "--model", str(root / "lab" / "model"), "--data", str(data), "--answers", str(answers)]
-    assert main([*argv, "--feedback", "mixed", "--save-reward", str(root / "lab" / "rewards"), "--json"]) == 0
+    saved, figure = str(root / "lab" / "rewards"), str(tmp_path / "wants.png")
+    assert main([*argv, "--feedback", "mixed", "--save-reward", saved, "--figure", figure, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
+    assert out["figure"] == figure and (tmp_path / "wants.png").stat().st_size > 5000
     assert [r["name"] for r in out["rewards"]] == ["P1", "P2"] and [r["answers"] for r in out["rewards"]] == [3, 2]
     assert out["answers"] == 6 and out["out_of_task"] == 1  # the drawer: not something Meta-World measures
     wants = out["rewards"][0]["wants"]

@@ -166,7 +166,11 @@ def cmd_improve(args: argparse.Namespace) -> None:
         ),
         opt("--participant", default=None, metavar="P", help="with --answers: only this participant's answers"),
         opt("--pooled", action="store_true", help="with --answers: one reward from every participant's answers"),
-        path("--figure", default=None, help="also draw the curves into this PNG"),
+        path(
+            "--figure",
+            default=None,
+            help="also draw the curves into this PNG (with --answers: what each learned reward wants, per feature)",
+        ),
         JSON,
         RERUN,
     ],
@@ -245,9 +249,15 @@ def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
         raise LangprefError("pass --participant P or --pooled, not both")
     if args.perfect_latent:
         raise LangprefError("--answers learns on a trained model's latent space: pass --model, not --perfect-latent")
+    if args.figure:
+        require("plots", "learn-reward --figure")  # before the model loads, not after
     result = rewards_from_answers(
         args.answers, args.data, args.model, cfg, args.participant, args.pooled, args.save_reward, lambda: _space(args)
     )
+    if args.figure:
+        from langpref.reward.wants import plot_wants
+
+        result["figure"] = str(plot_wants(result["rewards"], args.figure))
     emit(
         result,
         args.json,
@@ -261,6 +271,7 @@ def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
                 for e in r["rewards"]
             ]
             + ([] if "save_reward" in r else ["(pass --save-reward DIR to keep the rewards)"])
+            + ([f"figure {r['figure']}"] if "figure" in r else [])
         ),
     )
 

@@ -12,6 +12,7 @@ trajectories it ranks best and worst are named by dataset index.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,3 +56,29 @@ def describe(wants: dict[str, Any]) -> str:
         f"{name} {'up' if w['weight'] > 0 else 'down'} ({w['weight']:+.2f})" for name, w in items if w["weight"] != 0
     ]
     return f"wants {', '.join(parts) or 'nothing yet'}; the features explain {wants['explained']:.0%} of it"
+
+
+def plot_wants(rewards: list[dict[str, Any]], out: str | Path, title: str = "") -> Path:
+    """One panel per reward (`name` and `wants` of each): its weight on each feature as a bar, up or down, with the
+    plain correlation as a tick beside it, and the share the features explain in the panel's title."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the figure of what a reward wants")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    n = max(len(rewards), 1)
+    fig, axes = plt.subplots(1, n, figsize=(3.2 * n + 0.8, 3.2), sharey=True, squeeze=False)
+    for ax, entry in zip(axes[0], rewards):
+        features = entry["wants"]["features"]
+        names = list(features)
+        weights = [features[f]["weight"] for f in names]
+        ax.barh(names, weights, color=["tab:blue" if w >= 0 else "tab:red" for w in weights])
+        ax.scatter([features[f]["correlation"] for f in names], names, marker="|", s=200, color="black", zorder=3)
+        ax.axvline(0.0, color="grey", linewidth=0.8)
+        ax.set_title(f"{entry['name']} (explains {entry['wants']['explained']:.0%})", fontsize=9)
+        ax.set_xlabel("weight (bar), correlation (tick)", fontsize=8)
+    fig.suptitle(title or "what each learned reward wants, per standard deviation of a feature")
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
