@@ -20,6 +20,7 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
     (`choices` come from the fields' `Literal` types, the feedback kinds from their registry)."""
     from langpref.feedback.humans import HumanConfig
     from langpref.reward import DEFAULT_WEIGHT_DECAY, feedback_choices
+    from langpref.reward.learners import learner_names
 
     docs, out = cc.field_docs(HumanConfig), (lambda s: f" Results go to ENV-{s} unless --out." if experiment else "")
     return {
@@ -46,6 +47,7 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
         "candidate_split": "--candidates",
         "generated_out": {"metavar": "DIR"},
         "feedback": {"required": True, "choices": feedback_choices()},
+        "learner": {"choices": learner_names()},
     }
 
 
@@ -337,8 +339,10 @@ for _experiment in EXPERIMENTS.values():
     [config(EXPERIMENTS["verdict"].config, {"env": {"metavar": "TASK"}}), JSON, RERUN],
     "Reads each folder's runs.json (written by `langpref experiment reward`, e.g. one per training seed: --model "
     "models/ENV-seedN --out results/reward/ENV-seedN --humans 10), pairs language with comparisons run by run, and "
-    "writes verdict.md/.json: per model and pooled, language minus comparisons in the AUC of the true reward and in "
-    "the mean cross-entropy, with 95% t-intervals, and the verdict worded from the pooled intervals.",
+    "writes verdict.md/.json: per model and over every model, language minus comparisons in the AUC of the true "
+    "reward and in the mean cross-entropy, with 95% intervals whose unit is the human (a bootstrap over humans and "
+    "models: the models share their humans and seeds), and the verdict worded from the intervals over every model. "
+    "--interval pooled gives the old t-interval over every pair as if independent, for the record.",
 )
 def cmd_experiment_verdict(args: argparse.Namespace) -> None:
     from langpref.experiments.verdict import verdict_table

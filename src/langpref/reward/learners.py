@@ -59,6 +59,8 @@ class LearnerType:
     teach: Callable[..., None]
     saved: Callable[[Any], tuple[str, dict[str, list], dict[str, Any]]]
     description: str = ""
+    selections: tuple[str, ...] | None = ("random",)
+    """The query selections it can ask with (`--query-selection`; an active one reads its posterior); None: all."""
 
 
 def meaning_psi(space: LatentSpace, split: str, meaning: Meaning) -> np.ndarray:
@@ -179,6 +181,7 @@ register_learner(
         _teach_paper,
         _saved_paper,
         "Eq. 9: Bradley-Terry pairs on phi, refit on all answers",
+        selections=None,
     )
 )
 register_learner(
@@ -189,5 +192,6 @@ register_learner(
         _teach_answer_model,
         _saved_answer_model,
         "a belief over the reward; a sentence read given the trajectory it was said about",
+        selections=("random", "infogain"),
     )
 )

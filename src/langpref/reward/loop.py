@@ -39,17 +39,15 @@ from langpref.feedback.kind import MIXED, MIXED_KINDS, FeedbackKind, get_kind, k
 from langpref.feedback.space import LatentSpace
 from langpref.reward.answer_model import (
     ANSWER_KINDS,
-    LEARNERS,
     AnswerModelConfig,
     AnswerModelInfoGain,
     AnswerModelLearner,
-    Learner,
     confirm,
 )
 from langpref.reward.cost import query_costs
 from langpref.reward.curves import Curves, summarise_curves
 from langpref.reward.learner import RewardConfig, RewardLearner
-from langpref.reward.learners import get_learner
+from langpref.reward.learners import get_learner, learner_names
 from langpref.reward.metrics import value_order_correlation
 from langpref.reward.steps import SuccessEpisodes
 
@@ -85,8 +83,9 @@ class LearnRewardConfig:
     """Split of the metrics."""
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
-    learner: Learner = "paper"
-    """`paper`: Eq. 5-9's Bradley-Terry pairs fit by `reward` (`langpref.reward.learner`, the reproduction);
+    learner: str = "paper"
+    """A registered learner (`langpref.reward.learners`; an installed package adds its own). `paper`: Eq. 5-9's
+    Bradley-Terry pairs fit by `reward` (`langpref.reward.learner`, the reproduction);
     `answer-model`: a belief over the reward whose likelihood of a sentence depends on the trajectory it was said
     about, with comparisons in the same belief (`langpref.reward.answer_model`; `random` or `infogain` queries)."""
     answer_model: AnswerModelConfig = field(default_factory=AnswerModelConfig)
@@ -138,14 +137,15 @@ class LearnRewardConfig:
 
         if self.feedback not in feedback_choices():
             raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(feedback_choices())}")
-        if self.learner not in LEARNERS:
-            raise LangprefError(f"unknown learner {self.learner!r}: choose one of {', '.join(LEARNERS)}")
+        if self.learner not in learner_names():
+            raise LangprefError(f"unknown learner {self.learner!r}: choose one of {', '.join(learner_names())}")
+        asks = get_learner(self.learner).selections
+        if asks is not None and self.selection not in asks:
+            raise LangprefError(
+                f"the {self.learner} learner asks with {' or '.join(asks)} queries, not {self.selection!r}"
+            )
         if self.learner == "answer-model":
             self.answer_model.validate()
-            if self.selection not in ("random", "infogain"):
-                raise LangprefError(
-                    f"the answer-model learner asks with random or infogain queries, not {self.selection!r}"
-                )
             if self.feedback not in (*MIXED_KINDS, MIXED):
                 raise LangprefError(f"the answer-model learner takes language and comparisons, not {self.feedback!r}")
         if self.confirm_margin is not None and (self.learner != "answer-model" or not 0 <= self.confirm_margin <= 1):

@@ -83,10 +83,13 @@ class StudyConfig:
             isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 <= margin <= 1
         ):
             raise LangprefError(f"--confirm-margin must be a number from 0 to 1 (or unset: never ask), got {margin!r}")
-        from langpref.reward.answer_model import ANSWER_KINDS, LEARNERS
+        from langpref.reward.answer_model import ANSWER_KINDS
+        from langpref.reward.learners import learner_names
 
-        if self.learner not in LEARNERS:
-            raise LangprefError(f"--learner must be {' or '.join(LEARNERS)}, got {self.learner!r}")
+        known = learner_names()
+
+        if self.learner not in known:
+            raise LangprefError(f"--learner must be {' or '.join(known)}, got {self.learner!r}")
         from langpref.study.kinds import check_kinds
 
         self.kinds = check_kinds(self.kinds)

@@ -26,7 +26,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.space import LatentSpace
 from langpref.language.bank import DIRECTIONS
-from langpref.reward.answer_model import AnswerReader
+from langpref.reward.answer_model import AnswerModelLearner, AnswerReader
 from langpref.reward.selection import feature_axes
 
 
@@ -117,11 +117,13 @@ def check_meaning(meanings: Meanings, meaning: int) -> int:
 def learned_reward(learner: Any, space: LatentSpace, study: np.ndarray, name: str) -> dict[str, Any]:
     """What the export holds of a learner (module docstring): `latent_weights` xi (D,), `feature_weights` {feature:
     v_f} (answer-model) or None, and `ranking`, the study set's dataset indices by learned reward, best first."""
+    from langpref.reward.learners import learner_type_of
+
     reward = np.asarray(learner.predict(space.phi[study]), dtype=np.float64)
     ranking = [int(i) for i in study[np.argsort(-reward, kind="stable")]]
-    if name == "answer-model":
-        xi = learner.latent_weights()
+    kind, params, _ = learner_type_of(learner).saved(learner)
+    xi = params["xi"] if kind == "linear" else []  # a reward that is not linear in phi has no latent weights
+    v = None
+    if isinstance(learner, AnswerModelLearner):  # its belief is over the bank's feature axes
         v = {space.feature_names[int(f)]: float(x) for f, x in zip(learner.features, learner.mean())}
-    else:
-        xi, v = learner.params[0].detach().numpy(), None
     return {"learner": name, "latent_weights": [float(x) for x in xi], "feature_weights": v, "ranking": ranking}
