@@ -9,6 +9,7 @@ language encoder (`langpref.model.encoders.LanguageEncoder`) adds a trained head
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Sequence
 
 import torch
@@ -34,6 +35,8 @@ def load_transformer(name_or_path: str):
     transformers.utils.logging.set_verbosity_error()
     transformers.utils.logging.disable_progress_bar()
     path = resolve_lang_model(name_or_path)
+    if sys.stderr.isatty():  # a person at a terminal sees why the next seconds pass; logs and pipes stay clean
+        print(f"loading the language model {name_or_path} ...", file=sys.stderr, flush=True)
     try:
         config = AutoConfig.from_pretrained(path)
         tokenizer = AutoTokenizer.from_pretrained(path)
