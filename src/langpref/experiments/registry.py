@@ -195,7 +195,7 @@ for _experiment in (
     Experiment(
         "verdict",
         "language vs comparisons over several reward experiments (one per trained model): paired intervals on AUC "
-        "and mean CE",
+        "and mean CE, the human as the unit",
         "langpref.experiments.verdict:run_verdict_experiment",
         "langpref.experiments.verdict:VerdictConfig",
         inputs="own",
