@@ -156,21 +156,44 @@ def test_simulated_participants_answer_generated_trajectories_by_their_features(
         assert row["text"] in {phrases.texts[i] for i in phrases.rows(feature, direction)}, (row, feature)
 
 
-def test_a_later_round_is_made_before_sign_ups_first_feedback():
-    """Made-up participants that each give one feedback queue one job each; a participant further into Study 1 is
-    not held up behind them (the queue alone, without a simulator)."""
+def _queue_only():
+    """A Generator with its queue and nothing else (no engine, worker or simulator)."""
     import threading
     from collections import deque
 
-    from langpref.study.generated import Generator, Job
+    from langpref.study.generated import Generator
 
-    g = Generator.__new__(Generator)  # no engine or worker: only the queue
+    g = Generator.__new__(Generator)
     g._cond, g._queue, g._made, g._running, g._known = threading.Condition(), deque(), {}, None, set()
     g._failed, g._retry, g._thread, g._stopped = {}, {}, None, True
+    return g
+
+
+def test_a_later_round_is_made_before_sign_ups_first_feedback():
+    """Made-up participants that each give one feedback queue one job each; a participant further into Study 1 is
+    not held up behind them, nor is a new participant's first (the queue alone, without a simulator)."""
+    from langpref.study.generated import Job
+
+    g = _queue_only()
     for k in range(5):
         g.submit(Job(100 + k, f"junk{k}", k, 2, 1, 0, "Move faster."))
     g.submit(Job(200, "real", 9, 6, 3, 0, "Move faster."))
     g.submit(Job(201, "other", 8, 4, 2, 0, "Move faster."))
+    g.submit(Job(202, "again", 6, 4, 2, 0, "Move faster."))  # later rounds: in the order of the answers
     g.submit(Job(105, "late", 7, 2, 1, 0, "Move faster."))
-    assert [j.id for j in g._queue] == [200, 201, 100, 101, 102, 103, 104, 105]
-    assert g.status(200) == ("generating", 0) and g.status(105) == ("generating", 7)
+    assert [j.id for j in g._queue] == [200, 201, 202, 105, 104, 103, 102, 101, 100]
+    assert g.status(200) == ("generating", 0) and g.status(100) == ("generating", 8)
+
+
+def test_a_new_participants_first_trajectory_comes_next_after_sign_ups_first_feedback():
+    """Issue 44: 12 sign-ups that each gave one feedback (48 requests in 0.6 s) made a new participant wait 234 s
+    for their first generated trajectory (12 jobs ahead). It is now the next made after the job in flight."""
+    from langpref.study.generated import Job
+
+    g = _queue_only()
+    g._running = Job(99, "first", 1, 2, 1, 0, "Move faster.")
+    for k in range(12):
+        g.submit(Job(100 + k, f"junk{k}", k, 2, 1, 0, "Move faster."))
+    g.submit(Job(300, "new", 20, 2, 1, 0, "Move slower."))
+    assert g.status(300) == ("generating", 1)  # only the job in flight ahead of it
+    assert {j.id for j in g._queue} == {300, *range(100, 112)}  # the sign-ups' are made later, not dropped

@@ -1,6 +1,7 @@
 """What the server refuses before a request reaches the study (`langpref.study.guard`): bodies over the limit before
 they are read (by Content-Length, or counted as they stream in chunked), JSON nested too deeply, Host names that are
-not the study's (DNS rebinding), and wrong resume codes per client, so that one client cannot lock resume for all."""
+not the study's (DNS rebinding), wrong resume codes per client, so that one client cannot lock resume for all, and
+sign-ups per client."""
 
 from __future__ import annotations
 
@@ -230,6 +231,33 @@ def test_one_code_restores_a_bounded_number_of_sessions_a_minute(client, h, stud
     code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]
     statuses = [client.post("/api/participants/resume", json={"code": code}).status_code for _ in range(15)]
     assert statuses == [200] * MAX_RESUMES_PER_CODE + [429] * (15 - MAX_RESUMES_PER_CODE)
+
+
+def test_sign_ups_are_limited_per_client(client, study_state):
+    """Issue 44: 70 made-up participants from one client in 2.4 s took the robot's and the simulator's turns. One
+    client starts at most `--signups-per-client` (20) in 10 minutes; other clients are not held back."""
+    from langpref.study.config import ServeConfig
+    from langpref.study.guard import HttpError
+    from langpref.study.participants import create_participant
+
+    limit = ServeConfig.signups_per_client
+    statuses = [client.post("/api/participants", json={}).status_code for _ in range(limit + 3)]
+    assert statuses == [200] * limit + [429] * 3
+    r = client.post("/api/participants", json={}, headers={"X-Forwarded-For": "198.51.100.9"})  # no named proxy
+    assert r.status_code == 429 and "try again in 10 min" in r.json()["error"]
+    assert 590 <= int(r.headers["retry-after"]) <= 600
+    assert create_participant(study_state, b"{}", "198.51.100.2")["participant_id"]  # another client
+    with pytest.raises(HttpError) as exc:
+        create_participant(study_state, b"{}", "testclient")
+    assert exc.value.status == 429
+    count = study_state.connect().execute("SELECT count(*) FROM participants").fetchone()[0]
+    assert count == limit + 1  # nothing stored for a refused sign-up
+
+
+def test_a_rate_limiter_takes_an_event_only_below_its_limit():
+    limiter = RateLimiter(2, window_s=600)
+    assert [limiter.take("a", now=t) for t in (0.0, 1.0, 2.0)] == [0, 0, 598]
+    assert limiter.take("b", now=2.0) == 0 and limiter.take("a", now=600.0) == 0
 
 
 def _wrong_codes(url: str, forwarded: list[str | None]) -> list[int]:

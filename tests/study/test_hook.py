@@ -238,29 +238,69 @@ def wait_until(predicate, timeout: float = 30.0) -> None:
 
 
 def test_made_up_participants_cannot_take_the_robot():
-    """Sign-ups that stop at their first step fill the queue; a participant further in still gets the robot, and one
-    participant holds at most `per_participant` waiting runs."""
+    """Sign-ups that stop at their first step share the newcomers' places (the newest first); a participant who has
+    answered takes a run's place only from one holding more; one participant holds at most `per_participant`."""
     from langpref.study.hook import ShowHook
 
-    hook = ShowHook("sleep 60", Dataset(), queue_size=4)
+    hook = ShowHook("sleep 60", Dataset(), queue_size=8)
     try:
-        assert hook.per_participant == 2
-        hook.show("first", 1, "language", [0])
+        assert (hook.per_participant, hook.newcomer_slots) == (2, 2)
+        hook.show("first", 1, "language", [0], earned=3)
         wait_until(lambda: hook.status()["running"] is not None)  # the robot is busy
         for k in range(4):
-            hook.show(f"junk{k}", 1, "language", [k])  # step 1: the first with a video
-        assert hook.status()["queued"] == 4
-        hook.show("real", 5, "comparison", [7, 8])  # further in: two junk runs make room
-        hook.show("real", 6, "language", [9])  # a third waiting run of one participant: skipped
+            hook.show(f"junk{k}", 1, "language", [k], earned=0)  # each newcomer's step takes the oldest's place
         status = hook.status()
-        assert status["queued"] == 4 and status["counts"]["skipped"] == 3
-        skipped = [r for r in status["recent"] if r["status"] == "skipped"]
-        assert [(r["participant"], r["trajectory"]) for r in skipped] == [("real", 9), ("junk2", 2), ("junk3", 3)]
-        assert "runs waiting" in skipped[0]["output"] and "further into the study" in skipped[1]["output"]
-        hook.show("late", 1, "language", [10])  # as far in as the junk: no room is made
-        assert hook.status()["counts"]["skipped"] == 4
+        assert status["queued"] == 2 and status["counts"]["skipped"] == 2
+        assert [r["participant"] for r in status["recent"] if r["status"] == "skipped"] == ["junk1", "junk0"]
+        assert "answered no step since" in status["recent"][0]["output"]
+        for name, seq in (("a", 5), ("b", 5), ("c", 5)):
+            hook.show(name, seq, "comparison", [7, 8], earned=2)  # answered: not the newcomers' places
+        assert hook.status()["queued"] == 8
+        hook.show("a", 6, "language", [9], earned=3)  # a third waiting run of one participant: skipped
+        hook.show("d", 5, "language", [10], earned=2)  # full: the oldest newcomer's step makes room
+        hook.show("e", 5, "language", [11], earned=2)  # and the other
+        hook.show("f", 5, "language", [12], earned=2)  # no newcomer left: the newest run of one holding 2
+        hook.show("f", 6, "language", [13], earned=3)  # f holds 1, nobody holds 3: skipped
+        skipped = [(r["participant"], r["trajectory"]) for r in hook.status()["recent"] if r["status"] == "skipped"]
+        assert skipped[:5] == [("f", 13), ("a", 8), ("junk3", 3), ("junk2", 2), ("a", 9)]
+        assert "holding fewer runs" in hook.status()["recent"][1]["output"]
     finally:
         hook.close()
+
+
+WAIT_FOR_GO = 'echo "$LANGPREF_PARTICIPANT $LANGPREF_TRAJECTORY" >> runs.txt; while [ ! -e go ]; do sleep 0.01; done'
+"""A replay that logs itself, then holds the robot until the test creates the file `go`."""
+
+
+def test_a_real_participants_replays_come_next_however_many_sign_ups_came_first(tmp_path, monkeypatch):
+    """Issue 44: 70 sign-ups that stop at their first video step filled the 64 places; the next real participant's
+    first replay was skipped and their next one started after 63 others (8 min 17 s). Now the first comes after the
+    run in flight, and after answering it the next one right after."""
+    from langpref.study.hook import ShowHook
+
+    monkeypatch.chdir(tmp_path)
+    hook = ShowHook(shlex.join(["sh", "-c", WAIT_FOR_GO]), Dataset(), timeout_s=60)
+    try:
+        hook.show("first", 1, "language", [0], earned=0)
+        wait_until(lambda: hook.status()["running"] is not None)  # the robot is busy with the first sign-up's
+        for k in range(70):
+            hook.show(f"junk{k}", 1, "language", [100 + k], earned=0)
+        hook.show("real", 1, "language", [1], earned=0)
+        assert hook.status()["counts"]["skipped"] == 70 + 1 - hook.newcomer_slots  # the oldest sign-ups'
+        hook.show("real", 2, "comparison", [2, 3], earned=1)  # answered while the robot was still busy
+        hook.show("junk69", 2, "language", [4], earned=1)  # a sign-up that answers too has its own turns
+        (tmp_path / "go").touch()
+        assert hook.wait(timeout=60)
+        runs = [tuple(line.split()) for line in (tmp_path / "runs.txt").read_text().splitlines()]
+    finally:
+        hook.close()
+    # one turn each, round robin (never served first, then the longest waiting): the newcomers share one, the
+    # newest sign-up first; a sign-up that answered has its own; a participant's steps in order, a step's runs
+    # together. The real participant's replays come after the run in flight and one turn of each other lane.
+    turns = [("first", "0"), ("junk69", "169"), ("real", "1"), ("junk68", "168"), ("junk69", "4")]
+    assert runs[:7] == [*turns, ("real", "2"), ("real", "3")]
+    assert [int(t) for _, t in runs[7:]] == list(range(167, 154, -1))  # the newest first; the older ones skipped
+    assert hook.status()["counts"]["ok"] == len(runs)
 
 
 KEEP_GOING = """import os, subprocess, sys

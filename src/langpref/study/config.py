@@ -221,6 +221,10 @@ class ServeConfig:
     """Reverse proxies (addresses or networks: 127.0.0.1, 10.0.0.0/24) whose X-Forwarded-For header names the
     client, whom wrong resume codes are counted against. None by default: the address that connects is the client,
     whatever it sends. Behind the shipped nginx site: `--trusted-proxy 127.0.0.1`."""
+    signups_per_client: int = 20
+    """New participants one client (an address, as for wrong resume codes; IPv6 by its /64) may start in 10
+    minutes, then 429 for that client until the oldest is 10 minutes old; 0: no limit. A lab's one computer
+    starts far fewer; junk sign-ups from one client stay a few among the turns of the robot and the simulator."""
     study: StudyConfig = field(default_factory=StudyConfig)
     video: VideoConfig = field(default_factory=VideoConfig)
 
@@ -256,6 +260,8 @@ class ServeConfig:
                     f"--trusted-proxy {value!r}: give the proxy's address or network, e.g. 127.0.0.1 or 10.0.0.0/24"
                 ) from None
         self.trusted_proxies = tuple(proxies)
+        if self.signups_per_client < 0:
+            raise LangprefError(f"--signups-per-client must be >= 0 (0: no limit), got {self.signups_per_client}")
         if not self.on_show_timeout > 0:
             raise LangprefError(f"--on-show-timeout must be > 0 seconds, got {self.on_show_timeout}")
         self.study.validate()

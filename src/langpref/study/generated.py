@@ -17,8 +17,9 @@ Where things live and how a restart continues:
   finds the stored feedback rows whose trajectory is not made yet and queues them again.
 - One worker process (the model's trajectory encoder and a live simulator, apart from the server's threads, like
   the video worker) makes them one at a time, a later round before an earlier one (in the order of the answers
-  within a round; a participant has at most one waiting, as their next answer waits for it); every seed comes
-  from (study seed, participant seed, round), so a job run again makes the same trajectory.
+  within a round, except first rounds: the newest first, so that made-up sign-ups' first feedback cannot keep a
+  new participant waiting; a participant has at most one waiting, as their next answer waits for it: `_place`);
+  every seed comes from (study seed, participant seed, round), so a job run again makes the same trajectory.
 - A made trajectory is appended to a dataset (`langpref.propose.GeneratedStore`, one split `generated`, default
   `DB.generated/` beside the database) that replays, renders and loads like any other, and its row in the database
   table `generated` (id, round, where the search started, scores, its parameters and phi, its index in that dataset)
@@ -260,13 +261,23 @@ class Generator:
             if queued or any(j.id == job.id for j in self._queue):
                 return
             self._failed.pop(job.id, None)
-            # a later round first: sign-ups that gave one feedback and left cannot hold up a participant further
-            # into Study 1 (each participant has at most one job waiting: an answer about a trajectory that is not
-            # made yet is not taken)
-            place = next((k for k, j in enumerate(self._queue) if j.round < job.round), len(self._queue))
-            self._queue.insert(place, job)
+            self._queue.insert(self._place(job), job)
             self._ensure_thread()
             self._cond.notify_all()
+
+    def _place(self, job: Job) -> int:
+        """Where `job` joins the queue (call with `_cond` held). Turns are earned by answering: a later round first
+        (its participant has answered a feedback and a satisfaction step per round before it), so sign-ups that gave
+        one feedback and left never hold up a participant further into Study 1; each participant has at most one
+        job waiting (an answer about a trajectory not made yet is not taken), so no participant has two turns to
+        another's one. Among later rounds, in the order of the answers; among first rounds, the newest first: a
+        participant who has just answered is waiting for it now, while a first round answered long ago may be a
+        made-up sign-up's, which then can no longer keep a new participant waiting (made later, not dropped)."""
+        newest_first = job.round <= 1
+        for k, queued in enumerate(self._queue):
+            if queued.round < job.round or (newest_first and queued.round == job.round):
+                return k
+        return len(self._queue)
 
     def status(self, index: int) -> tuple[str, Any]:
         """`("ready", store index)`, `("generating", jobs ahead of it)`, `("failed", message)` (it is queued again)

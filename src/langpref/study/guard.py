@@ -10,14 +10,17 @@
   attack points at the server would otherwise reach it as "same origin";
 - a POST whose `Origin` (or `Referer`) is another site's page (`cross_site`);
 - too many wrong resume codes from one client (`RateLimiter`, keyed by `client_key`): one client cannot lock resume
-  for the others. The client is the address that connects; `X-Forwarded-For` names it only when that address is a
-  proxy the lab named (`TrustedProxies`, `--trusted-proxy`), so no client can pass itself off as many.
+  for the others; and too many sign-ups from one client (`study serve --signups-per-client`): made-up participants
+  cannot outnumber real ones in the turns of the robot (`--on-show`) and of the simulator. The client is the
+  address that connects; `X-Forwarded-For` names it only when that address is a proxy the lab named
+  (`TrustedProxies`, `--trusted-proxy`), so no client can pass itself off as many.
 """
 
 from __future__ import annotations
 
 import ipaddress
 import json
+import math
 import threading
 import time
 from collections import OrderedDict, deque
@@ -232,17 +235,33 @@ class RateLimiter:
             times = self._recent(key, now)
             return times is not None and len(times) >= self.limit
 
+    def take(self, key: str, now: float | None = None) -> int:
+        """Count one event of `key` if it has had fewer than `limit` in the window: 0; else, counting nothing, the
+        whole seconds until it may have one (for Retry-After). Checked and counted at once, so concurrent requests
+        cannot pass together."""
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            times = self._recent(key, now)
+            if times is not None and len(times) >= self.limit:
+                return max(1, math.ceil(times[0] + self.window_s - now))
+            self._add(key, now)
+        return 0
+
     def add(self, key: str, now: float | None = None) -> None:
         """Count one event of `key`."""
         now = time.monotonic() if now is None else now
         with self._lock:
-            times = self._recent(key, now)
-            if times is None:
-                times = self._events[key] = deque(maxlen=self.limit)
-                while len(self._events) > self.max_keys:
-                    self._events.popitem(last=False)
-            self._events.move_to_end(key)
-            times.append(now)
+            self._add(key, now)
+
+    def _add(self, key: str, now: float) -> None:
+        """Count one event of `key` (call with `_lock` held)."""
+        times = self._recent(key, now)
+        if times is None:
+            times = self._events[key] = deque(maxlen=self.limit)
+            while len(self._events) > self.max_keys:
+                self._events.popitem(last=False)
+        self._events.move_to_end(key)
+        times.append(now)
 
 
 class TrustedProxies:

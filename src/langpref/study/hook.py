@@ -22,16 +22,30 @@ plus):
 A generated trajectory cannot be shown before the simulator has made it: its run waits aside (counted in the queue's
 bound, holding no thread) and joins the queue when it is made, so it may run after runs of steps handed out later.
 
-Hooks run one at a time, in the order steps were handed out (one robot replays one trajectory at a time), in one
-background thread; a request only appends to a bounded queue, so a slow or failing hook never delays a step, an
-answer or another participant. A run that exits non-zero (`failed`), cannot start (`error`), or outlives its
+Hooks run one at a time (one robot replays one trajectory at a time), in turns (below), in one background thread;
+a request only appends to a bounded queue, so a slow or failing hook never delays a step, an answer or another
+participant. A run that exits non-zero (`failed`), cannot start (`error`), or outlives its
 timeout (`timeout`: its process group is killed) is logged; a trajectory that finds no room is dropped (`skipped`).
 The admin dashboard shows the counts and the last runs.
 
-Room is shared out so that made-up participants cannot take the robot: only steps with videos run the hook, which
-a participant reaches past the consent page and the first survey; one participant holds at most `per_participant`
-runs waiting (a quarter of the queue); and when the queue is full, a run of a participant further into the study
-(a later step) takes the place of the newest waiting run of the participant least far into it.
+Room and turns are shared out so that made-up participants cannot take the robot (sign-ups alone cost a client
+nothing but a request each; `study serve` also limits them per client):
+
+- Work is earned by answering. A step's runs are a newcomer's while the participant has answered no step with
+  videos (`ShowEvent.earned`, counted by the server from the stored answers). Newcomers' runs share
+  `newcomer_slots` places (a quarter of the queue): a newcomer's run takes the place of the oldest newcomer's step
+  (that participant has not answered since; a made-up sign-up never does), so sign-ups can never fill the queue.
+- Turns are fair. The robot serves one participant's step after another, round robin: the next run is of the
+  participant whose last turn is longest ago (never: first; then whose run waits longest), their oldest step first;
+  the newcomers together take one turn, the newest step first (the participant most likely still watching). A
+  step's runs are not split: B is replayed right after A.
+- One participant holds at most `per_participant` runs waiting (a quarter of the queue); when the queue is full, a
+  run takes the place of the oldest newcomer's step, else of the newest run of the participant holding the most
+  runs (when they hold more than one more than this participant), else it is skipped.
+
+So a real participant's first replay starts after the run in flight and at most one turn of each participant
+waiting, and each later one after at most one turn of each other participant, however many made-up participants
+signed up before.
 
 A run in flight when the server ends is killed with its whole process group: on a stop (Ctrl-C, SIGTERM) by the
 server, and when the server is killed outright (`kill -9`, a crash) by a small watchdog process that holds a pipe
@@ -44,9 +58,7 @@ from __future__ import annotations
 import logging
 import os
 import shlex
-import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -56,6 +68,8 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from langpref.study.watchdog import Watchdog, kill_group
+
 if TYPE_CHECKING:
     from langpref.dataset.storage import Dataset
     from langpref.study.generated import Generator
@@ -64,6 +78,8 @@ log = logging.getLogger("langpref.study")
 STATUSES = ("ok", "failed", "timeout", "error", "skipped")
 OUTPUT_TAIL = 500
 """Characters kept of a run's output (stdout and stderr together), from its end."""
+NEWCOMERS = ""
+"""The lane whose turns the steps of participants who have answered no step with videos share."""
 
 
 def parse_command(command: str) -> list[str]:
@@ -88,6 +104,10 @@ class ShowEvent:
     """The generated dataset (absolute) of a generated trajectory; None: the study's dataset."""
     shows: int = 1
     """How many trajectories the step shows (the admin page names the position, A, B, ..., of one of several)."""
+    earned: int = 0
+    """Steps with videos the participant had answered when this step was handed out (0: a newcomer's step)."""
+    order: int = 0
+    """The step's place among the steps handed out (this server process's count): which waited longest."""
 
 
 @dataclass(frozen=True)
@@ -117,6 +137,7 @@ class ShowHook:
         queue_size: int = 64,
         keep: int = 20,
         per_participant: int | None = None,
+        newcomer_slots: int | None = None,
     ):
         self.command = command
         self.argv = parse_command(command)
@@ -125,7 +146,18 @@ class ShowHook:
         self.queue_size = queue_size
         self.per_participant = per_participant or max(2, queue_size // 4)
         """Runs one participant may have waiting at once (2: a comparison step's)."""
+        self.newcomer_slots = newcomer_slots or max(2, queue_size // 4)
+        """Runs that participants who have answered no step with videos may have waiting, all together."""
         self._queue: deque[ShowEvent] = deque()
+        self._steps: Counter[str] = Counter()
+        """Steps with videos handed out per participant (what they have earned, when the server does not say)."""
+        self._answered: set[str] = set()
+        """Participants who have answered a step with videos: none of their steps is a newcomer's any more."""
+        self._turns = 0
+        self._last_turn: dict[str, int] = {}
+        """Lane (a participant, or `NEWCOMERS`) -> the number of the turn it last had."""
+        self._step: tuple[str, int] | None = None
+        """(participant, seq) of the step whose run started last: its other runs come next."""
         self._recent: deque[HookRun] = deque(maxlen=keep)
         self._counts: Counter[str] = Counter()
         self._handed_out: set[tuple[str, int]] = set()
@@ -148,19 +180,26 @@ class ShowHook:
 
     # ---- request side (never blocks, never raises for a hook's sake) ----
 
-    def show(self, participant: str, seq: int, kind: str, trajectories: Sequence[int]) -> None:
-        """Queue the hook for each trajectory of a step handed out to a participant (once per step); a generated
-        trajectory not made yet waits aside until it is."""
+    def show(
+        self, participant: str, seq: int, kind: str, trajectories: Sequence[int], earned: int | None = None
+    ) -> None:
+        """Queue the hook for each trajectory of a step handed out to a participant (once per step), who had answered
+        `earned` steps with videos before it (None: as many as this hook was told of); a generated trajectory not
+        made yet waits aside until it is."""
         with self._cond:
             if not trajectories or (participant, seq) in self._handed_out or self._stopped:
                 return
             self._handed_out.add((participant, seq))
+            earned = self._steps[participant] if earned is None else int(earned)
+            self._steps[participant] += 1
+            if earned:
+                self._answered.add(participant)
+            order = len(self._handed_out)
             for position, index in enumerate(trajectories):
-                event = ShowEvent(participant, seq, kind, position, int(index), shows=len(trajectories))
-                if sum(e.participant == participant for e in self._waiting_events()) >= self.per_participant:
-                    self._skip(event, f"this participant already had {self.per_participant} runs waiting")
-                elif len(self._queue) + self._waiting_runs() >= self.queue_size and not self._make_room(seq):
-                    self._skip(event, f"{self.queue_size} runs were already waiting")
+                event = ShowEvent(participant, seq, kind, position, int(index), None, len(trajectories), earned, order)
+                refused = self._admit(event)
+                if refused:
+                    self._skip(event, refused)
                 elif self.generated is not None and self.generated.owns(index):
                     # checked under our lock: `_made` takes it too, so no run is left waiting for a made trajectory
                     row = self.generated.store_index(index)
@@ -172,6 +211,11 @@ class ShowHook:
                     self._queue.append(event)
             self._cond.notify_all()
 
+    def handed_out(self, participant: str, seq: int) -> bool:
+        """Whether the hook was told of this step already (a reload of the page: nothing to count or run)."""
+        with self._cond:
+            return (participant, seq) in self._handed_out
+
     def _skip(self, event: ShowEvent, why: str) -> None:
         self._record(HookRun(event, None, "skipped", None, time.time(), 0.0, why))
 
@@ -179,25 +223,82 @@ class ShowHook:
         """Every run waiting, for its turn or for its trajectory to be made (call with `_cond` held)."""
         return [*self._queue, *(e for events in self._waiting.values() for e in events)]
 
-    def _make_room(self, seq: int) -> bool:
-        """Drop the newest waiting run of the participant least far into the study (the lowest step seq), if that is
-        before step `seq`; whether a run was dropped (call with `_cond` held)."""
+    def _admit(self, event: ShowEvent) -> str | None:
+        """Make room for `event` as the rules of the module say; why it is skipped, or None when it may wait (call
+        with `_cond` held)."""
         waiting = self._waiting_events()
-        if not waiting:
+        if sum(e.participant == event.participant for e in waiting) >= self.per_participant:
+            return f"this participant already had {self.per_participant} runs waiting"
+        if self._newcomer(event) and sum(map(self._newcomer, waiting)) >= self.newcomer_slots:
+            if not self._drop_newcomer(event):
+                return f"{self.newcomer_slots} runs of participants who had answered no step were already waiting"
+        if len(self._waiting_events()) >= self.queue_size and not self._make_room(event):
+            return f"{self.queue_size} runs were already waiting"
+        return None
+
+    def _drop_newcomer(self, event: ShowEvent) -> bool:
+        """Drop the oldest step of another participant who has answered no step with videos (they have not
+        answered it since it was handed out); whether one was dropped (call with `_cond` held)."""
+        others = [e for e in self._waiting_events() if self._newcomer(e) and e.participant != event.participant]
+        if not others:
             return False
-        lowest = min(e.seq for e in waiting)
-        if lowest >= seq:
+        oldest = min(e.order for e in others)
+        for victim in [e for e in others if e.order == oldest]:
+            self._remove(victim, "a newer participant's step took its place (this one had answered no step since)")
+        return True
+
+    def _make_room(self, event: ShowEvent) -> bool:
+        """The queue is full: drop the oldest newcomer's step, else the newest run of the participant holding the
+        most runs when they hold more than one more than `event`'s participant; whether a run was dropped (call
+        with `_cond` held)."""
+        if self._drop_newcomer(event):
+            return True
+        held = Counter(e.participant for e in self._waiting_events())
+        top, most = max(held.items(), key=lambda item: item[1], default=(None, 0))
+        if most <= held[event.participant] + 1:
             return False
-        victim = [e for e in waiting if e.seq == lowest][-1]
+        victim = max((e for e in self._waiting_events() if e.participant == top), key=lambda e: (e.order, e.position))
+        self._remove(victim, "made room for a participant holding fewer runs")
+        return True
+
+    def _newcomer(self, event: ShowEvent) -> bool:
+        """Whether `event` is the step of a participant who has answered no step with videos (as yet)."""
+        return not event.earned and event.participant not in self._answered
+
+    def _lane(self, event: ShowEvent) -> str:
+        """Whose turn `event` takes: its participant's, or a newcomer's, the newcomers' (`NEWCOMERS`)."""
+        return NEWCOMERS if self._newcomer(event) else event.participant
+
+    def _remove(self, victim: ShowEvent, why: str) -> None:
+        """Take a waiting run out of the queue (or of those waiting for the simulator), reported as skipped."""
         if victim in self._queue:
             self._queue.remove(victim)
         else:
             for events in self._waiting.values():
                 if victim in events:
                     events.remove(victim)
-        self._waiting = {k: v for k, v in self._waiting.items() if v}
-        self._skip(victim, "made room for a participant further into the study")
-        return True
+            self._waiting = {k: v for k, v in self._waiting.items() if v}
+        self._skip(victim, why)
+
+    def _next(self) -> ShowEvent:
+        """Take the next run of the queue (not empty; call with `_cond` held): the rest of the step in flight, else
+        the turn of the lane (a participant, or the newcomers together) whose last turn is longest ago (never
+        first; then the one whose run waits longest): a participant's oldest step, the newcomers' newest."""
+        rest = [e for e in self._queue if (e.participant, e.seq) == self._step]
+        if rest:
+            event = min(rest, key=lambda e: e.position)
+        else:
+            lanes: dict[str, list[ShowEvent]] = {}
+            for e in self._queue:
+                lanes.setdefault(self._lane(e), []).append(e)
+            lane = min(lanes, key=lambda k: (self._last_turn.get(k, -1), min(e.order for e in lanes[k])))
+            newest = lane == NEWCOMERS
+            event = min(lanes[lane], key=lambda e: (-e.order if newest else e.order, e.position))
+            self._turns += 1
+            self._last_turn[lane] = self._turns
+        self._queue.remove(event)
+        self._step = (event.participant, event.seq)
+        return event
 
     def _waiting_runs(self) -> int:
         """Runs waiting for a generated trajectory to be made (call with `_cond` held); they count in the bound."""
@@ -243,7 +344,7 @@ class ShowHook:
             self._queue.clear()
             self._waiting.clear()
             if self._proc is not None:
-                _kill_group(self._proc)
+                kill_group(self._proc)
             self._cond.notify_all()
         self._thread.join(timeout=10)
         self._watchdog.close()
@@ -273,7 +374,7 @@ class ShowHook:
                 self._cond.wait_for(lambda: self._queue or self._stopped)
                 if self._stopped:
                     return
-                event = self._running = self._queue.popleft()
+                event = self._running = self._next()
             try:
                 run = self._execute(event)
             except Exception as exc:  # noqa: BLE001 (a broken run is reported; the thread serves the next one)
@@ -325,12 +426,12 @@ class ShowHook:
             with self._cond:
                 self._proc = proc
                 if self._stopped:
-                    _kill_group(proc)
+                    kill_group(proc)
             try:
                 proc.wait(timeout=self.timeout_s)
                 status = "ok" if proc.returncode == 0 else "failed"
             except subprocess.TimeoutExpired:
-                _kill_group(proc)
+                kill_group(proc)
                 proc.wait()
                 status = "timeout"
             finally:
@@ -345,75 +446,6 @@ class ShowHook:
         return HookRun(event, episode, status, proc.returncode, started, time.monotonic() - t0, output)
 
 
-def _kill_group(proc: subprocess.Popen[bytes]) -> None:
-    """Kill the hook and everything it started (its own session, see `start_new_session`), unless it has ended."""
-    if proc.returncode is not None:
-        return
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
-
-
-WATCHDOG = """
-import os, signal, sys
-groups = set()
-for line in sys.stdin:
-    (groups.add if line[0] == "+" else groups.discard)(int(line[1:]))
-for group in groups:
-    try:
-        os.killpg(group, signal.SIGKILL)
-    except OSError:
-        pass
-"""
-"""The watchdog's program: it reads `+GROUP` / `-GROUP` lines until the server's end of the pipe closes (the server
-has ended, however), then kills the process groups still listed."""
-
-
-class Watchdog:
-    """A process that kills the hook runs in flight when the server ends, even by `kill -9`: it is told each run's
-    process group over a pipe, and the pipe closes when the server's process does. Without it (it could not start)
-    only a stop the server sees kills them."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        try:
-            self._proc: subprocess.Popen[bytes] | None = subprocess.Popen(
-                [sys.executable, "-I", "-S", "-c", WATCHDOG],
-                stdin=subprocess.PIPE,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-                start_new_session=True,  # a Ctrl-C of the server's terminal leaves it to do its job
-            )
-        except OSError as exc:
-            log.warning("--on-show: no watchdog (%s); a hook run may outlive a server that is killed", exc)
-            self._proc = None
-
-    def _send(self, line: str) -> None:
-        with self._lock:
-            if self._proc is None or self._proc.stdin is None:
-                return
-            try:
-                self._proc.stdin.write(line.encode())
-                self._proc.stdin.flush()
-            except (BrokenPipeError, ValueError):
-                pass
-
-    def watch(self, group: int) -> None:
-        self._send(f"+{group}\n")
-
-    def forget(self, group: int) -> None:
-        self._send(f"-{group}\n")
-
-    def close(self) -> None:
-        """End the watchdog (every run has ended or was killed): it kills what is still listed and exits."""
-        with self._lock:
-            proc, self._proc = self._proc, None
-        if proc is not None:
-            if proc.stdin is not None:
-                proc.stdin.close()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+def _lane(event: ShowEvent) -> str:
+    """Whose turn `event` takes: its participant's, or a newcomer's, the newcomers' (`NEWCOMERS`)."""
+    return event.participant if event.earned else NEWCOMERS

@@ -50,14 +50,12 @@ def participant_router(state: StudyApp) -> APIRouter:
     @router.post("/api/participants")
     async def new_participant(request: Request):
         body = await read_body(request)
-        return await run_in_threadpool(create_participant, state, body)
+        return await run_in_threadpool(create_participant, state, body, _client(state, request))
 
     @router.post("/api/participants/resume")
     async def resume_session(request: Request):
         body = await read_body(request)
-        peer = request.client.host if request.client else None
-        client = state.proxies.client(peer, request.headers.getlist("x-forwarded-for"))
-        return await run_in_threadpool(resume, state, body, client)
+        return await run_in_threadpool(resume, state, body, _client(state, request))
 
     @router.get("/api/participants/{pid}/step")
     def current(pid: str, request: Request):
@@ -73,6 +71,12 @@ def participant_router(state: StudyApp) -> APIRouter:
         return await video(state, request)
 
     return router
+
+
+def _client(state: StudyApp, request: Request) -> str | None:
+    """The address a request comes from: the connection's, or where a named proxy says it comes from."""
+    peer = request.client.host if request.client else None
+    return state.proxies.client(peer, request.headers.getlist("x-forwarded-for"))
 
 
 def authenticate(state: StudyApp, conn, pid: str, token: str | None) -> tuple[Participant, Any]:
@@ -128,11 +132,22 @@ def step_json(state: StudyApp, step: Step, resume_code: str | None = None, p: Pa
     return out
 
 
-def create_participant(state: StudyApp, body: bytes) -> dict[str, Any]:
-    """A new participant; nothing about the browser or the person is stored (no User-Agent, no address)."""
+def create_participant(state: StudyApp, body: bytes, client: str | None = None) -> dict[str, Any]:
+    """A new participant; nothing about the browser or the person is stored (no User-Agent, no address). Sign-ups
+    are limited per client (`client`, as for `resume`; held in memory only): made-up participants cannot outnumber
+    real ones in the turns of the robot and the simulator."""
     data = decode_json(body, allow_empty=True)
     if not isinstance(data, dict):
         raise HttpError(400, "the body must be a JSON object ({})")
+    if state.signups is not None:
+        wait = state.signups.take(client_key(client))
+        if wait:
+            minutes = max(1, round(wait / 60))
+            raise HttpError(
+                429,
+                f"too many people started the study from this address just now; try again in {minutes} min",
+                {"Retry-After": str(wait)},
+            )
     pid, token = secrets.token_hex(16), secrets.token_urlsafe(32)
     now = time.time()
     conn = state.connect()
@@ -194,7 +209,7 @@ def get_step(state: StudyApp, pid: str, token: str | None) -> dict[str, Any]:
             "UPDATE steps SET first_shown_at=? WHERE participant_id=? AND seq=? AND first_shown_at IS NULL",
             (time.time(), pid, step.seq),
         )
-    _show(state, pid, step)
+    _show(state, conn, pid, step)
     return step_json(state, step, prow["resume_code"], p)
 
 
@@ -250,14 +265,18 @@ def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[st
             raise
         if state.generated is not None:
             state.generated.after_answer(p, step.seq, tr.records)
-        _show(state, pid, tr.next)
+        _show(state, conn, pid, tr.next)
         return step_json(state, tr.next, prow["resume_code"], p)
 
 
-def _show(state: StudyApp, pid: str, step: Step) -> None:
-    """Tell the `--on-show` hook of a step handed out (it runs for a generated trajectory once it is made)."""
-    if state.hook is not None:
-        state.hook.show(pid, step.seq, step.kind, step.shown)
+def _show(state: StudyApp, conn, pid: str, step: Step) -> None:
+    """Tell the `--on-show` hook of a step handed out (it runs for a generated trajectory once it is made), with the
+    steps that showed videos the participant has answered: the turns of the robot they have earned."""
+    if state.hook is not None and step.shown and not state.hook.handed_out(pid, step.seq):
+        earned = conn.execute(
+            "SELECT count(*) FROM answers WHERE participant_id=? AND kind != 'survey'", (pid,)
+        ).fetchone()[0]
+        state.hook.show(pid, step.seq, step.kind, step.shown, earned)
 
 
 def _store(conn, p: Participant, step: Step, row: dict, ans, tr, received: float) -> None:

@@ -123,6 +123,7 @@ def build_state(
         allowed_hosts=cfg.allowed_hosts,
         bind_host=cfg.host,
         trusted_proxies=cfg.trusted_proxies,
+        signups_per_client=cfg.signups_per_client,
     )
 
 

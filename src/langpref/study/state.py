@@ -2,8 +2,8 @@
 
 It holds the database path (one connection per thread), the engine and the robot (a reward learner per participant),
 the video cache, the admin token, the `--on-show` hook, Study 1's generated candidates, the checks of Host and
-Origin, the proxies trusted to name the client, and the per-participant locks and rate limits that keep concurrent
-requests apart.
+Origin, the proxies trusted to name the client, the per-participant locks that keep concurrent requests apart, and
+the rate limits (wrong resume codes, sign-ups per client).
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ MAX_RESUME_FAILURES = 20
 about 2^50 codes cannot be tried, and no client can lock resume for the others."""
 MAX_RESUMES_PER_CODE = 10
 """Sessions restored per minute with one resume code (each adds a token), then 429 for that code."""
+SIGNUP_WINDOW_S = 600.0
+"""The window of `--signups-per-client`: sign-ups counted per client over the last 10 minutes."""
 
 
 def sha256(text: str) -> str:
@@ -54,6 +56,7 @@ class StudyApp:
         allowed_hosts: tuple[str, ...] = (),
         bind_host: str | None = None,
         trusted_proxies: tuple[str, ...] = (),
+        signups_per_client: int = 0,
     ):
         self.db_path = str(db_path)
         self.engine = engine
@@ -70,6 +73,8 @@ class StudyApp:
         self._locks = [threading.Lock() for _ in range(LOCK_STRIPES)]
         self.resume_failures = RateLimiter(MAX_RESUME_FAILURES)
         self.resumes = RateLimiter(MAX_RESUMES_PER_CODE)
+        self.signups = RateLimiter(signups_per_client, SIGNUP_WINDOW_S) if signups_per_client else None
+        """New participants per client in `SIGNUP_WINDOW_S` (None: no limit); in memory only, nothing is stored."""
         self._local = threading.local()
         self.video_waiters = 0  # requests waiting for a video; changed only on the event loop
         self.stopping = threading.Event()
