@@ -432,3 +432,25 @@ def test_the_comparative_corpus_copies_no_held_out_text_nor_any_val_or_test_phra
     # our texts only: a failure must not print a held-out text
     assert not near_held, f"corpus texts that nearly copy a held-out text: {near_held}"
     assert not near_bank, f"corpus texts that nearly copy a bank's val/test phrasing: {near_bank}"
+
+
+def test_the_corpus_phrasings_the_drawer_trains_on_copy_no_held_out_text():
+    """`train --corpus-phrasings N` adds the corpus's sentences of the concepts a task's features tie to, about the
+    feature's object (`langpref.language.corpus_phrasings`): for the recorded drawer task, at every N measured or
+    shipped as a default (up to 64; at 75 one of its sentences nearly copies a held-out text), none is an exact or
+    near copy of a held-out text. Not so for the reach plugin (one of its distance-to-the-goal sentences at N = 16
+    nearly copies one): it was not measured with them, and its default stays 0 (a plugin task)."""
+    task = "drawer-open"
+    from langpref.language.corpus import copies
+    from langpref.language.corpus_phrasings import tied_phrasings
+    from langpref.language.near_copies import NEAR_COPY_RATIO
+    from langpref.model.keep import AUTO_CORPUS, CORPUS_SEED
+
+    held = [t for texts_ in _held_out_texts().values() for t in texts_]
+    for n in sorted({16, 32, 48, 64, AUTO_CORPUS} - {0}):
+        made = tied_phrasings(_task_features(task), n, seed=CORPUS_SEED)
+        texts = sorted({t for by_dir in made.values() for ts in by_dir.values() for t in ts})
+        assert texts or task != "drawer-open"
+        assert not {_key(t) for t in held} & {_key(t) for t in texts}, f"N={n}: a corpus phrasing is a held-out text"
+        near = sorted(copies(texts, held, NEAR_COPY_RATIO))
+        assert not near, f"N={n}: corpus phrasings that nearly copy a held-out text: {near}"  # ours only

@@ -114,12 +114,16 @@ def _sentences(lex: dict[str, Any], concept: dict[str, Any], direction: str) -> 
 
 
 def generate(
-    seed: int = 0, per_meaning: int = DEFAULT_PER_MEANING, concepts: Iterable[str] | None = None
+    seed: int = 0,
+    per_meaning: int = DEFAULT_PER_MEANING,
+    concepts: Iterable[str] | None = None,
+    lexicon: dict[str, Any] | None = None,
 ) -> list[Example]:
     """Template sentences: for each (concept, direction), `per_meaning` of every sentence its templates make, taken
     in a seeded order, each kind (requests, complaints, negations, indirect forms) in turn so no kind crowds out
-    another. The same seed gives the same list."""
-    lex = load_lexicon()
+    another. The same seed gives the same list. `lexicon` (default: the shipped one) lets a caller narrow an object
+    concept to one object (`langpref.language.corpus_phrasings`)."""
+    lex = load_lexicon() if lexicon is None else lexicon
     names = list(lex["concepts"]) if concepts is None else list(concepts)
     out: list[Example] = []
     for name in names:

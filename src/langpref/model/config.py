@@ -183,6 +183,12 @@ class TrainConfig:
     checkpoint's prototypes keep the bank's own phrasings. Default: 48 for a bank of the size a lab writes (fewer
     than 40 train phrasings per meaning, where it was measured to read unseen phrasings better), 0 for larger banks
     such as the built-in tasks' (the paper's protocol). 0 = none."""
+    corpus_phrasings: int | None = None
+    """Extend the train phrasings, for training only, by up to N sentences per meaning of the comparative corpus's
+    concept each feature's name ties to (`langpref.language.corpus_phrasings`: in the feature's direction, about its
+    object; never a copy of a val or test phrasing); the bank and the checkpoint's prototypes keep the bank's own
+    phrasings. Default: `langpref.model.keep.AUTO_CORPUS` for a recorded task, 0 for the built-in and plugin tasks
+    (the paper's protocol). 0 = none."""
     patience: int = 3
     """Early stopping: epochs without a better validation accuracy before a stage ends."""
     weight_decay: float = 0.0
@@ -212,6 +218,7 @@ class TrainConfig:
             "windows",
             "finetune_layers",
             "augment_phrasings",
+            "corpus_phrasings",
         ):
             if (getattr(self, name) or 0) < 0:  # None: automatic
                 raise LangprefError(f"{name} must be >= 0, got {getattr(self, name)}")

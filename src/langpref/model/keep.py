@@ -12,7 +12,10 @@ keep that knowledge, each a `TrainConfig` field and chosen on val (docs/results.
 - `augment_phrasings`: the train split extended, for training only, by `langpref bank augment`'s template proposals
   (negations of the opposite direction, intensified and indirect forms of the train phrasings): the direction of a
   negated phrasing is what a small bank of plain imperatives never shows. The proposals never enter the bank nor the
-  checkpoint's prototypes, which stay the means of the bank's own train phrasings.
+  checkpoint's prototypes, which stay the means of the bank's own train phrasings;
+- `corpus_phrasings`: the train split extended, for training only, by the comparative corpus's sentences of the
+  concepts the task's features tie to by name (`langpref.language.corpus_phrasings`), in each feature's direction
+  and about its object; the same rules as the proposals (never val or test, never the prototypes).
 """
 
 from __future__ import annotations
@@ -92,4 +95,49 @@ def augmented(train: Phrasings, val: Phrasings, per_meaning: int) -> Phrasings:
     return merge_phrasings(train, phrasings_from_mapping(extra, train.feature_names, require_all=False))
 
 
-__all__ = ["AUTO_AUGMENT", "SMALL_BANK", "Anchor", "augmented", "layer_stack", "resolve_augment", "trainable_lm_params"]
+AUTO_CORPUS = 0
+"""Corpus sentences per meaning added by default to a recorded task's train phrasings (chosen on val,
+docs/results.md); the built-in and plugin tasks never get them unless asked (the paper's protocol)."""
+CORPUS_SEED = 0
+"""The corpus seed the sentences are drawn with: the same sentences for every training seed, the ones a test checks
+against the held-out texts."""
+
+
+def resolve_corpus(requested: int | None, env: str) -> int:
+    """`corpus_phrasings` as given, or by default `AUTO_CORPUS` for a recorded task and 0 otherwise."""
+    if requested is not None:
+        return requested
+    from langpref.tasks import get_task
+
+    return AUTO_CORPUS if get_task(env).source == "recorded" else 0
+
+
+def with_corpus(train: Phrasings, val: Phrasings, per_meaning: int, env: str) -> Phrasings:
+    """The train phrasings plus up to `per_meaning` corpus sentences per meaning of each tied feature; none copies
+    a val or test phrasing of the task's bank, a phrasing of `val`, or a train phrasing of another meaning."""
+    if not per_meaning:
+        return train
+    from langpref.language.bank import load_bank
+    from langpref.language.corpus_phrasings import tied_phrasings
+
+    bank = load_bank(env)
+    held = [text for split in ("val", "test") for text, _, _ in bank.all_of_split(split)]
+    extra = tied_phrasings(
+        train.feature_names, per_meaning, seed=CORPUS_SEED, exclude=[*held, *val.texts], train=train.as_mapping()
+    )
+    return merge_phrasings(train, phrasings_from_mapping(extra, train.feature_names, require_all=False))
+
+
+__all__ = [
+    "AUTO_AUGMENT",
+    "AUTO_CORPUS",
+    "CORPUS_SEED",
+    "SMALL_BANK",
+    "Anchor",
+    "augmented",
+    "resolve_corpus",
+    "with_corpus",
+    "layer_stack",
+    "resolve_augment",
+    "trainable_lm_params",
+]

@@ -21,7 +21,7 @@ from langpref.model.config import TrainConfig
 from langpref.model.encoders import freeze, normalisation_stats
 from langpref.model.evaluate import alignment_counts
 from langpref.model.inputs import resolve_observations, sees_images
-from langpref.model.keep import Anchor, augmented, resolve_augment, trainable_lm_params
+from langpref.model.keep import Anchor, augmented, resolve_augment, resolve_corpus, trainable_lm_params, with_corpus
 from langpref.model.latent import DataInfo, LatentModel
 from langpref.model.loss import episode_contrastive_loss, latent_loss
 from langpref.model.trainset import TrainSplit, load_phrasings
@@ -90,8 +90,9 @@ class Trainer:
         self.seconds = {0: 0.0, 1: 0.0, 2: 0.0}
 
     def _phrasings(self, cfg: TrainConfig, train_phr: Phrasings | None, val_phr: Phrasings | None) -> TrainConfig:
-        """Set what training reads (with `augment_phrasings`, the bank's and template proposals) and what the saved
-        prototypes are made of (the bank's own train phrasings); the config with `augment_phrasings` resolved."""
+        """Set what training reads (the bank's phrasings, with `augment_phrasings` template proposals, with
+        `corpus_phrasings` the corpus's sentences of tied concepts) and what the saved prototypes are made of (the
+        bank's own train phrasings); the config with both resolved."""
         meta = self.dataset.meta
         names = list(meta.feature_names)
         if train_phr is None or val_phr is None:
@@ -101,8 +102,14 @@ class Trainer:
             if list(p.feature_names) != names:
                 raise LangprefError(f"phrasings cover {list(p.feature_names)}, the dataset has features {names}")
         self.bank_train_phr = train_phr
-        cfg = replace(cfg, augment_phrasings=resolve_augment(cfg.augment_phrasings, train_phr))
-        self.train_phr, self.val_phr = augmented(train_phr, val_phr, cfg.augment_phrasings), val_phr
+        cfg = replace(
+            cfg,
+            augment_phrasings=resolve_augment(cfg.augment_phrasings, train_phr),
+            corpus_phrasings=resolve_corpus(cfg.corpus_phrasings, meta.env),
+        )
+        train_aug = augmented(train_phr, val_phr, cfg.augment_phrasings)
+        self.train_phr = with_corpus(train_aug, val_phr, cfg.corpus_phrasings, meta.env)
+        self.val_phr = val_phr
         return cfg
 
     def _build_model(self, thresholds: np.ndarray, observations: str) -> LatentModel:
