@@ -14,15 +14,19 @@ def _banner(text: str) -> None:
     print(f"\n== {text}", flush=True)
 
 
-def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100) -> dict:
+def run_demo(
+    out: Path, workers: int | None = None, num_trajectories: int = 100, horizon: int = 500, train_config=None
+) -> dict:
     """Generate, inspect, render, train, evaluate, improve and learn rewards at small size under `out`; what it made
-    (name -> path or figure), also written with the numbers into `out/summary.json`."""
+    (name -> path or figure), also written with the numbers into `out/summary.json`. `num_trajectories` and
+    `horizon` size the generated dataset, `train_config` (a `TrainConfig`; data and out are set here) the training,
+    by default the demo's 12 + 6 epochs: a test runs the whole demo smaller still."""
     start = time.time()
     out = Path(out)
     data = out / "data_metaworld"
     made: dict = {}
-    ds = _dataset_stages(out, data, made, workers, num_trajectories)
-    model_dir, accuracy = _latent_stage(out, data, ds, made)
+    ds = _dataset_stages(out, data, made, workers, num_trajectories, horizon)
+    model_dir, accuracy = _latent_stage(out, data, ds, made, train_config)
     space, improvement = _improvement_stage(out, data, model_dir, made)
     rewards = _reward_stage(out, space, made)
     (out / "summary.json").write_text(
@@ -42,20 +46,21 @@ def run_demo(out: Path, workers: int | None = None, num_trajectories: int = 100)
     return made
 
 
-def _dataset_stages(out: Path, data: Path, made: dict, workers: int | None, num_trajectories: int):
+def _dataset_stages(out: Path, data: Path, made: dict, workers: int | None, num_trajectories: int, horizon: int):
     """Stages 1-3: generate (or reuse) the dataset, describe it, render a success and a failure; the dataset."""
     from langpref.dataset.generate import GenerateConfig, generate
     from langpref.dataset.inspect import describe, format_description
     from langpref.dataset.render import render_trajectory
     from langpref.dataset.storage import load_dataset
 
-    _banner(f"1. Generating {num_trajectories} Meta-World button-press trajectories (T = 500) in the simulator")
+    _banner(f"1. Generating {num_trajectories} Meta-World button-press trajectories (T = {horizon}) in the simulator")
     if (data / "meta.json").exists():
         print(f"   reusing {data} (delete it to regenerate)")
     else:
-        generate(
-            GenerateConfig(env="metaworld", out=data, num_trajectories=num_trajectories, workers=workers, force=True)
+        cfg = GenerateConfig(
+            env="metaworld", out=data, num_trajectories=num_trajectories, horizon=horizon, workers=workers, force=True
         )
+        generate(cfg)
     made["dataset"] = str(data)
 
     _banner("2. Inspecting the dataset: feature ranges and how independent the features are")
@@ -73,7 +78,7 @@ def _dataset_stages(out: Path, data: Path, made: dict, workers: int | None, num_
     return ds
 
 
-def _latent_stage(out: Path, data: Path, ds, made: dict) -> tuple[Path, dict]:
+def _latent_stage(out: Path, data: Path, ds, made: dict, train_config=None) -> tuple[Path, dict]:
     """Stage 4: train (or reuse) the shared latent space and read unseen phrasings with it; the model's directory
     and its test accuracy."""
     from dataclasses import replace
@@ -90,8 +95,8 @@ def _latent_stage(out: Path, data: Path, ds, made: dict) -> tuple[Path, dict]:
     if (model_dir / "config.json").exists():
         print(f"   reusing {model_dir} (delete it to retrain)")
     else:
-        cfg = replace(TrainConfig(), data=str(data), out=str(model_dir), stage1_epochs=12, stage2_epochs=6, force=True)
-        train(cfg)
+        cfg = train_config or replace(TrainConfig(), stage1_epochs=12, stage2_epochs=6)
+        train(replace(cfg, data=str(data), out=str(model_dir), force=True))
     made["model"] = str(model_dir)
     model = load_model(model_dir, dataset=ds)
     accuracy = evaluate_split(model, ds, "test", phrasings_from_bank(load_bank("metaworld"), "test", ds.feature_names))

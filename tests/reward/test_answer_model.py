@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from langpref.errors import LangprefError
 from langpref.feedback import KINDS, toy_latent_space
 from langpref.feedback.comparison import ComparisonAnswer, ComparisonQuery
 from langpref.feedback.humans import HumanConfig
@@ -113,7 +114,7 @@ def test_comparisons_enter_the_same_belief(space):
         learner.observe("comparison", ComparisonAnswer(ComparisonQuery(a, b), choice))
     learner.fit()
     assert learner.mean()[0] > before[0] + 0.3
-    with pytest.raises(Exception, match="language and comparison"):
+    with pytest.raises(LangprefError, match="takes language and comparison feedback, not 'rating'"):
         learner.observe("rating", object())
 
 
@@ -166,12 +167,15 @@ def test_the_paper_learner_output_has_no_answer_model_fields(space):
 
 
 def test_bad_answer_model_settings_are_one_line_errors():
-    for cfg in (
-        LearnRewardConfig(learner="bayes"),
-        LearnRewardConfig(learner="answer-model", query_selection="lal-infogain"),
-        LearnRewardConfig(learner="answer-model", answer_model=AnswerModelConfig(lapse=1.5)),
+    for cfg, says in (
+        (LearnRewardConfig(learner="bayes"), "unknown learner 'bayes'"),
+        (
+            LearnRewardConfig(learner="answer-model", query_selection="lal-infogain"),
+            "asks with random or infogain queries, not 'lal-infogain'",
+        ),
+        (LearnRewardConfig(learner="answer-model", answer_model=AnswerModelConfig(lapse=1.5)), r"lapse in \[0, 1\)"),
     ):
-        with pytest.raises(Exception) as err:
+        with pytest.raises(LangprefError, match=says) as err:
             cfg.validate()
         assert "\n" not in str(err.value)
 
