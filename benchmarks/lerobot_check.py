@@ -84,12 +84,13 @@ def write_random_reward(
 def prepare(out: Path) -> dict:
     """(langpref's venv) The random reward and the labelled copies of the fixtures under `out`."""
     from langpref.dataset.label import LabelConfig, label_dataset
+    from langpref.reward import load
 
     reward = write_random_reward(out / "reward", 6, 3)
     summaries = {}
     for name in DATASETS:
         cfg = LabelConfig(dataset=FIXTURES / name, reward=reward, out=out / name, force=True)
-        summaries[name] = label_dataset(cfg, progress=False)
+        summaries[name] = label_dataset(cfg, load(cfg.reward), progress=False)
     return summaries
 
 

@@ -68,3 +68,38 @@ def test_test_modules_have_unique_names():
     for path in (SRC.parents[1] / "tests").rglob("test_*.py"):
         names.setdefault(path.name, []).append(str(path.relative_to(SRC.parents[1])))
     assert not {n: p for n, p in names.items() if len(p) > 1}, "rename one of each"
+
+
+ONE_WAY = {"feedback": "reward", "dataset": "reward"}
+"""package -> a package downstream of it that it must not import at run time (docs/design.md: nothing downstream
+reaches back upstream). Imports under `if TYPE_CHECKING:` are for type checkers only and do not count."""
+
+
+def _runtime_imports(path: Path) -> set[str]:
+    """Every module a file imports outside `if TYPE_CHECKING:` blocks, at any depth (function-level imports too)."""
+    tree = ast.parse(path.read_text())
+    skip = {
+        id(node)
+        for block in ast.walk(tree)
+        if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
+        for stmt in block.body
+        for node in ast.walk(stmt)
+    }
+    found = set()
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.add(node.module)
+    return found
+
+
+def test_feedback_and_datasets_import_nothing_of_reward_learning():
+    bad = {
+        name: sorted(m for m in _runtime_imports(path) if m.startswith(f"langpref.{ONE_WAY[name.split('.')[0]]}"))
+        for name, path in modules().items()
+        if name.split(".")[0] in ONE_WAY
+    }
+    assert not {k: v for k, v in bad.items() if v}, "move the import to the downstream package, or pass the object in"

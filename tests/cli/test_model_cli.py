@@ -89,7 +89,8 @@ def test_train_evaluate_embed_visualize_end_to_end(tiny_data, tmp_path, capsys):
     readings = json.loads(out)["readings"]
     assert [r["text"] for r in readings] == texts and readings[0]["out_of_task"] is None
     assert (
-        readings[1]["out_of_task"]["concept"] == "opening" and "does not measure" in readings[1]["out_of_task"]["message"]
+        readings[1]["out_of_task"]["concept"] == "opening"
+        and "does not measure" in readings[1]["out_of_task"]["message"]
     )
     assert "error" in readings[2] and "feature" in readings[2]
 

@@ -53,7 +53,9 @@ def reward_path(request, tmp_path_factory) -> Path:
 
 def test_a_plain_recording_is_labelled_beside_its_own_bytes(recording, reward_path, tmp_path):
     out = tmp_path / "out"
-    summary = label_dataset(LabelConfig(dataset=recording, reward=reward_path, out=out), progress=False)
+    summary = label_dataset(
+        LabelConfig(dataset=recording, reward=reward_path, out=out), load(reward_path), progress=False
+    )
     assert (summary["episodes"], summary["frames"], summary["format"]) == (3, sum(LENGTHS), "plain")
     reward = load(reward_path)
     for path in plain_episode_files(recording):
@@ -80,9 +82,13 @@ def test_a_plain_recording_is_labelled_beside_its_own_bytes(recording, reward_pa
 
 
 def test_a_labelled_episode_is_not_labelled_again(recording, reward_path, tmp_path):
-    label_dataset(LabelConfig(dataset=recording, reward=reward_path, out=tmp_path / "once"), progress=False)
+    label_dataset(
+        LabelConfig(dataset=recording, reward=reward_path, out=tmp_path / "once"), load(reward_path), progress=False
+    )
     with pytest.raises(LangprefError, match="labelled before"):
-        label_dataset(LabelConfig(dataset=tmp_path / "once", reward=reward_path, out=tmp_path / "twice"), False)
+        label_dataset(
+            LabelConfig(dataset=tmp_path / "once", reward=reward_path, out=tmp_path / "twice"), load(reward_path), False
+        )
     assert not (tmp_path / "twice").exists() and not list(tmp_path.glob(".twice.*"))
 
 

@@ -35,7 +35,7 @@ def reward_path(request, tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def labelled(reward_path, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("labelled") / "tiny"
-    summary = label_dataset(LabelConfig(dataset=TINY, reward=reward_path, out=out), progress=False)
+    summary = label_dataset(LabelConfig(dataset=TINY, reward=reward_path, out=out), load(reward_path), progress=False)
     assert (summary["episodes"], summary["frames"], summary["format"]) == (4, 51, "lerobot")
     return out
 
@@ -146,7 +146,7 @@ def test_langprefs_reader_reads_the_copy_as_the_original(labelled):
 
 def test_an_image_dataset_is_labelled_and_reads_back(reward_path, tmp_path):
     out = tmp_path / "images"
-    label_dataset(LabelConfig(dataset=IMAGES, reward=reward_path, out=out), progress=False)
+    label_dataset(LabelConfig(dataset=IMAGES, reward=reward_path, out=out), load(reward_path), progress=False)
     before, after = read_lerobot(IMAGES, images=True), read_lerobot(out, images=True)
     assert [b.images.cells for b in after] == [a.images.cells for a in before]
     original = pq.read_table(IMAGES / DATA)
@@ -157,14 +157,16 @@ def test_an_image_dataset_is_labelled_and_reads_back(reward_path, tmp_path):
 
 def test_a_labelled_copy_is_not_labelled_again(labelled, reward_path, tmp_path):
     with pytest.raises(LangprefError, match="labelled before"):
-        label_dataset(LabelConfig(dataset=labelled, reward=reward_path, out=tmp_path / "again"), progress=False)
+        label_dataset(
+            LabelConfig(dataset=labelled, reward=reward_path, out=tmp_path / "again"), load(reward_path), progress=False
+        )
     assert not (tmp_path / "again").exists() and not list(tmp_path.glob(".again.*"))
 
 
 def test_a_reward_for_other_sizes_is_refused(tmp_path):
     other = write_random_reward(tmp_path / "other", 39, 4, task="drawer-open")
     with pytest.raises(LangprefError, match=r"task 'drawer-open' with observations of 39 .* has 6 and 3"):
-        label_dataset(LabelConfig(dataset=TINY, reward=other, out=tmp_path / "out"), progress=False)
+        label_dataset(LabelConfig(dataset=TINY, reward=other, out=tmp_path / "out"), load(other), progress=False)
     assert not (tmp_path / "out").exists()
 
 
@@ -174,5 +176,7 @@ def test_a_corrupt_data_file_is_one_line(reward_path, tmp_path):
     broken = Path(shutil.copytree(TINY, tmp_path / "broken"))
     (broken / DATA).write_bytes(b"not parquet")
     with pytest.raises(LangprefError, match="not a readable parquet file") as err:
-        label_dataset(LabelConfig(dataset=broken, reward=reward_path, out=tmp_path / "out"), progress=False)
+        label_dataset(
+            LabelConfig(dataset=broken, reward=reward_path, out=tmp_path / "out"), load(reward_path), progress=False
+        )
     assert "\n" not in str(err.value) and not (tmp_path / "out").exists()

@@ -101,9 +101,10 @@ def cmd_import(args: argparse.Namespace) -> None:
 )
 def cmd_label(args: argparse.Namespace) -> None:
     from langpref.dataset.label import LabelConfig, label_dataset
+    from langpref.reward import load
 
     cfg = from_args(LabelConfig, args)
-    summary = label_dataset(cfg)
+    summary = label_dataset(cfg, load(cfg.reward))
     record(args, Path(summary["out"]) / "label.config.json", cfg)
     emit(
         summary,

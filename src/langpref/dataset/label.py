@@ -70,17 +70,16 @@ class LabelConfig:
     """Replace an existing OUT."""
 
 
-def label_dataset(cfg: LabelConfig, progress: bool = True) -> dict[str, Any]:
-    """Write the labelled copy of `cfg.dataset` to `cfg.out` and return its summary: `episodes`, `frames`,
-    `seconds` (wall time), `out`, `format` (`lerobot` or `plain`), `columns` and the episodes' learned rewards
-    (`episode_reward`: mean, min, max)."""
+def label_dataset(cfg: LabelConfig, reward: Any, progress: bool = True) -> dict[str, Any]:
+    """Write the labelled copy of `cfg.dataset` to `cfg.out` with `reward` (the saved reward at `cfg.reward`, as
+    `langpref.reward.load` opened it: the reward side is opened by the caller, so that datasets need nothing of it)
+    and return its summary: `episodes`, `frames`, `seconds` (wall time), `out`, `format` (`lerobot` or `plain`),
+    `columns` and the episodes' learned rewards (`episode_reward`: mean, min, max)."""
     from langpref.dataset.label_lerobot import is_lerobot, label_lerobot
-    from langpref.reward.api import load
 
     start = time.perf_counter()
     src, out = Path(cfg.dataset), Path(cfg.out)
     _check_paths(src, out, cfg.force)
-    reward = load(cfg.reward)
     if cfg.task is not None and reward.task != cfg.task:
         raise LangprefError(f"the reward {reward.path} was learned on task {reward.task!r}, not {cfg.task!r}")
     tmp = out.parent / f".{out.name}.labelling-{os.getpid()}"

@@ -18,7 +18,7 @@ from langpref.errors import LangprefError
 from langpref.feedback import bradley_terry
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import HumanConfig, Seed, rng_of, true_reward
-from langpref.feedback.kind import RANDOM, FeedbackKind, StudyPage, register_kind
+from langpref.feedback.kind import FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace
 
 if TYPE_CHECKING:
@@ -112,23 +112,6 @@ def from_record(row: Mapping[str, Any]) -> ComparisonAnswer:
     return ComparisonAnswer(ComparisonQuery(int(row["a"]), int(row["b"])), int(row["choice"]))
 
 
-# ---- active query selection (`langpref.reward.selection`, imported when a strategy is used) --------------------
-
-
-def infogain(space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None, samples: int):
-    """`infogain`: the mutual information between xi and the choice, over every pair of candidates."""
-    from langpref.reward.selection import ComparisonActive
-
-    return ComparisonActive(space, pool, "infogain", candidates, samples)
-
-
-def volume_removal(space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None, samples: int):
-    """`volume-removal`: the expected removed volume (Sadigh et al. 2017)."""
-    from langpref.reward.selection import ComparisonActive
-
-    return ComparisonActive(space, pool, "volume-removal", candidates, samples)
-
-
 COMPARISON = register_kind(
     FeedbackKind(
         name="comparison",
@@ -143,7 +126,6 @@ COMPARISON = register_kind(
         table="comparisons",
         to_record=to_record,
         from_record=from_record,
-        strategies={RANDOM: None, "infogain": infogain, "volume-removal": volume_removal},
         page=StudyPage(
             widget="choice",
             label="Pair-wise comparison",

@@ -20,8 +20,10 @@ A kind that the study web app can ask people (`langpref study serve --kinds NAME
 `StudyPage`: the widget its answer is given with (a text box, or a choice among the shown trajectories), its label
 and the question above the videos; `parse` checks what the widget sends and `pairs` is what the learner takes.
 
-A kind's active query selections are its own: `strategies` maps each `--query-selection` name to the factory of its
-selector (`langpref.reward.selection.Selector`), so the reward loop and Study 2 ask the kind, never a table beside it.
+A kind's active query selections are registered from the reward side (`langpref.reward.selection.register_strategy`:
+the paper's kinds' are there, so this package imports nothing of `langpref.reward` at run time); a kind of another
+package may also list its own in `strategies`. The reward loop and Study 2 ask
+`langpref.reward.selection.selector_factories(kind)`.
 """
 
 from __future__ import annotations
@@ -110,9 +112,9 @@ class FeedbackKind:
     from_record: Callable[[Mapping[str, Any]], Any]
     """A stored row of `table` -> the answer again (the study replays them to rebuild a learner)."""
     strategies: Mapping[str, SelectorFactory | None] = field(default_factory=lambda: {RANDOM: None})
-    """`--query-selection` name -> the factory of its selector, in the order errors list them; `random` (uniform,
-    `random_query`; the paper's) has none and every kind should keep it. Study 2 runs a strategy whose selector can
-    score the rows it is given (`Selector.score_rows`)."""
+    """`--query-selection` name -> the factory of its selector, beside those registered from the reward side, in the
+    order errors list them; `random` (uniform, `random_query`; the paper's) has none. Study 2 runs a strategy whose
+    selector can score the rows it is given (`Selector.score_rows`)."""
     page: StudyPage | None = None
     """How the study web app asks this kind (`langpref study serve --kinds`); None: the study cannot run it."""
 

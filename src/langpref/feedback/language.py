@@ -29,7 +29,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, HumanConfig, Seed, rng_of, softmax, true_reward
-from langpref.feedback.kind import RANDOM, FeedbackKind, StudyPage, register_kind
+from langpref.feedback.kind import FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
 from langpref.language.bank import DIRECTIONS, NO_CHANGE_FEEDBACK, VAGUE_FEEDBACK, is_no_change
 
@@ -257,23 +257,6 @@ def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
     return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
 
 
-# ---- active query selection (`langpref.reward.selection`, imported when a strategy is used) --------------------
-
-
-def infogain(space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None, samples: int):
-    """`infogain`: the information about xi in the person's answer, under the answer model (Eq. 10 with xi)."""
-    from langpref.reward.selection import LanguageInfoGain
-
-    return LanguageInfoGain(space, pool, reward, candidates, samples)
-
-
-def lal_infogain(space: LatentSpace, pool: Sequence[int], reward: RewardConfig, candidates: int | None, samples: int):
-    """`lal-infogain`: the authors' follow-up's selection."""
-    from langpref.reward.selection import LalInfoGain
-
-    return LalInfoGain(space, pool, candidates)
-
-
 LANGUAGE = register_kind(
     FeedbackKind(
         name="language",
@@ -288,7 +271,6 @@ LANGUAGE = register_kind(
         table="feedback",
         to_record=to_record,
         from_record=from_record,
-        strategies={RANDOM: None, "infogain": infogain, "lal-infogain": lal_infogain},
         page=StudyPage(
             widget="text",
             label="Language feedback",

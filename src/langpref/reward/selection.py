@@ -59,7 +59,7 @@ from langpref.reward.batch import Scored, comparison_candidates, language_candid
 from langpref.reward.posterior import laplace_posterior, require_linear
 
 if TYPE_CHECKING:
-    from langpref.feedback.kind import FeedbackKind
+    from langpref.feedback.kind import FeedbackKind, SelectorFactory
     from langpref.feedback.space import LatentSpace
     from langpref.reward import RewardConfig, RewardLearner
 
@@ -88,14 +88,33 @@ class Selection:
     """How many trajectories (language) or pairs (comparisons) were scored; both together for a mixed learner."""
 
 
+_FACTORIES: dict[str, dict[str, SelectorFactory]] = {}
+"""kind name -> strategy -> its selector's factory, registered from the reward side (`register_strategy`)."""
+
+
+def register_strategy(kind: str, strategy: str, factory: SelectorFactory) -> None:
+    """Make `strategy` a query selection of feedback `kind` (the paper's are registered below; another package's kind
+    may register its own here, or list them in `FeedbackKind.strategies`)."""
+    _FACTORIES.setdefault(kind, {})[strategy] = factory
+
+
+def selector_factories(kind: FeedbackKind) -> dict[str, SelectorFactory | None]:
+    """strategy -> factory of `kind`, in the order errors list them: `random` (None: drawn uniformly), the kind's own
+    list (`FeedbackKind.strategies`), then those registered here."""
+    from langpref.feedback.kind import RANDOM
+
+    return {RANDOM: None, **kind.strategies, **_FACTORIES.get(kind.name, {})}
+
+
 def strategies_of(feedback: str) -> tuple[str, ...]:
-    """The query selections of `feedback`: a registered kind's own, `MIXED_STRATEGIES` for `mixed`."""
+    """The query selections of `feedback`: a registered kind's (`selector_factories`), `MIXED_STRATEGIES` for
+    `mixed`."""
     from langpref.feedback.kind import KINDS, MIXED, RANDOM
 
     if feedback == MIXED:
         return MIXED_STRATEGIES
     kind = KINDS.get(feedback)
-    return tuple(kind.strategies) if kind is not None else (RANDOM,)
+    return tuple(selector_factories(kind)) if kind is not None else (RANDOM,)
 
 
 def known_strategies() -> tuple[str, ...]:
@@ -377,11 +396,40 @@ def make_selector(
     candidates: int | None = None,
     samples: int | None = None,
 ) -> Selector | None:
-    """The selector of `strategy` for feedback `kind` (built by the kind's own factory, `FeedbackKind.strategies`);
-    None for `random` (the caller draws uniformly)."""
+    """The selector of `strategy` for feedback `kind` (built by its factory, `selector_factories`); None for
+    `random` (the caller draws uniformly)."""
     check_strategy(strategy, kind.name)
     require_linear(reward.model, strategy)
-    factory = kind.strategies[strategy]
+    factory = selector_factories(kind)[strategy]
     if factory is None:
         return None
     return factory(space, pool, reward, candidates, DEFAULT_SAMPLES if samples is None else int(samples))
+
+
+# ---- the paper's kinds' strategies ---------------------------------------------------------------------------------
+
+
+def _language_infogain(space, pool, reward, candidates, samples) -> Selector:
+    """`infogain`: the information about xi in the person's answer, under the answer model (Eq. 10 with xi)."""
+    return LanguageInfoGain(space, pool, reward, candidates, samples)
+
+
+def _lal_infogain(space, pool, reward, candidates, samples) -> Selector:
+    """`lal-infogain`: the authors' follow-up's selection."""
+    return LalInfoGain(space, pool, candidates)
+
+
+def _comparison(strategy: str) -> SelectorFactory:
+    """`infogain` (the mutual information between xi and the choice) or `volume-removal` (the expected removed
+    volume, Sadigh et al. 2017), over every pair of candidates."""
+
+    def make(space, pool, reward, candidates, samples) -> Selector:
+        return ComparisonActive(space, pool, strategy, candidates, samples)
+
+    return make
+
+
+register_strategy("language", "infogain", _language_infogain)
+register_strategy("language", "lal-infogain", _lal_infogain)
+register_strategy("comparison", "infogain", _comparison("infogain"))
+register_strategy("comparison", "volume-removal", _comparison("volume-removal"))

@@ -38,7 +38,7 @@ from langpref.feedback.kind import RANDOM, get_kind, shown_by
 from langpref.feedback.space import LatentSpace
 from langpref.reward import RewardConfig
 from langpref.reward.batch import Scored
-from langpref.reward.selection import DEFAULT_SAMPLES, Selector, candidate_rows
+from langpref.reward.selection import DEFAULT_SAMPLES, Selector, candidate_rows, selector_factories
 from langpref.study.config import StudyConfig
 
 ANSWER_MODEL_SAMPLES = 64
@@ -78,9 +78,9 @@ class QueryChooser:
         self._selectors = {} if self.answer_model else {m: self._selector(m) for m in active}
 
     def _selector(self, method: str) -> Selector:
-        """The selector of `method`'s strategy, made by its kind (`FeedbackKind.strategies`)."""
+        """The selector of `method`'s strategy (`langpref.reward.selection.selector_factories`)."""
         strategy = self.strategies[method]
-        selector = get_kind(method).strategies[strategy](
+        selector = selector_factories(get_kind(method))[strategy](
             self.space, self.study, self.reward, self.cfg.query_candidates, DEFAULT_SAMPLES
         )
         if type(selector).score_rows is Selector.score_rows:
