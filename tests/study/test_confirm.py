@@ -1,12 +1,13 @@
 """Ask when unsure (`--confirm-margin`): a Study-2 language answer whose reading is uncertain is followed by a confirm
 step; the meaning chosen is what the learner receives (either learner, a rebuilt one too), "none of these" is stored
 and not learned from, a malformed confirm body is a one-line 4xx, and the export reports the confirmations and writes
-the confirmed phrasings as a bank file."""
+the confirmed phrasings as a file to review (no bank before `bank review`)."""
 
 from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -197,6 +198,7 @@ def test_a_malformed_confirm_body_is_a_one_line_4xx(serve, h, body, status):
 
 
 def test_the_export_reports_confirmations_and_writes_bank_additions(serve, h, tmp_path):
+    from langpref.errors import LangprefError
     from langpref.language.bank import load_user_utterances
     from langpref.study.export import export
 
@@ -224,14 +226,20 @@ def test_the_export_reports_confirmations_and_writes_bank_additions(serve, h, tm
     assert summary["time_s"]["n"] == 4 and 0 < summary["time_s"]["mean"] < took  # each confirm, shown to answered
     raw = json.loads(bank_file.read_text())
     env = state.engine.env
-    assert set(raw) == {"_comment", env}
+    assert (raw["format"], raw["task"]) == ("langpref-bank-additions/1", env)
+    assert raw["source"]["db"] == str(Path(state.db_path).resolve()) and raw["source"]["participants"] == 1
     meanings = state.engine.meanings
-    bank = load_user_utterances(bank_file, env)
+    got = {(a["text"], a["feature"], a["direction"]): a for a in raw["additions"]}
     for text, meaning in chosen:
-        if meaning is None:  # each query said another text
-            assert all(text not in ts for d in bank.values() for ts in d.values())
-        else:
-            assert text in bank[meanings.feature(meaning)][meanings.direction(meaning)]
+        if meaning is None:  # each query said another text: "none of these" adds nothing
+            assert all(t != text for t, _, _ in got)
+            continue
+        a = got[(text, meanings.feature(meaning), meanings.direction(meaning))]
+        assert a["count"] == 1 and a["participants"] == [1] and a["accept"] is None
+        (c,) = a["confirmations"]
+        assert c["participant"] == 1 and c["method"] == "language" and 0 <= c["margin"] <= 1 and c["rank"] in (1, 2)
+    with pytest.raises(LangprefError, match="not reviewed"):  # no reader takes it as a bank before the review
+        load_user_utterances(bank_file, env)
     report = (tmp_path / "out" / "report.html").read_text()
     assert "Asked what they meant" in report
 

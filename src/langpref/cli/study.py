@@ -8,7 +8,7 @@ from pathlib import Path
 
 from langpref import cli_config as cc
 from langpref.cli.common import JSON
-from langpref.cli_config import RERUN, command, config, emit, from_args, opt, record
+from langpref.cli_config import RERUN, command, config, emit, from_args, opt, path, record
 from langpref.dataset.splits import SPLITS
 
 
@@ -150,5 +150,76 @@ def cmd_study_export(args: argparse.Namespace) -> None:
                 if "rewards_skipped" not in o
                 else f"no rewards: {o['rewards_skipped']}"
             )
+            + (
+                f"\n{o['bank_additions_phrasings']} bank additions ({o['bank_additions_flagged']} flagged) to review "
+                f"in {o['bank_additions']}: langpref bank review {o['bank_additions']}"
+                if "bank_additions" in o
+                else ""
+            )
         ),
     )
+
+
+@command(
+    "bank review",
+    "the lab's review of a study's bank additions: the accepted phrasings as an utterances file",
+    [
+        path("additions", help="the file `study export --bank-additions` wrote, with each addition's accept set"),
+        path("--out", default=None, help="write the accepted phrasings here (an utterances file); else only report"),
+        opt(
+            "--accept-unflagged",
+            action="store_true",
+            help="take an undecided addition without flags as accepted (a flagged one always needs accept set)",
+        ),
+        opt("--force", action="store_true", help="overwrite an existing --out file"),
+        JSON,
+    ],
+    "A study's confirmed phrasings come with their count, participants and flags (the same text confirmed as "
+    "another meaning, a text naming no change, the bank's own reading) and are no bank until reviewed: set each "
+    "addition's accept to true or false, then this writes the accepted ones as an utterances file for `bank check "
+    "--utterances` and `train --utterances`. Refused while an addition is undecided or a text is accepted as two "
+    "meanings.",
+)
+def cmd_bank_review(args: argparse.Namespace) -> None:
+    import json
+
+    from langpref.errors import LangprefError
+    from langpref.language.additions import load_additions, review
+
+    data = load_additions(args.additions)
+    if args.out is None:
+        emit(_review_listing(data), args.json, _review_text)
+        return
+    if args.out.exists() and (args.out.resolve() == args.additions.resolve() or not args.force):
+        raise LangprefError(f"--out {args.out} already exists; pass --force to overwrite it, or another file")
+    bank, report = review(data, accept_unflagged=args.accept_unflagged)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
+    report["out"] = str(args.out)
+    emit(
+        report,
+        args.json,
+        lambda o: (
+            f"wrote {o['written']} phrasings of {o['accepted']} accepted additions (of {o['additions']}; "
+            f"{o['rejected']} rejected) to {o['out']}; check them: "
+            f"langpref bank check {o['task']} --utterances {o['out']}"
+        ),
+    )
+
+
+def _review_listing(data: dict) -> dict:
+    """What a bank additions file holds, for the lab to read: each addition's meaning, count, flags and decision."""
+    rows = [
+        {k: a.get(k) for k in ("text", "feature", "direction", "count", "participants", "flags", "accept")}
+        for a in data["additions"]
+    ]
+    return {"task": data["task"], "additions": rows, "undecided": sum(r["accept"] is None for r in rows)}
+
+
+def _review_text(o: dict) -> str:
+    lines = [f"{len(o['additions'])} additions to {o['task']}'s bank, {o['undecided']} undecided:"]
+    for a in o["additions"]:
+        decision = {None: "undecided", True: "accepted", False: "rejected"}[a["accept"]]
+        lines.append(f"  {a['text']!r} as {a['feature']}/{a['direction']}: x{a['count']}, {decision}")
+        lines.extend(f"      ! {flag}" for flag in a["flags"])
+    return "\n".join(lines)

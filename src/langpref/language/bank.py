@@ -42,6 +42,8 @@ NO_CHANGE_FEEDBACK = "That's good, no change."
 """The answer "that's good, no change" (a button in the study, `no_change` in a language answer): the shown trajectory
 is as the person wants it. Recorded with this text; never read by the language model (the feedback gate refuses
 praise without a direction when it is typed). Typed, it is recognised as `is_no_change` reads it."""
+ADDITIONS_FORMAT = "langpref-bank-additions/1"
+"""The `format` of a study's bank additions file (`langpref.language.additions`), which no utterances reader takes."""
 _QUOTES = str.maketrans({"\u2019": "'", "\u2018": "'", "\u02bc": "'", "\u2032": "'", "`": "'", "\u00b4": "'"})
 _AROUND = " \t\r\n\u00a0\"'\u201c\u201d\u00ab\u00bb"
 _FINAL = ".!\u2026\u3002\uff01"
@@ -245,7 +247,9 @@ def load_user_utterances(
         raise LangprefError(f"{where} is not UTF-8 text: {exc}") from None
     except OSError as exc:
         raise LangprefError(f"{where} cannot be read: {exc.strerror or exc}") from None
-    entries = _check_top(_read_json(text, where), where)
+    data = _read_json(text, where)
+    _refuse_additions(data, where, path)
+    entries = _check_top(data, where)
     known = set(task_names()) | {env}
     parsed = {
         name: _parse_phrasings(section, name, where, name, require_all=False, valid=features if name == env else None)
@@ -258,6 +262,15 @@ def load_user_utterances(
     if not parsed[env]:
         raise LangprefError(f"{where}: section {env!r} gives no phrasings")
     return parsed[env]
+
+
+def _refuse_additions(data: Any, where: str, path: Path) -> None:
+    """Refuse a study's bank additions file where an utterances file is read: its phrasings are not reviewed."""
+    if isinstance(data, dict) and data.get("format") == ADDITIONS_FORMAT:
+        raise LangprefError(
+            f"{where} is a study's bank additions file, not reviewed: set each addition's accept to true or false, "
+            f"then write the accepted ones with `langpref bank review {path} --out BANK.json` and use that file"
+        )
 
 
 def _parse_bank(data: Any, env: str, where: str, features: tuple[str, ...] | None = None) -> Bank:

@@ -303,9 +303,11 @@ class ExportConfig:
     """Participants to leave out of the analyses (`--exclude 3,7`: arrival numbers, or ids as the dashboard shows them),
     besides those marked excluded on the dashboard; the tables keep every row."""
     bank_additions: str | None = None
-    """Also write the phrasings participants confirmed the meaning of (`--confirm-margin`) to this JSON file, in the
-    bank's schema ({TASK: {feature: {increase: [...], decrease: [...]}}}), for the lab to review before adding any to
-    its bank. An existing file is refused without `--force`, and the study database always."""
+    """Also write the phrasings participants confirmed the meaning of (`--confirm-margin`) to this JSON file for the
+    lab to review: each text under each meaning chosen, with its count, participants, margins and flags (the same
+    text confirmed otherwise, a text naming no change, the bank's own reading). No command reads it as a bank until
+    `langpref bank review FILE --out BANK` writes the accepted ones. An existing file is refused without `--force`,
+    and the study database always."""
     model: str | None = None
     """The study's model folder, where it is no longer where the study ran (the saved rewards refer to it)."""
 

@@ -40,7 +40,8 @@ def export(
 ) -> dict[str, Any]:
     """Write the CSVs, summary.json, learned_rewards.json, the figures and report.html of the study in `db_path` into
     `out`; the analyses leave out the participants excluded on the dashboard and those in `exclude` (numbers or ids).
-    With `bank_additions_file`, also the confirmed phrasings as a bank file there (`bank_additions`): an existing file
+    With `bank_additions_file`, also the confirmed phrasings as a file to review there (`bank_additions`; no bank
+    reader takes it before `langpref bank review`): an existing file
     only with `force`, and never the database itself (or its journal) nor a file the export writes. Also the answers
     and rewards of `langpref.study.rewards` (its model: `model`, else where the study ran)."""
     out = Path(out)
@@ -64,9 +65,7 @@ def export(
         rewards = learned_rewards(tables, excluded)
         (out / "learned_rewards.json").write_text(json.dumps(rewards) + "\n", encoding="utf-8")
         if bank_additions_file is not None:
-            bank, added = bank_additions(tables, summary.get("env") or "", excluded)
-            Path(bank_additions_file).parent.mkdir(parents=True, exist_ok=True)
-            Path(bank_additions_file).write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
+            added = _write_bank_additions(tables, summary.get("env") or "", excluded, db_path, bank_additions_file)
         taken = write_study_rewards(tables, out, excluded, model)
         report = report_html(summary, figs, free_texts(tables, excluded))
         (out / "report.html").write_text(report, encoding="utf-8", errors="replace")
@@ -83,12 +82,17 @@ def export(
         "finished": summary["finished"],
         "excluded": len(summary["excluded"]),
         **taken,
-        **(
-            {"bank_additions": str(bank_additions_file), "bank_additions_phrasings": added}
-            if bank_additions_file is not None
-            else {}
-        ),
+        **(added or {}),
     }
+
+
+def _write_bank_additions(tables: dict, env: str, excluded, db_path: str | Path, file: str | Path) -> dict[str, Any]:
+    """Write the bank additions file for the lab's review (`bank_additions`); what the export says of it."""
+    bank, added = bank_additions(tables, env, excluded, str(Path(db_path).resolve()))
+    Path(file).parent.mkdir(parents=True, exist_ok=True)
+    Path(file).write_text(json.dumps(bank, indent=2) + "\n", encoding="utf-8")
+    flagged = sum(bool(a["flags"]) for a in bank["additions"])
+    return {"bank_additions": str(file), "bank_additions_phrasings": added, "bank_additions_flagged": flagged}
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -4,7 +4,8 @@
   `learned_rewards.json` for analyses outside langpref;
 - `confirmations`: how often participants were asked what they meant (`--confirm-margin`) and what they chose
   (table `confirmations`), in `summary.json`;
-- `bank_additions`: the phrasings they confirmed, as a bank file for the lab to review (`--bank-additions FILE`).
+- `bank_additions`: the phrasings they confirmed, with their provenance, counts and conflicts, as a file for the lab
+  to review before any of them enters a bank (`--bank-additions FILE`, then `langpref bank review`).
 
 Each takes the study's tables (`analysis.tables.read_tables`) and the ids of the participants left out of the analyses.
 """
@@ -13,11 +14,14 @@ from __future__ import annotations
 
 import html
 import json
+import time
 from collections.abc import Callable, Collection
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
+from langpref.errors import LangprefError
 from langpref.study import db as sdb
 from langpref.study.flow import SURROGATES
 
@@ -110,21 +114,68 @@ def confirmations_html(c: dict[str, Any], fmt: Callable[[Any], str]) -> str:
     )
 
 
-def bank_additions(tables: Tables, env: str, excluded: Collection[str] = ()) -> tuple[dict[str, Any], int]:
-    """The phrasings participants confirmed (text -> the meaning they chose) as a bank file for `env` (docs/design.md,
-    schema, `{TASK: {feature: {increase: [...], decrease: [...]}}}`) for the lab to review before adding any to its
-    bank; "none of these" and `excluded` participants are left out. (The file's content, its number of phrasings.)"""
-    section: dict[str, dict[str, list[str]]] = {}
-    for r in sorted(tables.get("confirmations", []), key=lambda r: (r["feature"] or "", r["answered_at"])):
-        if r["meaning"] is None or r["participant_id"] in excluded:
-            continue
-        text = " ".join(SURROGATES.sub("\ufffd", r["text"]).split())
-        texts = section.setdefault(r["feature"], {}).setdefault(r["direction"], [])
-        if text not in texts:
-            texts.append(text)
-    count = sum(len(t) for d in section.values() for t in d.values())
-    note = (
-        "Phrasings study participants typed and then confirmed the meaning of (langpref study export "
-        "--bank-additions). Review them before adding any to the task's bank; nothing here is used by itself."
-    )
-    return {"_comment": note, env: section}, count
+def bank_additions(
+    tables: Tables, env: str, excluded: Collection[str] = (), db: str | None = None
+) -> tuple[dict[str, Any], int]:
+    """The phrasings participants confirmed the meaning of, as a bank additions file for the lab to review
+    (`langpref.language.additions`: each text under each meaning chosen, with its count, the participants and every
+    confirmation's query, margin and rank, and flags: the same text confirmed otherwise, a text naming no change,
+    the bank's own reading); "none of these" counts against a text, and `excluded` participants are left out. No
+    utterances reader takes the file before `langpref bank review`. (The file's content, its number of additions.)"""
+    from langpref.language.additions import additions_file
+
+    numbers = {p["id"]: p["number"] for p in tables["participants"]}
+    rows = [
+        _confirmation(r, numbers.get(r["participant_id"]))
+        for r in sorted(tables.get("confirmations", []), key=lambda r: r["answered_at"])
+        if r["participant_id"] not in excluded
+    ]
+    meta = sdb.decode_meta(tables.get("meta", []))
+    source = {
+        "db": db,
+        "model": meta.get("model"),
+        "data": meta.get("data"),
+        "confirm_margin": (meta.get("study") or {}).get("confirm_margin"),
+        "participants": len({r["participant"] for r in rows}),
+        "excluded_participants": len(set(excluded)),
+        "exported_at": _iso(time.time()),
+    }
+    out = additions_file(env, rows, _bank_of(env), source)
+    return out, len(out["additions"])
+
+
+def _confirmation(r: dict[str, Any], number: int | None) -> dict[str, Any]:
+    """A `confirmations` row as a confirmation of the additions file: the text and meaning chosen, and where it
+    came from (the participant's number, the query, the reading's margin, the chosen meaning's rank and p)."""
+    options = json.loads(r["options"]) if r.get("options") else []
+    chosen = next((o for o in options if o.get("meaning") == r["meaning"]), None)
+    return {
+        "text": " ".join(SURROGATES.sub("\ufffd", r["text"]).split()),
+        "feature": r["feature"] if r["meaning"] is not None else None,
+        "direction": r["direction"] if r["meaning"] is not None else None,
+        "participant": number,
+        "method": r["method"],
+        "query": r["number"],
+        "seq": r["seq"],
+        "shown": r["shown"],
+        "margin": r["margin"],
+        "rank": r["rank"],
+        "p": None if chosen is None else chosen.get("p"),
+        "answered_at": _iso(r["answered_at"]),
+    }
+
+
+def _bank_of(env: str) -> dict[str, str] | None:
+    """normalised text -> meaning of task `env`'s bank, all splits; None when the bank cannot be read here (a task
+    not registered in this process): the additions are then not checked against it."""
+    from langpref.language.additions import bank_meanings
+    from langpref.language.bank import load_bank
+
+    try:
+        return bank_meanings(load_bank(env).phrasings)
+    except (LangprefError, KeyError, ValueError):
+        return None
+
+
+def _iso(t: float) -> str:
+    return datetime.fromtimestamp(float(t), tz=UTC).isoformat(timespec="seconds")
