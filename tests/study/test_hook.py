@@ -101,6 +101,10 @@ def test_hook_runs_once_per_shown_trajectory_with_its_environment(hooked, h, tmp
     assert {r["LANGPREF_EPISODE"] for r in runs} == {""}  # a simulated dataset has no recorded episodes
     status = state.hook.status()
     assert status["counts"]["ok"] == len(runs) and sum(status["counts"].values()) == len(runs)
+    # each step's runs carry the steps with videos the participant had answered (from the stored answers): its turns
+    recent = list(reversed(status["recent"]))
+    seqs = sorted({r["seq"] for r in recent})
+    assert [r["earned"] for r in recent] == [seqs.index(r["seq"]) for r in recent] and len(seqs) > 1
 
 
 def test_failing_and_missing_hooks_are_logged_and_counted(hooked, h, tmp_path, caplog):
