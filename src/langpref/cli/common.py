@@ -43,6 +43,16 @@ NEGATION = opt(
 """`--negation/--no-negation` of every command that loads a model to read text with it (`load`)."""
 
 
+def figure(what: str):
+    """The `--figure PNG` option of a command that can draw the picture beside its numbers, saying what it shows."""
+    return path("--figure", default=None, metavar="PNG", help=f"also draw {what} into this PNG (needs matplotlib)")
+
+
+def with_figure(text: Callable[[dict], str]) -> Callable[[dict], str]:
+    """A command's text output, followed by a line naming its figure when it drew one."""
+    return lambda o: text(o) + (f"\nfigure {o['figure']}" if o.get("figure") else "")
+
+
 def load(args: argparse.Namespace, with_data: bool = True):
     """The model of `--model` (on `--device`, reading negations as `--negation` says, else as saved) and, with
     `with_data`, the dataset of `--data` it is checked against."""

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from langpref.cli.common import DIR, JSON
+from langpref.cli.common import DIR, JSON, figure, with_figure
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.errors import LangprefError
+from langpref.extras import require
 
 
 @command(
@@ -182,11 +183,20 @@ def cmd_tasks(args: argparse.Namespace) -> None:
     )
 
 
-@command("inspect", "describe a dataset: sizes, splits, feature ranges, correlations and checksum", [DIR, JSON])
+@command(
+    "inspect",
+    "describe a dataset: sizes, splits, feature ranges, correlations and checksum",
+    [DIR, figure("each feature's spread (histograms) and the feature correlation heatmap"), JSON],
+)
 def cmd_inspect(args: argparse.Namespace) -> None:
-    from langpref.dataset.inspect import describe, format_description
+    from langpref.dataset.inspect import describe, format_description, plot_dataset
 
-    emit(describe(args.dir), args.json, format_description)
+    if args.figure:
+        require("plots", "inspect --figure")
+    out = describe(args.dir)
+    if args.figure:
+        out["figure"] = str(plot_dataset(args.dir, args.figure))
+    emit(out, args.json, with_figure(format_description))
 
 
 @command(

@@ -90,3 +90,53 @@ def format_description(d: dict[str, Any]) -> str:
             "(see CHANGELOG.md): regenerate it to get what this version makes"
         )
     return "\n".join(lines)
+
+
+def plot_dataset(root: str | Path, out: str | Path) -> Path:
+    """`langpref inspect --figure`: each feature's spread over the dataset (a histogram, successes and failures
+    stacked) and the features' correlation matrix as a heatmap, into the PNG `out`."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the figure of a dataset's features")
+    ds = load_dataset(root)
+    names, feats = list(ds.feature_names), ds.features
+    corr = np.nan_to_num(np.corrcoef(feats.T)) if len(feats) > 1 else np.eye(len(names))
+    cols = min(3, len(names))
+    rows = -(-len(names) // cols)
+    side = 1.6 + 0.6 * len(names)
+    fig = plt.figure(figsize=(2.9 * cols + side + 1.2, max(2.5 * rows, side) + 0.8), layout="constrained")
+    grid = fig.add_gridspec(rows, cols + 1, width_ratios=[1.0] * cols + [side / 2.6])
+    success = ds.success.astype(bool)
+    for k, (name, col) in enumerate(zip(names, feats.T)):
+        ax = fig.add_subplot(grid[k // cols, k % cols])
+        ax.hist([col[success], col[~success]], bins=20, stacked=True, color=["tab:green", "tab:grey"])
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("feature value", fontsize=8)
+        ax.set_ylabel("trajectories", fontsize=8)
+        ax.yaxis.get_major_locator().set_params(integer=True)
+        if k == 0:
+            ax.legend(["task succeeded", "task failed"], fontsize=7)
+    heat = fig.add_subplot(grid[:, cols])
+    _correlation_heatmap(heat, names, corr)
+    heat.set_title("feature correlation (Pearson)", fontsize=10)
+    fig.suptitle(
+        f"{ds.env} dataset {ds.root.name}: each feature's spread over {len(feats)} trajectories, and how the "
+        "features correlate"
+    )
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return out
+
+
+def _correlation_heatmap(ax, names: list[str], corr: np.ndarray) -> None:
+    """`corr` as a red (positive) to blue (negative) heatmap over -1..1, each cell's value written in it."""
+    image = ax.imshow(corr, cmap="RdBu_r", vmin=-1.0, vmax=1.0)
+    ax.set_xticks(range(len(names)), names, rotation=45, ha="right", fontsize=8)
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    if len(names) <= 12:
+        for i, row in enumerate(corr):
+            for j, v in enumerate(row):
+                ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=7, color="white" if abs(v) > 0.6 else "k")
+    ax.figure.colorbar(image, ax=ax, shrink=0.8, label="correlation")

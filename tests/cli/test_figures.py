@@ -1,0 +1,39 @@
+"""`--figure PNG` of `inspect`, `bank check`, `evaluate` and `label`: each writes a real picture (a PNG that PIL reads,
+of a readable size) and names it, in `--json` as `figure` and in the text output."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from PIL import Image
+
+from langpref.cli import main
+
+
+def assert_picture(path: Path, min_size: tuple[int, int] = (600, 300)) -> None:
+    """`path` is a PNG that PIL decodes, at least `min_size` pixels (width, height) and not one flat colour."""
+    assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with Image.open(path) as image:
+        image.load()
+        assert image.format == "PNG" and image.width >= min_size[0] and image.height >= min_size[1], image.size
+        low, high = image.convert("L").getextrema()
+        assert high - low > 100  # something is drawn on the white
+
+
+def _run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_inspect_draws_each_features_spread_and_the_correlations(synthetic_dataset, tmp_path, capsys):
+    png = tmp_path / "figs" / "inspect.png"
+    code, out, err = _run(capsys, "inspect", str(synthetic_dataset), "--figure", str(png), "--json")
+    assert code == 0, err
+    assert json.loads(out)["figure"] == str(png)
+    assert_picture(png)
+    code, out, _ = _run(capsys, "inspect", str(synthetic_dataset), "--figure", str(tmp_path / "again.png"))
+    assert code == 0 and out.rstrip().endswith(f"figure {tmp_path / 'again.png'}")
+    code, out, _ = _run(capsys, "inspect", str(synthetic_dataset), "--json")
+    assert code == 0 and "figure" not in json.loads(out)
