@@ -37,3 +37,23 @@ def test_inspect_draws_each_features_spread_and_the_correlations(synthetic_datas
     assert code == 0 and out.rstrip().endswith(f"figure {tmp_path / 'again.png'}")
     code, out, _ = _run(capsys, "inspect", str(synthetic_dataset), "--json")
     assert code == 0 and "figure" not in json.loads(out)
+
+
+def test_bank_check_draws_which_meaning_is_read_as_which(tmp_path, capsys, monkeypatch):
+    """Read with a bag of words (no language model): a meaning that copies another's phrasings shows as confused."""
+    import langpref.cli.bank as bank_cli
+    from tests.language.test_bank_check import BANK, _task_file, bag_of_words
+
+    bank = json.loads(json.dumps(BANK))
+    bank["height"]["decrease"] = list(bank["height"]["increase"])
+    bank["speed"]["decrease"] = ["move slower"]  # too few to check: n/a
+    task = _task_file(tmp_path, {s: bank for s in ("train", "val", "test")})
+    monkeypatch.setattr(bank_cli, "_embedder", lambda args, task: (bag_of_words, "bag of words"))
+    png = tmp_path / "bank.png"
+    code, out, err = _run(capsys, "bank", "check", str(task), "--figure", str(png), "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["figure"] == str(png) and "height/decrease" in result["weak"]
+    assert_picture(png)
+    code, out, _ = _run(capsys, "bank", "check", str(task), "--figure", str(png))
+    assert code == 0 and out.rstrip().endswith(f"figure {png}")

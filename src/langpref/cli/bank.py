@@ -8,9 +8,10 @@ import json
 import os
 from pathlib import Path
 
-from langpref.cli.common import JSON, NEGATION
+from langpref.cli.common import JSON, NEGATION, figure, with_figure
 from langpref.cli_config import RERUN, command, emit, opt, path, record
 from langpref.errors import LangprefError
+from langpref.extras import require
 
 WHERE = opt(
     "where",
@@ -69,6 +70,7 @@ def _embedder(args: argparse.Namespace, task: str):
         opt("--threshold", type=float, default=None, help="flag a meaning read right less often (default 0.8)"),
         SEED,
         NEGATION,
+        figure("the confusion matrix of meanings (which is read as which) and each meaning's accuracy"),
         JSON,
     ],
     "Leave-one-out over the bank's train split: each phrasing is read as the meaning (feature, direction) whose "
@@ -91,6 +93,8 @@ def cmd_bank_check(args: argparse.Namespace) -> None:
 
         mapping = load_user_utterances(args.utterances, source.task, source.features)
         queries = {f: {d: list(t) for d, t in by.items()} for f, by in mapping.items()}
+    if args.figure:
+        require("plots", "bank check --figure")  # before the model loads, not after
     args.lang_model_given = args.lang_model is not None
     args.lang_model = args.lang_model or "minilm"
     embed, encoder = _embedder(args, source.task)
@@ -109,7 +113,12 @@ def cmd_bank_check(args: argparse.Namespace) -> None:
             method=f"{args.utterances} against the {args.split} split",
             threshold=threshold,
         )
-    emit(result.to_dict(), args.json, lambda _: _human(result))
+    out = result.to_dict()
+    if args.figure:
+        from langpref.language.check_figure import plot_bank_check
+
+        out["figure"] = str(plot_bank_check(result, args.figure))
+    emit(out, args.json, with_figure(lambda _: _human(result)))
 
 
 def _human(result) -> str:
