@@ -6,7 +6,19 @@ import argparse
 import importlib
 from pathlib import Path
 
-from langpref.cli.common import DATA, DEVICE, DEVICES, JSON, MODEL, NEGATION, TASK, load, run_config_experiment
+from langpref.cli.common import (
+    DATA,
+    DEVICE,
+    DEVICES,
+    JSON,
+    MODEL,
+    NEGATION,
+    TASK,
+    figure,
+    load,
+    run_config_experiment,
+    with_figure,
+)
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.dataset.splits import SPLITS
 from langpref.experiments.registry import EXPERIMENTS
@@ -114,6 +126,7 @@ def cmd_train(args: argparse.Namespace) -> None:
             "must not steer anything (a reporting-only set written apart)",
         ),
         NEGATION,
+        figure("the accuracy per feature against chance and what the misread phrasings were read as"),
         JSON,
     ],
     "Over every ordered pair of the split's trajectories, every feature that differs (beyond the model's tie "
@@ -122,8 +135,10 @@ def cmd_train(args: argparse.Namespace) -> None:
 )
 def cmd_evaluate(args: argparse.Namespace) -> None:
     from langpref.language.pairs import phrasings_from_bank, phrasings_from_mapping
-    from langpref.model.evaluate import evaluate_split, summary_only
+    from langpref.model.evaluate import evaluate_split, plot_evaluation, summary_only
 
+    if args.figure:
+        require("plots", "evaluate --figure")  # before the model loads, not after
     model, dataset = load(args)
     if args.utterances:
         from langpref.language.bank import load_user_utterances
@@ -148,7 +163,9 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
         out["near_copies"] = near_copy_report(out, phrasings, dataset.env, args.near_copy_ratio)
     if args.summary:
         out = summary_only(out)
-    emit(out, args.json, evaluate_text)
+    if args.figure:
+        out["figure"] = str(plot_evaluation(out, args.figure))
+    emit(out, args.json, with_figure(evaluate_text))
 
 
 def near_copy_report(out: dict, phrasings, env: str, ratio: float) -> dict:

@@ -18,7 +18,9 @@ whose psi is closest in cosine to that meaning's prototype; what a person typing
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Collection, Sequence
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -233,3 +235,74 @@ def embed_text(model, text: str, temperature: float = CONFIDENCE_TEMPERATURE) ->
         found = detect(text)
         out["negation"] = {"flipped": found.flip, "reason": found.reason, "read_as": found.text}
     return out
+
+
+def plot_evaluation(out: dict, path) -> Path:
+    """`langpref evaluate --figure`: left, the accuracy on each feature (`out["per_feature"]`) against chance (0.5)
+    and the overall accuracy; right, what the misread phrasings (`out["misread"]`) were read as, each pair (meaning,
+    read as) a bar of how many phrasings."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the figure of an evaluation")
+    fig, (left, right) = plt.subplots(
+        1, 2, figsize=(12.0, 0.9 + 0.45 * max(len(out["per_feature"]), 8)), layout="constrained"
+    )
+    _feature_bars(left, out)
+    _misread_bars(right, out)
+    oracle = f", oracle {out['oracle']} side" if out.get("oracle") else ""
+    fig.suptitle(
+        f"alignment on the {out['split']} split ({out['utterances']}{oracle}): {out['num_samples']} samples, "
+        f"{out['num_phrasings']} phrasings"
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _feature_bars(ax, out: dict) -> None:
+    names, acc = list(out["per_feature"]), list(out["per_feature"].values())
+    y = np.arange(len(names))
+    ax.barh(y, acc, color=["tab:blue" if a > 0.5 else "tab:red" for a in acc])
+    for k, a in enumerate(acc):
+        ax.text(a + 0.02, k, f"{a:.3f}", va="center", fontsize=8, bbox={"facecolor": "white", "edgecolor": "none"})
+    ax.axvline(0.5, color="grey", linestyle=":", label="chance (0.5)")
+    ax.axvline(out["accuracy"], color="k", linestyle="--", linewidth=1, label=f"all features ({out['accuracy']:.3f})")
+    ax.set_yticks(y, names)
+    ax.invert_yaxis()
+    ax.set_xlim(0.0, 1.1)
+    ax.set_xticks(np.linspace(0.0, 1.0, 6))
+    ax.set_xlabel("accuracy: share of pairs ordered right by the phrasing")
+    ax.set_title("accuracy per feature (red: at or below chance)", fontsize=10)
+    ax.legend(fontsize=8, loc="lower right")
+
+
+def _misread_bars(ax, out: dict) -> None:
+    if "misread" not in out:
+        why = (
+            f"--summary: aggregates only, no phrasing's reading\n({out['reading_accuracy']:.3f} of "
+            f"{out['num_phrasings']} phrasings read as their own meaning)"
+            if "reading_accuracy" in out
+            else "this checkpoint has no prototypes to read phrasings by"
+        )
+        ax.text(0.5, 0.5, why, ha="center", va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+        ax.set_title("what misread phrasings were read as", fontsize=10)
+        return
+    counts = Counter(f"{m['meaning']} read as {m['read_as']}" for m in out["misread"])
+    pairs = counts.most_common(15)
+    y = np.arange(len(pairs))
+    ax.barh(y, [n for _, n in pairs], color="tab:orange")
+    ax.set_yticks(y, [p for p, _ in pairs], fontsize=8)
+    ax.invert_yaxis()
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.set_xlabel("phrasings")
+    shown = f"; the {len(pairs)} commonest of {len(counts)} confusions" if len(counts) > len(pairs) else ""
+    ax.set_title(
+        f"misread phrasings: what each was read as\n{len(out['misread'])} of {out['num_phrasings']} misread "
+        f"(`langpref embed`){shown}",
+        fontsize=10,
+    )
+    if not pairs:
+        ax.text(0.5, 0.5, "every phrasing read as its own meaning", ha="center", va="center", transform=ax.transAxes)
