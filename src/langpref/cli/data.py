@@ -92,7 +92,12 @@ def cmd_import(args: argparse.Namespace) -> None:
 @command(
     "label",
     "a copy of a LeRobotDataset (v3) or plain recording with per-frame columns of a learned reward",
-    [config("langpref.dataset.label:LabelConfig", {"dataset": {"positional": True}}), JSON, RERUN],
+    [
+        config("langpref.dataset.label:LabelConfig", {"dataset": {"positional": True}}),
+        figure("each episode's learned reward so far (v_t) along its frames, the best and worst highlighted"),
+        JSON,
+        RERUN,
+    ],
     "Write a copy of DATASET with three float32 columns per frame from the saved reward (`learn-reward "
     "--save-reward`): langpref.reward_share (the frame's share; an episode's frames sum to its learned reward), "
     "langpref.reward_progress (the learned reward of the episode so far) and langpref.episode_reward (the "
@@ -105,14 +110,18 @@ def cmd_label(args: argparse.Namespace) -> None:
     from langpref.reward import load
 
     cfg = from_args(LabelConfig, args)
-    summary = label_dataset(cfg, load(cfg.reward))
+    if args.figure:
+        require("plots", "label --figure")  # before the episodes are labelled, not after
+    summary = label_dataset(cfg, load(cfg.reward), figure=args.figure)
     record(args, Path(summary["out"]) / "label.config.json", cfg)
     emit(
         summary,
         args.json,
-        lambda s: (
-            f"labelled {s['episodes']} episodes ({s['frames']} frames) of a {s['format']} dataset into {s['out']} "
-            f"({s['seconds']:.1f} s); columns: {', '.join(s['columns'])}"
+        with_figure(
+            lambda s: (
+                f"labelled {s['episodes']} episodes ({s['frames']} frames) of a {s['format']} dataset into {s['out']} "
+                f"({s['seconds']:.1f} s); columns: {', '.join(s['columns'])}"
+            )
         ),
     )
 

@@ -70,11 +70,14 @@ class LabelConfig:
     """Replace an existing OUT."""
 
 
-def label_dataset(cfg: LabelConfig, reward: Any, progress: bool = True) -> dict[str, Any]:
+def label_dataset(
+    cfg: LabelConfig, reward: Any, progress: bool = True, figure: str | Path | None = None
+) -> dict[str, Any]:
     """Write the labelled copy of `cfg.dataset` to `cfg.out` with `reward` (the saved reward at `cfg.reward`, as
     `langpref.reward.load` opened it: the reward side is opened by the caller, so that datasets need nothing of it)
     and return its summary: `episodes`, `frames`, `seconds` (wall time), `out`, `format` (`lerobot` or `plain`),
-    `columns` and the episodes' learned rewards (`episode_reward`: mean, min, max)."""
+    `columns` and the episodes' learned rewards (`episode_reward`: mean, min, max). With `figure`, also draw the
+    episodes' v_t curves into that PNG (`plot_progress`) and name it in the summary's `figure`."""
     from langpref.dataset.label_lerobot import is_lerobot, label_lerobot
 
     start = time.perf_counter()
@@ -101,7 +104,7 @@ def label_dataset(cfg: LabelConfig, reward: Any, progress: bool = True) -> dict[
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     rewards = totals["episode_rewards"]
-    return {
+    summary = {
         "episodes": len(rewards),
         "frames": totals["frames"],
         "seconds": round(time.perf_counter() - start, 3),
@@ -110,6 +113,9 @@ def label_dataset(cfg: LabelConfig, reward: Any, progress: bool = True) -> dict[
         "columns": list(COLUMNS),
         "episode_reward": {"mean": float(np.mean(rewards)), "min": float(min(rewards)), "max": float(max(rewards))},
     }
+    if figure is not None:
+        summary["figure"] = str(plot_progress(totals["curves"], figure, reward.task))
+    return summary
 
 
 def _check_paths(src: Path, out: Path, force: bool) -> None:
@@ -157,15 +163,54 @@ def bar(items: Iterable, desc: str, total: int, progress: bool) -> Iterable:
     return tqdm(items, desc=desc, total=total, unit="episode", disable=not progress, dynamic_ncols=True)
 
 
+MOST_CURVES = 200
+"""`plot_progress` draws at most this many episodes' curves in grey (spread over the range of their rewards)."""
+
+
+def plot_progress(curves: dict[str, np.ndarray], out: str | Path, task: str = "") -> Path:
+    """`langpref label --figure`: left, each episode's v_t (the learned reward so far) along its frames, the best and
+    the worst episode (by r_xi(tau), the last v_t) highlighted; right, how the episodes' learned rewards spread."""
+    from langpref.extras import pyplot
+
+    plt = pyplot("the figure of the learned reward along each episode")
+    names = sorted(curves, key=lambda n: float(curves[n][-1]))
+    totals = np.array([float(curves[n][-1]) for n in names])
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12.0, 4.4), width_ratios=[2.0, 1.0], layout="constrained")
+    shown = [names[int(k)] for k in np.unique(np.linspace(0, len(names) - 1, min(len(names), MOST_CURVES)).round())]
+    for name in shown:
+        left.plot(curves[name], color="grey", alpha=0.35, linewidth=0.8)
+    for name, color, which in ((names[-1], "tab:green", "best"), (names[0], "tab:red", "worst")):
+        left.plot(curves[name], color=color, linewidth=2.2, label=f"{which}: {name} ({float(curves[name][-1]):.3g})")
+    left.set_xlabel("frame")
+    left.set_ylabel("v_t: learned reward of the episode so far")
+    some = f"{len(shown)} of {len(names)}" if len(shown) < len(names) else f"all {len(names)}"
+    left.set_title(f"the learned reward along each episode ({some} episodes, grey)", fontsize=10)
+    left.legend(fontsize=8)
+    right.hist(totals, bins=min(30, max(5, len(totals) // 3)), color="tab:blue", edgecolor="white")
+    right.axvline(totals[-1], color="tab:green", linewidth=2, label="best")
+    right.axvline(totals[0], color="tab:red", linewidth=2, label="worst")
+    right.set_xlabel("r_xi(tau): the episode's learned reward")
+    right.set_ylabel("episodes")
+    right.yaxis.get_major_locator().set_params(integer=True)
+    right.set_title("the episodes' learned rewards", fontsize=10)
+    right.legend(fontsize=8)
+    fig.suptitle(f"langpref label: the learned reward{f' of task {task}' if task else ''} on {len(names)} episodes")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
 # ---- plain recording folder ----------------------------------------------------------------------------------------
 
 
 def label_plain(src: Path, out: Path, reward: Any, progress: bool = True) -> dict[str, Any]:
     """Label every NAME.npz of the plain recording `src` into `out` (the original file with the label arrays
     appended, so its own arrays keep their bytes); videos linked, other files and folders copied. Returns
-    {frames, episode_rewards}."""
+    {frames, episode_rewards, curves (episode name -> its v_t)}."""
     files = plain_episode_files(src)
-    frames, rewards = 0, []
+    frames, rewards, curves = 0, [], {}
     for path in bar(files, f"label {src.name}", len(files), progress):
         episode = read_plain_episode(path)
         check_sizes(reward, episode.observations.shape[1], episode.actions.shape[1], str(path))
@@ -173,6 +218,7 @@ def label_plain(src: Path, out: Path, reward: Any, progress: bool = True) -> dic
         _append_arrays(path, out / path.name, columns)
         frames += len(episode.observations)
         rewards.append(float(columns[EPISODE][0]))
+        curves[path.stem] = columns[PROGRESS]
     labelled = {p.name for p in files}
     for entry in sorted(src.iterdir()):
         if entry.name in labelled:
@@ -183,7 +229,7 @@ def label_plain(src: Path, out: Path, reward: Any, progress: bool = True) -> dic
             link_or_copy(entry, out / entry.name)
         else:
             shutil.copy2(entry, out / entry.name)
-    return {"frames": frames, "episode_rewards": rewards}
+    return {"frames": frames, "episode_rewards": rewards, "curves": curves}
 
 
 def _append_arrays(src: Path, dst: Path, arrays: dict[str, np.ndarray]) -> None:

@@ -34,7 +34,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from langpref.dataset.label import COLUMNS, EPISODE, SHARE, bar, check_sizes, episode_columns, link_or_copy
+from langpref.dataset.label import COLUMNS, EPISODE, PROGRESS, SHARE, bar, check_sizes, episode_columns, link_or_copy
 from langpref.dataset.lerobot import (
     EPISODES_DIR,
     INFO_PATH,
@@ -66,7 +66,8 @@ def is_lerobot(src: Path) -> bool:
 def label_lerobot(
     src: Path, out: Path, reward: Any, state_key: str, action_key: str, progress: bool = True
 ) -> dict[str, Any]:
-    """Write the labelled copy of the LeRobotDataset `src` into the empty folder `out`; {frames, episode_rewards}."""
+    """Write the labelled copy of the LeRobotDataset `src` into the empty folder `out`; {frames, episode_rewards,
+    curves (episode name -> its v_t), columns, progress_sidecar}."""
     info = _read_info(src)
     features = info["features"]
     for key in (state_key, action_key):
@@ -98,6 +99,7 @@ def label_lerobot(
     return {
         "frames": frames,
         "episode_rewards": [float(labels[ep["episode_index"]][EPISODE][0]) for ep in episodes],
+        "curves": {f"episode {ep['episode_index']}": labels[ep["episode_index"]][PROGRESS] for ep in episodes},
         "columns": list(written),
         "progress_sidecar": PROGRESS_SIDECAR,
     }
