@@ -19,6 +19,9 @@ $(STAMP): pyproject.toml requirements/constraints.txt examples/plugin/pyproject.
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[all,test,docs]"
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e examples/plugin  # example task plugin (metaworld-reach)
+	@# the language model that has read comparative feedback (about 3 minutes on 2 cores, once; cached): the scope
+	@# check reads feedback in its space, and a newcomer's first `embed` or study would otherwise wait on it
+	HF_HUB_OFFLINE=1 $(BIN)/langpref lang-model build comparative
 	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here); its
 	@# reverse-proxy test runs Debian's nginx with a self-signed certificate (openssl).
 	{ command -v chromium && { command -v nginx || test -x /usr/sbin/nginx; } && command -v openssl; } >/dev/null \

@@ -240,7 +240,8 @@ def _scope_text(o: dict) -> str:
             f"{m}: {v['real_said_outside']:.1%} / {v['lacked_said_outside']:.1%}" for m, v in r["by_margin"].items()
         )
         lines.append(f"  {name} ({r['real']} own, {r['lacked']} about what it lacks): {cells}")
-    lines.append(f"margin chosen by the rule: {o['chosen_margin']}  (cells: own said outside / others said outside)")
+    which = "chosen by the rule" if o["split"] == "val" else "the rule would choose here (it chooses on val)"
+    lines.append(f"margin {which}: {o['chosen_margin']}  (cells: own said outside / others said outside)")
     return "\n".join(lines)
 
 

@@ -119,20 +119,19 @@ class FeedbackGate:
         gate of bare phrasings (no features known)."""
         if not self._features:
             return None
-        from langpref.language.scope import ScopeCheck
+        from langpref.language.scope import ScopeCheck, cached_embeddings, scope_embedder
 
+        embed, key = scope_embedder()
         texts = sorted(self._features)
-        return ScopeCheck.build(self.feature_names, texts, [self._features[t] for t in texts], self._embed_cached)
-
-    def _embed_cached(self, texts: list[str]) -> np.ndarray:
-        from langpref.language.scope import cached_embeddings
-
-        return cached_embeddings(texts, self._embed, GATE_LANG_MODEL)
+        features = [self._features[t] for t in texts]
+        return ScopeCheck.build(self.feature_names, texts, features, lambda t: cached_embeddings(t, embed, key))
 
     def scope(self, text: str):
         """Where `text` stands against what the task measures (`langpref.language.scope.Scope`), or None."""
+        from langpref.language.scope import scope_embedder
+
         check = self.scope_check
-        return None if check is None else check.scope(self._embed([" ".join(str(text).split())])[0])
+        return None if check is None else check.scope(scope_embedder()[0]([" ".join(str(text).split())])[0])
 
     def out_of_task_message(self, text: str, scope) -> str:
         """One line a person can act on, for a text about something the task does not measure."""
