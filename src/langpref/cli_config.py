@@ -23,6 +23,7 @@ import importlib
 import inspect
 import itertools
 import json
+import re
 import shlex
 import textwrap
 import types
@@ -100,15 +101,17 @@ def add_config(
     flag_prefix: str = "",
     only: tuple[str, ...] | None = None,
     unset: bool = False,
+    common: tuple[str, ...] | None = None,
 ) -> None:
     """Add an option for each field of `cls` (see the module docstring); `only` keeps the named (dotted) fields;
-    `unset`: options default to None ("not given") and say the field's default in their help."""
+    `unset`: options default to None ("not given") and say the field's default in their help; `common`: the (dotted)
+    fields `--help` shows, the others only `--help-all` (None: all of them)."""
     opts, hints, docs = opts or {}, typing.get_type_hints(cls), field_docs(cls)
     for f in dataclasses.fields(cls):
         name, hint, default = prefix + f.name, hints[f.name], _default(f)
         spec = opts.get(name, {})
         if spec is not None and dataclasses.is_dataclass(hint):
-            add_config(p, hint, opts, prefix=name + ".", flag_prefix=flag_prefix, only=only, unset=unset)
+            add_config(p, hint, opts, prefix=name + ".", flag_prefix=flag_prefix, only=only, unset=unset, common=common)
         if spec is None or dataclasses.is_dataclass(hint) or (only is not None and name not in only):
             continue
         spec = {"flag": spec} if isinstance(spec, str) else dict(spec)
@@ -136,7 +139,20 @@ def add_config(
         elif "type" in kw and "choices" not in spec:
             kw["metavar"] = flag.lstrip("-").replace("-", "_").upper()
         kw.update(spec)
-        p.add_argument(flag, *aliases, help=text.replace("%", "%%"), **kw)
+        hidden = common is not None and name not in common and not kw.get("required")
+        if hidden:
+            p.set_defaults(_langpref_more_help=True)  # the command gains --help-all (make_parser)
+        shown = not hidden or _HELP_ALL[0]
+        if common is not None and not _HELP_ALL[0]:
+            text = _first_sentence(text)  # --help is a summary; --help-all has every word
+        p.add_argument(flag, *aliases, help=text.replace("%", "%%") if shown else argparse.SUPPRESS, **kw)
+
+
+def _first_sentence(text: str) -> str:
+    """The first sentence of an option's help, with its default when the help ends by stating one."""
+    default = re.search(r" \(default [^()]*\)$", text)
+    head = re.split(r"(?<![Ee]q\.)(?<!e\.g\.)(?<=\.)\s", text, maxsplit=1)[0]
+    return head + (default.group(0) if default and default.group(0) not in head else "")
 
 
 def args_of(args: argparse.Namespace, prefix: str = "") -> dict[str, Any]:
@@ -159,6 +175,11 @@ def from_args(cls: type, args: argparse.Namespace, prefix: str = "", **given: An
 
 
 # ---- commands: registry, options, output --------------------------------------------------------------------------
+
+
+_HELP_ALL = [False]
+"""Whether this parser is built for `--help-all` (every option shown), set by `make_parser`."""
+HELP_ALL_NOTE = "Shown: the common options; `--help-all` lists every option."
 
 
 def command(name: str, help: str, options: list[Options], description: str | None = None):
@@ -190,9 +211,8 @@ def config(where: str, opts: dict | Callable[[], dict] | None = None, **kw: Any)
 
 
 RERUN_HELP = (
-    "rerun the command recorded in this resolved config (COMMAND.config.json, STEM.config.json): its command line, "
-    "with the options given here after it, so these override the record's (a switch the record turned on is turned "
-    "off with its --no- form); relative paths are read from the current directory, as when it ran"
+    "rerun the command recorded in this resolved config (COMMAND.config.json, STEM.config.json), the options given "
+    "here overriding the record's (a switch it turned on: its --no- form)"
 )
 RERUN = opt("--config", metavar="PATH", type=Path, help=RERUN_HELP)
 """The `--config PATH` option of every command that records its resolved config (`record`)."""
@@ -320,7 +340,10 @@ def make_parser(
     prog: str, description: str, groups_help: dict[str, tuple[str, str, str]], argv: list[str] | None = None
 ) -> argparse.ArgumentParser:
     """Every registered command with its help (`groups_help`: help, dest and metavar of each group of commands); a
-    command's options only when `argv` names it (all of them without `argv`), so the others import nothing."""
+    command's options only when `argv` names it (all of them without `argv`), so the others import nothing. A
+    command whose config names its common options (`config(..., common=...)`) shows only those with `--help`, every
+    option with `--help-all`."""
+    _HELP_ALL[0] = argv is None or "--help-all" in argv  # every parser at once (docs, tests): all of every help
     parser = argparse.ArgumentParser(prog=prog, description=description)
     top = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     groups: dict[str, Any] = {}
@@ -337,6 +360,12 @@ def make_parser(
         if argv is None or argv[: len(group) + 1] == [*group, leaf]:
             for add in options:
                 add(p)
+            more = bool(p.get_default("_langpref_more_help"))
+            p.add_argument(
+                "--help-all", action="help", help="show every option" + (", not only the common ones" if more else "")
+            )
+            if more and not _HELP_ALL[0]:
+                p.description = f"{p.description} {HELP_ALL_NOTE}"
             if RERUN in options:
                 _add_inverse_switches(p)
     return parser

@@ -293,3 +293,20 @@ def test_every_command_that_records_takes_config_and_one_device_default():
     devices = {name: a.default for name, q in p.items() for a in q._actions if "--device" in a.option_strings}
     assert {"train", "evaluate", "experiment observations"} <= set(devices)
     assert set(devices.values()) == {DEFAULT_DEVICE} == {TrainConfig().device}
+
+
+@pytest.mark.parametrize("command", [["train"], ["learn-reward"]])
+def test_help_shows_the_common_options_and_help_all_every_one(command, capsys):
+    from langpref.cli import main
+
+    with pytest.raises(SystemExit):
+        main([*command, "--help"])
+    short = capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main([*command, "--help-all"])
+    full = capsys.readouterr().out
+    assert (
+        len(short.splitlines()) < 65 and "--help-all" in short and len(full.splitlines()) > 3 * len(short.splitlines())
+    )
+    hidden = "--latent-dim" if command == ["train"] else "--negatives"
+    assert hidden not in short and hidden in full

@@ -48,6 +48,7 @@ from langpref.language.near_copies import NEAR_COPY_RATIO
                 "model.observations": {"choices": importlib.import_module("langpref.model.config").OBSERVATIONS},
                 "model.frame_channels": {"metavar": "C1,C2,..."},
             },
+            common=("data", "out", "model.lang_model", "stage1_epochs", "stage2_epochs", "seed", "threads", "force"),
         ),
         JSON,
         RERUN,

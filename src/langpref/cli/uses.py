@@ -85,7 +85,8 @@ def _space(args: argparse.Namespace):
     )
 
 
-PROPOSE = config("langpref.propose:ProposeConfig", prefix="propose.")
+PROPOSE = config("langpref.propose:ProposeConfig", prefix="propose.", common=())
+"""The simulator search's knobs, behind `--help-all`."""
 
 
 def _generation(args: argparse.Namespace, space):
@@ -140,31 +141,31 @@ def cmd_improve(args: argparse.Namespace) -> None:
     "reward learning from synthetic language feedback or comparisons",
     [
         *_space_options(),
-        config("langpref.reward:LearnRewardConfig", _use_opts),
+        config(
+            "langpref.reward:LearnRewardConfig",
+            _use_opts,
+            common=("feedback", "queries", "humans", "seeds", "learner", "query_selection"),
+        ),
         opt(
             "--optimize",
             action="store_true",
-            help="after the last query, generate r_xi's optimum in the simulator "
-            "(`langpref.propose`); adds optimized_true_reward, one per human x seed run (above 1: better than the "
-            "eval split's best), and recorded_true_reward, r_xi's best recorded trajectory over every split (the "
-            "baseline: the generator starts from and fits all of them)",
+            help="after the last query, generate r_xi's optimum in the simulator (`langpref.propose`): adds "
+            "optimized_true_reward (above 1: better than the eval split's best) and recorded_true_reward",
         ),
         PROPOSE,
         path(
             "--save-reward",
             default=None,
             metavar="DIR",
-            help="write each run's r_xi into DIR (reward.json is "
-            "the first run's) for `langpref.reward.load`, `langpref label` and the Gymnasium wrapper "
-            "langpref.reward.saved.LearnedReward; with synthetic humans, each is learned from a random hidden reward",
+            help="write each run's r_xi into DIR (reward.json: the first run's) for `langpref.reward.load`, "
+            "`langpref label` and the Gymnasium wrapper (synthetic humans: each from a random hidden reward)",
         ),
         path(
             "--answers",
             default=None,
             metavar="FILE",
-            help="learn from real people's recorded answers (JSON Lines: a `study export`'s answers.jsonl, or "
-            "docs/answers.md's format) instead of synthetic humans: one reward per participant, saved with "
-            "--save-reward; --queries, --humans and --seeds do not apply",
+            help="learn from real people's recorded answers (JSON Lines: a `study export`'s answers.jsonl, or the "
+            "answers format of docs/api/reward.md), one reward per participant, instead of synthetic humans",
         ),
         opt("--participant", default=None, metavar="P", help="with --answers: only this participant's answers"),
         opt("--pooled", action="store_true", help="with --answers: one reward from every participant's answers"),

@@ -66,7 +66,7 @@ class LearnRewardConfig:
     """`langpref learn-reward`: synthetic humans x seeds, Q queries each, metrics after every query."""
 
     feedback: str = "language"
-    """The kind of feedback (`langpref.feedback.KINDS`): `language` (one trajectory shown, comparative feedback),
+    """The kind of feedback (`langpref.feedback.KINDS`). `language` (one trajectory shown, comparative feedback),
     `comparison` (a pair shown, one choice), any registered kind, or `mixed`: both in one learner, each query of the
     kind and item with the most information per modelled second (`infogain`; the linear reward)."""
     queries: int = 40
