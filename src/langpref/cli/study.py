@@ -43,22 +43,25 @@ from langpref.dataset.splits import SPLITS
                     "needs it (they may then wait for it)."
                 },
             },
+            common=("model", "data", "db", "host", "port", "admin_token", "on_show", "trusted_proxies"),
         ),
         config(
             "langpref.study.config:StudyConfig",
-            {
+            lambda: {
                 "study.split": {"choices": (*SPLITS, "all")},
                 "study.improve_candidates": {"choices": ("split", "generated")},
-                "study.learner": {"choices": ("paper", "answer-model")},
+                "study.learner": {"choices": importlib.import_module("langpref.reward.learners").learner_names()},
             },
             prefix="study.",
             unset=True,
+            common=("study.split", "study.kinds", "study.pref_queries", "study.learner", "study.confirm_margin"),
         ),
         config(
             "langpref.study.config:VideoConfig",
             lambda: {"video.format": {"choices": importlib.import_module("langpref.study.config").VIDEO_FORMATS}},
             prefix="video.",
             flag_prefix="video-",
+            common=(),
         ),
     ],
     "Prints the participant URL and an admin token. State lives in the SQLite --db: a restart on the same --db "
