@@ -200,3 +200,28 @@ def test_paired_intervals_and_targets():
     assert one == {"mean": 0.5, "low": None, "high": None} and "no interval" in _interval(one)
     met = targets({s: {"final_true_reward": v} for s, v in (("language", 0.85), ("comparison", 0.9), ("true", 1.0))})
     assert list(met.values()) == [True, False]
+
+
+def test_the_share_of_the_true_reward_policy_counts_humans_not_seeds():
+    """Ratios of means over humans on both scales; duplicating every seed changes neither the ratio nor the interval
+    (a human's seeds are one unit), and the untrained policy is the zero of the second scale."""
+    from langpref.experiments.rl_report import ratios
+
+    def runs_of(seeds: int) -> dict:
+        out = {}
+        for h, (lang, true) in enumerate([(1.0, 2.0), (2.0, 2.0), (1.5, 3.0)]):
+            for s in range(seeds):
+                for source, final in (("language", lang), ("true", true)):
+                    out[f"policy-{source}-h{h}-s{s}"] = {
+                        "final": {"true_reward": final},
+                        "curve": {"true_reward": [0.5]},
+                    }
+        return out
+
+    one = ratios(runs_of(1), RLConfig(humans=3, seeds=1, sources=("language", "true")))["language"]
+    three = ratios(runs_of(3), RLConfig(humans=3, seeds=3, sources=("language", "true")))["language"]
+    assert one["as_evaluated"]["mean"] == pytest.approx(4.5 / 7) and one["above_untrained"]["mean"] == pytest.approx(
+        3 / 5.5
+    )
+    assert one["as_evaluated"]["low"] < one["as_evaluated"]["mean"] < one["as_evaluated"]["high"]
+    assert one == three and one["untrained_true_reward"] == 0.5

@@ -91,6 +91,42 @@ def targets(sources: dict[str, dict]) -> dict[str, bool]:
     return out
 
 
+BOOTSTRAPS = 10_000
+"""Resamples of the humans for the ratios' intervals."""
+
+
+def ratios(runs: dict[str, dict], cfg, seed: int = 0) -> dict[str, Any]:
+    """Per learned source, the mean final true reward of its policies as a share of the true-reward policies', on two
+    scales: as evaluated (0 = the test split's worst trajectory) and above the untrained policy (each run's
+    evaluation at step 0, the untrained network: the share of the true-reward policies' gain). A ratio of means over
+    humans (a human's seeds averaged first): the interval is a percentile bootstrap over humans (seeded), so
+    correlated seeds never count as more humans, and a human whose true-reward policy gained little does not blow
+    the ratio up."""
+    if "true" not in cfg.sources:
+        return {}
+
+    def per_human(source: str, value) -> np.ndarray:
+        return np.array(
+            [np.mean([value(runs[f"policy-{source}-h{h}-s{s}"]) for s in range(cfg.seeds)]) for h in range(cfg.humans)]
+        )
+
+    final = lambda r: r["final"]["true_reward"]  # noqa: E731
+    start = lambda r: r["curve"]["true_reward"][0]  # noqa: E731
+    picks = np.random.default_rng(seed).integers(0, cfg.humans, size=(BOOTSTRAPS, cfg.humans))
+    best, untrained = per_human("true", final), per_human("true", start)
+    out = {}
+    for source in (s for s in cfg.sources if s != "true"):
+        mine, zero = per_human(source, final), (per_human(source, start) + untrained) / 2
+        scales = {"as_evaluated": (mine, best), "above_untrained": (mine - zero, best - zero)}
+        out[source] = {}
+        for scale, (num, den) in scales.items():
+            boot = num[picks].mean(axis=1) / den[picks].mean(axis=1)
+            low, high = np.percentile(boot, [2.5, 97.5])
+            out[source][scale] = {"mean": float(num.mean() / den.mean()), "low": float(low), "high": float(high)}
+        out[source]["untrained_true_reward"] = float(zero.mean())
+    return out
+
+
 def summarise(runs: dict[str, dict], rewards: dict[str, dict], cfg) -> dict[str, Any]:
     """The experiment's results: per source, paired contrasts, the learned rewards, the targets."""
     sources = {s: source_summary(runs, s, cfg) for s in cfg.sources}
@@ -104,6 +140,7 @@ def summarise(runs: dict[str, dict], rewards: dict[str, dict], cfg) -> dict[str,
         "contrasts": contrasts,
         "learned_rewards": reward_summary(rewards, cfg),
         "targets": targets(sources),
+        "ratios": ratios(runs, cfg),
     }
 
 
@@ -169,6 +206,20 @@ def markdown(summary: dict[str, Any]) -> str:
         lines += ["| contrast | true reward | success |", "|---|---|---|"]
         for name, c in summary["contrasts"].items():
             cells = [_interval(c[k]) for k in METRICS]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if summary.get("ratios"):
+        lines += ["", "Share of the true-reward policies' true reward (ratio of means over humans; 95% bootstrap over "]
+        lines[-1] += "humans; the untrained policy's true reward is each run's step-0 evaluation):"
+        lines += [
+            "",
+            "| trained on | as evaluated (0 = worst test trajectory) | above the untrained policy |",
+            "|---|---|---|",
+        ]
+        for name, r in summary["ratios"].items():
+            cells = [
+                f"{r[k]['mean']:.0%} ({r[k]['low']:.0%} to {r[k]['high']:.0%})"
+                for k in ("as_evaluated", "above_untrained")
+            ]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
     if summary["targets"]:
         lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
