@@ -149,7 +149,8 @@ def cmd_study_export(args: argparse.Namespace) -> None:
             f"finished), {len(o['tables'])} tables and {len(o['figures'])} figures in {o['out']}\n"
             f"{o['num_answers']} answers in {o['answers']}; "
             + (
-                f"{len(o['rewards'])} participant rewards and {len(o['pooled'])} pooled in {o['out']}/rewards"
+                f"{len(o['rewards'])} participant rewards in {o['out']}/rewards; pooled: "
+                + (f"{len(o['pooled'])}" if isinstance(o["pooled"], list) else o["pooled"])
                 if "rewards_skipped" not in o
                 else f"no rewards: {o['rewards_skipped']}"
             )

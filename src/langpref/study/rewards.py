@@ -87,14 +87,14 @@ def write_study_rewards(
 ) -> dict[str, Any]:
     """answers.jsonl and rewards/ of the module docstring into `out`; what was written, and why not where it was
     not. `model` overrides the study's recorded model folder."""
+    from langpref.reward.saved import check_saveable, write_reward
+
     meta = sdb.decode_meta(tables.get("meta", []))
     study = StudyConfig.from_dict(meta.get("study") or {})
     records = study_answers(tables, study, excluded)
     answers_path = out / "answers.jsonl"
     write_answers(answers_path, records)
     result: dict[str, Any] = {"answers": str(answers_path), "num_answers": len(records), "rewards": []}
-    from langpref.reward.saved import check_saveable, write_reward
-
     model = Path(model or meta.get("model") or "")
     if not (model / "config.json").is_file():
         result["rewards_skipped"] = (
