@@ -141,27 +141,33 @@ def cmd_study_export(args: argparse.Namespace) -> None:
         cfg.db, cfg.out, exclude=cfg.exclude, bank_additions_file=cfg.bank_additions, force=args.force, model=cfg.model
     )
     record(args, Path(cfg.out) / "export.config.json", cfg)
-    emit(
-        out,
-        args.json,
-        lambda o: (
-            f"wrote {o['report']} ({o['participants']} participants, {o['finished']} "
-            f"finished), {len(o['tables'])} tables and {len(o['figures'])} figures in {o['out']}\n"
-            f"{o['num_answers']} answers in {o['answers']}; "
-            + (
-                f"{len(o['rewards'])} participant rewards in {o['out']}/rewards; pooled: "
-                + (f"{len(o['pooled'])}" if isinstance(o["pooled"], list) else o["pooled"])
-                if "rewards_skipped" not in o
-                else f"no rewards: {o['rewards_skipped']}"
-            )
-            + (
-                f"\n{o['bank_additions_phrasings']} bank additions ({o['bank_additions_flagged']} flagged) to review "
-                f"in {o['bank_additions']}: langpref bank review {o['bank_additions']}"
-                if "bank_additions" in o
-                else ""
-            )
-        ),
-    )
+    emit(out, args.json, _export_text)
+
+
+def _export_text(o: dict) -> str:
+    """What `study export` wrote, in words: the report, the answers, the rewards and what each wants."""
+    lines = [
+        f"wrote {o['report']} ({o['participants']} participants, {o['finished']} finished), {len(o['tables'])} "
+        f"tables and {len(o['figures'])} figures in {o['out']}",
+        f"{o['num_answers']} answers in {o['answers']}",
+    ]
+    if "rewards_skipped" in o:
+        lines.append(f"no rewards: {o['rewards_skipped']}")
+    else:
+        pooled = isinstance(o["pooled"], list)
+        lines.append(
+            f"{len(o['rewards'])} participant rewards"
+            + (f" and {len(o['pooled'])} pooled" if pooled else "")
+            + f" in {o['out']}/rewards"
+            + ("" if pooled else f" (no pooled ones: {o['pooled']})")
+        )
+        lines += [f"  {r['participant']} {r['method']}: {r['wants']}" for r in o["rewards"] if "wants" in r]
+    if "bank_additions" in o:
+        lines.append(
+            f"{o['bank_additions_phrasings']} bank additions ({o['bank_additions_flagged']} flagged) to review in "
+            f"{o['bank_additions']}: langpref bank review {o['bank_additions']}"
+        )
+    return "\n".join(lines)
 
 
 @command(

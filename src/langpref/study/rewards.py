@@ -88,6 +88,7 @@ def write_study_rewards(
     """answers.jsonl and rewards/ of the module docstring into `out`; what was written, and why not where it was
     not. `model` overrides the study's recorded model folder."""
     from langpref.reward.saved import check_saveable, write_reward
+    from langpref.reward.wants import describe
 
     meta = sdb.decode_meta(tables.get("meta", []))
     study = StudyConfig.from_dict(meta.get("study") or {})
@@ -112,6 +113,7 @@ def write_study_rewards(
     for (pid, method), row in sorted(_latest(tables, excluded).items(), key=lambda kv: (numbers[kv[0][0]], kv[0][1])):
         xi = json.loads(row["latent_weights"])
         name = f"P{numbers[pid]}"
+        wanted = wants(np.asarray(xi, dtype=np.float64))
         path = write_reward(
             out / "rewards" / method,
             name,
@@ -121,10 +123,11 @@ def write_study_rewards(
             env=env,
             model=model,
             queries=int(row["number"]),
-            wants=wants(np.asarray(xi, dtype=np.float64)),
+            wants=wanted,
             extra={"learned_from": {"study_method": method, "participant": name, "answers": int(row["number"])}},
         )
-        result["rewards"].append({"method": method, "participant": name, "path": str(path)})
+        entry = {"method": method, "participant": name, "path": str(path)}
+        result["rewards"].append(entry | ({"wants": describe(wanted)} if wanted else {}))
     result["pooled"] = pooled_rewards(records, study, out / "rewards", model, meta.get("data"))
     return result
 
