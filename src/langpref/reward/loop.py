@@ -363,11 +363,13 @@ def optimize_reward(generation, learner: RewardLearner, run_seed: tuple[int, ...
     return generation.proposer(key=(*run_seed, 31337)).optimise(learner.predict, start)
 
 
-def _save_run_reward(learner, directory: str, env: str, model: str | None, name: str, default: bool) -> str:
-    """Write one run's r_xi into `directory` (`langpref.reward.saved`); its path."""
+def _save_run_reward(learner, directory: str, space: LatentSpace, model: str | None, name: str, default: bool) -> str:
+    """Write one run's r_xi into `directory` (`langpref.reward.saved`), with what it wants in the task's features;
+    its path."""
     from langpref.reward.saved import save_learned_reward
 
-    return str(save_learned_reward(learner, directory, env=env, model=model, name=name, default=default))
+    saved = save_learned_reward(learner, directory, env=space.env, model=model, name=name, default=default, space=space)
+    return str(saved)
 
 
 def learn_reward(
@@ -409,7 +411,7 @@ def learn_reward(
                     )
                 )
                 if save_reward:
-                    saved.append(_save_run_reward(learners[0], save_reward, space.env, model, f"h{h}-s{s}", not saved))
+                    saved.append(_save_run_reward(learners[0], save_reward, space, model, f"h{h}-s{s}", not saved))
                 bar.update()
     extra = {"saved_rewards": saved} if saved else {}
     if generation is not None:
