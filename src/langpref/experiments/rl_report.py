@@ -120,11 +120,20 @@ def ratios(runs: dict[str, dict], cfg, seed: int = 0) -> dict[str, Any]:
         scales = {"as_evaluated": (mine, best), "above_untrained": (mine - zero, best - zero)}
         out[source] = {}
         for scale, (num, den) in scales.items():
-            boot = num[picks].mean(axis=1) / den[picks].mean(axis=1)
-            low, high = np.percentile(boot, [2.5, 97.5])
-            out[source][scale] = {"mean": float(num.mean() / den.mean()), "low": float(low), "high": float(high)}
+            out[source][scale] = _ratio_of_means(num, den, picks)
         out[source]["untrained_true_reward"] = float(zero.mean())
     return out
+
+
+def _ratio_of_means(num: np.ndarray, den: np.ndarray, picks: np.ndarray) -> dict[str, float | None]:
+    """mean(num) / mean(den) with a percentile interval over the resampled rows `picks`; None where the true-reward
+    policies gained nothing (no scale to share), and resamples without a gain left out."""
+    if den.mean() == 0:
+        return {"mean": None, "low": None, "high": None}
+    top, bottom = num[picks].mean(axis=1), den[picks].mean(axis=1)
+    boot = top[bottom != 0] / bottom[bottom != 0]
+    low, high = np.percentile(boot, [2.5, 97.5])
+    return {"mean": float(num.mean() / den.mean()), "low": float(low), "high": float(high)}
 
 
 def summarise(runs: dict[str, dict], rewards: dict[str, dict], cfg) -> dict[str, Any]:
@@ -217,7 +226,7 @@ def markdown(summary: dict[str, Any]) -> str:
         ]
         for name, r in summary["ratios"].items():
             cells = [
-                f"{r[k]['mean']:.0%} ({r[k]['low']:.0%} to {r[k]['high']:.0%})"
+                f"{r[k]['mean']:.0%} ({r[k]['low']:.0%} to {r[k]['high']:.0%})" if r[k]["mean"] is not None else "n/a"
                 for k in ("as_evaluated", "above_untrained")
             ]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
