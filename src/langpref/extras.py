@@ -25,6 +25,7 @@ from __future__ import annotations
 import importlib.util
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
@@ -94,3 +95,14 @@ def pyplot(what: str) -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig: Any, out: str | Path, dpi: int = 110) -> Path:
+    """Write a matplotlib figure to `out` (its folder made), trimmed to what is drawn, and close it; the path."""
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return out

@@ -95,7 +95,7 @@ def format_description(d: dict[str, Any]) -> str:
 def plot_dataset(root: str | Path, out: str | Path) -> Path:
     """`langpref inspect --figure`: each feature's spread over the dataset (a histogram, successes and failures
     stacked) and the features' correlation matrix as a heatmap, into the PNG `out`."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the figure of a dataset's features")
     ds = load_dataset(root)
@@ -123,11 +123,7 @@ def plot_dataset(root: str | Path, out: str | Path) -> Path:
         f"{ds.env} dataset {ds.root.name}: each feature's spread over {len(feats)} trajectories, and how the "
         "features correlate"
     )
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def _correlation_heatmap(ax, names: list[str], corr: np.ndarray) -> None:

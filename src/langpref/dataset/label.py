@@ -170,7 +170,7 @@ MOST_CURVES = 200
 def plot_progress(curves: dict[str, np.ndarray], out: str | Path, task: str = "") -> Path:
     """`langpref label --figure`: left, each episode's v_t (the learned reward so far) along its frames, the best and
     the worst episode (by r_xi(tau), the last v_t) highlighted; right, how the episodes' learned rewards spread."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the figure of the learned reward along each episode")
     names = sorted(curves, key=lambda n: float(curves[n][-1]))
@@ -195,11 +195,7 @@ def plot_progress(curves: dict[str, np.ndarray], out: str | Path, task: str = ""
     right.set_title("the episodes' learned rewards", fontsize=10)
     right.legend(fontsize=8)
     fig.suptitle(f"langpref label: the learned reward{f' of task {task}' if task else ''} on {len(names)} episodes")
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 # ---- plain recording folder ----------------------------------------------------------------------------------------

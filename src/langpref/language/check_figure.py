@@ -26,7 +26,7 @@ def plot_bank_check(result: BankCheck, out: str | Path) -> Path:
     """Left: the confusion matrix of meanings, each row (a meaning's phrasings) as shares of what they were read as,
     with the counts written in. Right: each meaning's accuracy, weak ones in red, with the weak threshold and the
     chance line (one meaning among all of them)."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the figure of a bank check")
     names, counts = confusion(result)
@@ -40,11 +40,7 @@ def plot_bank_check(result: BankCheck, out: str | Path) -> Path:
         f"bank check of {result.task}: which meaning each phrasing is read as ({result.encoder}, {result.method})",
         fontsize=11,
     )
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def _confusion_heatmap(ax, names: list[str], counts: np.ndarray) -> None:

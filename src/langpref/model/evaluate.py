@@ -241,7 +241,7 @@ def plot_evaluation(out: dict, path) -> Path:
     """`langpref evaluate --figure`: left, the accuracy on each feature (`out["per_feature"]`) against chance (0.5)
     and the overall accuracy; right, what the misread phrasings (`out["misread"]`) were read as, each pair (meaning,
     read as) a bar of how many phrasings."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the figure of an evaluation")
     fig, (left, right) = plt.subplots(
@@ -254,11 +254,7 @@ def plot_evaluation(out: dict, path) -> Path:
         f"alignment on the {out['split']} split ({out['utterances']}{oracle}): {out['num_samples']} samples, "
         f"{out['num_phrasings']} phrasings"
     )
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _feature_bars(ax, out: dict) -> None:

@@ -61,7 +61,7 @@ def describe(wants: dict[str, Any]) -> str:
 def plot_wants(rewards: list[dict[str, Any]], out: str | Path, title: str = "") -> Path:
     """One panel per reward (`name` and `wants` of each): its weight on each feature as a bar, up or down, with the
     plain correlation as a tick beside it, and the share the features explain in the panel's title."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the figure of what a reward wants")
     out = Path(out)
@@ -79,6 +79,4 @@ def plot_wants(rewards: list[dict[str, Any]], out: str | Path, title: str = "") 
         ax.set_xlabel("weight (bar), correlation (tick)", fontsize=8)
     fig.suptitle(title or "what each learned reward wants, per standard deviation of a feature")
     fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
