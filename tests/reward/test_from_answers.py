@@ -85,7 +85,7 @@ def lab(tmp_path_factory):
     return root, data, answers
 
 
-def test_learn_reward_from_answers_saves_rewards_that_move_with_theiruntrained_checkpoint(lab, tmp_path, capsys):
+def test_learn_reward_from_answers_saves_rewards_that_move_with_their_model(lab, tmp_path, capsys):
     import shutil
 
     import gymnasium as gym
