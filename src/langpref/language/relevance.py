@@ -1,8 +1,8 @@
 """Is a free-form sentence feedback on how the robot moves at all? A gate in front of the model for typed text.
 
-A trained model maps every sentence somewhere in the latent space, "I like pizza." and "asdf" included, and reads it
-as some feature and direction. This gate compares the sentence with the env's bank phrasings in the *pretrained*
-sentence space of the offline MiniLM (mean-pooled, cosine). Co-finetuning pulls every sentence towards the robot's
+A trained model maps every sentence somewhere in the latent space, "The weather is nice." and "asdf" included, and
+reads it as some feature and direction. This gate compares the sentence with the env's bank phrasings in the
+*pretrained* sentence space of the offline MiniLM (mean-pooled, cosine). Co-finetuning pulls every sentence towards the robot's
 vocabulary: in a co-finetuned model's own space small talk such as "ok" scores higher against the bank than some
 real feedback does, while the pretrained space keeps the two apart.
 

@@ -88,7 +88,7 @@ def write_study_rewards(
     """answers.jsonl and rewards/ of the module docstring into `out`; what was written, and why not where it was
     not. `model` overrides the study's recorded model folder."""
     from langpref.reward.saved import check_saveable, write_reward
-    from langpref.reward.wants import describe
+    from langpref.reward.wants import describe, what_it_wants
 
     meta = sdb.decode_meta(tables.get("meta", []))
     study = StudyConfig.from_dict(meta.get("study") or {})
@@ -109,11 +109,11 @@ def write_study_rewards(
         return result
     numbers = {p["id"]: int(p["number"]) for p in tables["participants"]}
     env = meta.get("env") or ""
-    wants = _wants_of(model, meta.get("data"))
+    space = _space_of(model, meta.get("data"))
     for (pid, method), row in sorted(_latest(tables, excluded).items(), key=lambda kv: (numbers[kv[0][0]], kv[0][1])):
         xi = json.loads(row["latent_weights"])
         name = f"P{numbers[pid]}"
-        wanted = wants(np.asarray(xi, dtype=np.float64))
+        wanted = None if space is None else what_it_wants(space.phi @ np.asarray(xi), space.theta, space.feature_names)
         path = write_reward(
             out / "rewards" / method,
             name,
@@ -128,28 +128,28 @@ def write_study_rewards(
         )
         entry = {"method": method, "participant": name, "path": str(path)}
         result["rewards"].append(entry | ({"wants": describe(wanted)} if wanted else {}))
-    result["pooled"] = pooled_rewards(records, study, out / "rewards", model, meta.get("data"))
+    result["pooled"] = (
+        pooled_rewards(records, study, out / "rewards", model, space, meta["data"])
+        if space is not None
+        else f"the study's dataset is not at {meta.get('data')}: the pooled rewards need it"
+    )
     return result
 
 
 def pooled_rewards(
-    records: list[dict[str, Any]], study: StudyConfig, out: Path, model: Path, data: str | None
-) -> list[dict[str, Any]] | str:
+    records: list[dict[str, Any]], study: StudyConfig, out: Path, model: Path, space, data: str
+) -> list[dict[str, Any]]:
     """One reward per method learned from every participant's answers in turn, with the study's learner and
-    settings over the study set (`langpref.reward.recorded`); why not, when the dataset is gone."""
-    if not data or not (Path(data) / "meta.json").is_file():
-        return f"the study's dataset is not at {data}: the pooled rewards need it"
+    settings over the study set (`langpref.reward.recorded`), in the study's latent `space`."""
     from langpref.dataset.storage import load_dataset
     from langpref.feedback.answers import parse_records
-    from langpref.feedback.space import load_space
     from langpref.reward import LearnRewardConfig, RewardConfig
     from langpref.reward.recorded import learn_group
     from langpref.reward.saved import save_learned_reward
 
-    dataset = load_dataset(data)
-    pool = np.arange(len(dataset)) if study.split == "all" else np.asarray(dataset.split(study.split))
-    space = load_space(data, model, bank_splits=("train",))
-    answers = parse_records(records, len(dataset), dataset.feature_names)
+    n = len(space.phi)
+    pool = np.arange(n) if study.split == "all" else np.asarray(load_dataset(data).split(study.split))
+    answers = parse_records(records, n, list(space.feature_names))
     written = []
     for method in study.kinds:
         chosen = [a for a in answers if a.group == method]
@@ -167,16 +167,11 @@ def pooled_rewards(
     return written
 
 
-def _wants_of(model: Path, data: str | None):
-    """xi -> what the linear reward xi . phi wants over the study's dataset (`langpref.reward.wants`), phi made by
-    the model's trajectory encoder; None for every xi when the dataset is gone."""
+def _space_of(model: Path, data: str | None):
+    """The study's latent space (its dataset through its model, the bank's train phrasings), read once for what each
+    reward wants and for the pooled rewards; None when the dataset is gone."""
     if not data or not (Path(data) / "meta.json").is_file():
-        return lambda xi: None
-    from langpref.dataset.storage import load_dataset
-    from langpref.reward.steps import StepEncoder
-    from langpref.reward.wants import what_it_wants
+        return None
+    from langpref.feedback.space import load_space
 
-    dataset = load_dataset(data)
-    encoder = StepEncoder.from_checkpoint(model)
-    phi = np.stack([encoder.embeddings(t.observations, t.actions).mean(axis=0) for t in dataset.trajectories()])
-    return lambda xi: what_it_wants(phi @ xi, dataset.features, dataset.feature_names)
+    return load_space(data, model, bank_splits=("train",))
