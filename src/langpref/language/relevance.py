@@ -2,9 +2,9 @@
 
 A trained model maps every sentence somewhere in the latent space, "The weather is nice." and "asdf" included, and
 reads it as some feature and direction. This gate compares the sentence with the env's bank phrasings in the
-*pretrained* sentence space of the offline MiniLM (mean-pooled, cosine). Co-finetuning pulls every sentence towards the robot's
-vocabulary: in a co-finetuned model's own space small talk such as "ok" scores higher against the bank than some
-real feedback does, while the pretrained space keeps the two apart.
+*pretrained* sentence space of the offline MiniLM (mean-pooled, cosine). Co-finetuning pulls every sentence towards
+the robot's vocabulary: in a co-finetuned model's own space small talk such as "ok" scores higher against the bank
+than some real feedback does, while the pretrained space keeps the two apart.
 
 The score is the highest cosine to any bank phrasing of the env. A sentence is refused when it scores below
 `RELEVANCE_FLOOR` (under the lowest score of the 192 held-out phrasings people wrote without seeing the bank, 0.42,
