@@ -219,10 +219,10 @@ def training_table(today: str) -> str | None:
 
 
 def generation_table(envs: list[str], today: str, steps: int = 10) -> str:
-    """One generation step as Study 1 waits for it (`experiments.propose.step_latency`) on the default dataset and
+    """One generation step as Study 1 waits for it (`experiments.generate.step_latency`) on the default dataset and
     model of each env, at the dataset's horizon."""
     from langpref.experiments.alignment import default_model
-    from langpref.experiments.propose import step_latency
+    from langpref.experiments.generate import step_latency
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     lines = [

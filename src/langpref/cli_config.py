@@ -25,6 +25,7 @@ import itertools
 import json
 import re
 import shlex
+import sys
 import textwrap
 import types
 import typing
@@ -246,7 +247,8 @@ def expand_rerun(argv: list[str], parser_for: Callable[[list[str]], argparse.Arg
     else:
         where, rest = argv[at].split("=", 1)[1], argv[:at] + argv[at + 1 :]
     try:
-        recorded = json.loads(Path(where).read_text())["command"]
+        saved = json.loads(Path(where).read_text())
+        recorded = saved["command"]
     except FileNotFoundError:
         raise LangprefError(f"--config {where}: no such file; give the .config.json a command wrote") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as exc:
@@ -257,8 +259,22 @@ def expand_rerun(argv: list[str], parser_for: Callable[[list[str]], argparse.Arg
     words = shlex.split(recorded)[1:]
     if _command_name(words) != name:
         raise LangprefError(f"--config {where} records `{recorded[:60]}`, not `langpref {name}`; run that command")
+    _warn_if_other_version(where, saved.get("langpref_version"))
     given = rest[len(name.split()) :]
     return [*_without_given(_leaf(parser_for(words), name), words, given), *given]
+
+
+def _warn_if_other_version(where: str, version: Any) -> None:
+    """One line on stderr when the record at `where` was written by another langpref: the command line replays, but
+    a default that changed since then applies now, so the rerun may differ from the record."""
+    from langpref import __version__
+
+    if version != __version__:
+        print(
+            f"warning: --config {where} was recorded by langpref {version or 'of unknown version'}, this is "
+            f"{__version__}: defaults that changed since then apply",
+            file=sys.stderr,
+        )
 
 
 def _leaf(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:

@@ -264,6 +264,19 @@ def test_config_reruns_a_recorded_command_to_identical_output(tmp_path, capsys, 
     assert "m" in capsys.readouterr().err  # the switch turned off: now it reads --model m, which is not there
 
 
+def test_config_warns_in_one_line_when_the_record_is_of_another_version(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    data = write_dataset(tmp_path / "d", n=40, horizon=10, like_task=True)
+    assert main([*_learn_reward(data, "--queries", "1", "--humans", "1", "--seeds", "1"), "--figure", "a.png"]) == 0
+    assert main(["learn-reward", "--config", "a.config.json", "--figure", "b.png"]) == 0
+    assert "warning" not in capsys.readouterr().err  # the same version: nothing to say
+    record = json.loads((tmp_path / "a.config.json").read_text())
+    (tmp_path / "old.config.json").write_text(json.dumps({**record, "langpref_version": "0.0.1"}))
+    assert main(["learn-reward", "--config", "old.config.json", "--figure", "c.png"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning")]
+    assert len(warned) == 1 and "0.0.1" in warned[0], warned
+
+
 def test_config_errors_are_one_line(tmp_path, capsys):
     (tmp_path / "bad.json").write_text("{not json")
     (tmp_path / "other.config.json").write_text(json.dumps({"command": "langpref improve --data d"}))
@@ -279,17 +292,25 @@ def test_config_errors_are_one_line(tmp_path, capsys):
         main(["inspect", "d", "--config", str(tmp_path / "other.config.json")])  # inspect records nothing
 
 
-def test_every_command_that_records_takes_config_and_one_device_default():
+def test_a_command_takes_config_exactly_when_it_records_and_one_device_default():
+    import inspect
+    import re
+
     from langpref.cli.common import DEFAULT_DEVICE
     from langpref.cli_config import COMMANDS, RERUN
     from langpref.model.config import TrainConfig
 
-    recording = {name for name, (_, _, options, _) in COMMANDS.items() if RERUN in options}
-    assert {"train", "generate", "import", "learn-reward", "improve", "bank augment", "study export"} <= recording
-    assert {f"experiment {name}" for name in ("alignment", "observations", "reward", "active")} <= recording
+    parsers()  # registers every command
+    rerun = {name for name, (_, _, options, _) in COMMANDS.items() if RERUN in options}
+    writes = {
+        name
+        for name, (_, _, _, run) in COMMANDS.items()
+        if re.search(r"(?<![\w.])(record|run_config_experiment)\(\s*args\b", inspect.getsource(run))
+    }
+    assert {"train", "generate", "import", "learn-reward", "improve", "bank augment", "study export"} <= writes
+    assert {f"experiment {name}" for name in ("alignment", "observations", "reward", "active")} <= writes
+    assert rerun == writes  # --config offered where there is no record to rerun, or a record --config cannot rerun
     p = parsers()
-    for name in recording:
-        assert "--config" in {o for a in p[name]._actions for o in a.option_strings}, name
     devices = {name: a.default for name, q in p.items() for a in q._actions if "--device" in a.option_strings}
     assert {"train", "evaluate", "experiment observations"} <= set(devices)
     assert set(devices.values()) == {DEFAULT_DEVICE} == {TrainConfig().device}

@@ -151,6 +151,7 @@ for _experiment in (
         (
             *_REWARD_FLAGS,
             "human.no_change_logit",
+            "human.no_change_margin",
             "candidates",
             "posterior_samples",
             "query_batch",
@@ -158,13 +159,13 @@ for _experiment in (
             "comparison_seconds",
         ),
         {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}},
-        default_out=_OUT.format(name="active") + ", ENV-mlp, ENV-nochangeC",
+        default_out=_OUT.format(name="active") + ", ENV-mlp, ENV-nochangeC, ENV-nochange-marginM",
     ),
     Experiment(
         "generate",
         "issue 18: improvement from dataset vs generated candidates, and r_xi's generated optimum vs the "
         "best test trajectory (10 humans x 3 seeds, Q = 40)",
-        "langpref.experiments.propose:run_propose_experiment",
+        "langpref.experiments.generate:run_generate_experiment",
         _IMPROVE,
         ("iterations", "seeds"),
         default_out=_OUT.format(name="generate") + ", ENV-mlp",

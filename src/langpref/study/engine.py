@@ -34,7 +34,7 @@ from langpref.feedback.language import LanguageAnswer
 from langpref.improve import improvement_step
 from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
-from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
+from langpref.reward.answer_model import CONFIRM_OPTIONS, AnswerModelConfig, AnswerModelLearner
 from langpref.reward.learners import LearnerSettings, get_learner
 from langpref.study.config import StudyConfig
 from langpref.study.flow import Confirmed, Participant
@@ -51,8 +51,6 @@ Confirmations = Callable[[str, str], dict[int, Confirmed]]
 Learner = RewardLearner | AnswerModelLearner
 NO_CHANGE_READING: dict[str, Any] = {"feature": None, "direction": None, "confidence": 1.0, "no_change": True}
 """How "that's good, no change" (a button, never read by the model) is shown back and stored."""
-CONFIRM_OPTIONS = 3
-"""Readings offered on a confirm step (besides "none of these")."""
 
 
 class _TextCache:

@@ -34,8 +34,6 @@ from langpref.study.surveys import survey_questions, validate_answers
 if TYPE_CHECKING:
     from langpref.study.queries import Chosen
 
-PHASES = ("pre_survey", "improve", "improve_survey", *(f"pref_{m}" for m in METHODS), "pref_survey", "done")
-"""The phases of the paper's protocol; a study of other kinds has `pref_NAME` for each of its kinds."""
 MAX_CLIENT_MS = 24 * 3600 * 1000
 NONE_OF_THESE = "none of these"
 """The last option of a confirm step (its `meaning` is null): the answer is stored and not learned from."""

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from langpref.errors import LangprefError
 from langpref.feedback.space import LatentSpace
 from langpref.language.bank import DIRECTIONS
 from langpref.reward.answer_model import AnswerModelLearner, AnswerReader
@@ -106,12 +105,6 @@ def _typical(table, rows: np.ndarray, mean: np.ndarray) -> str:
         keys.append((indirect, len(words) < 2, len(table.texts[int(r)]), -float(c), int(r)))
     text = table.texts[min(keys)[-1]].strip().rstrip(".!")
     return text[:1].lower() + text[1:] if text[1:2].islower() or len(text) < 2 else text
-
-
-def check_meaning(meanings: Meanings, meaning: int) -> int:
-    if not 0 <= int(meaning) < len(meanings):
-        raise LangprefError(f"meaning {meaning} is not one of the {len(meanings)} meanings of the bank")
-    return int(meaning)
 
 
 def learned_reward(learner: Any, space: LatentSpace, study: np.ndarray, name: str) -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""`langpref experiment generate` (experiments.propose): a run depends on its seed only."""
+"""`langpref experiment generate` (experiments.generate): a run depends on its seed only."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
     from dataclasses import replace
 
     from langpref import propose
-    from langpref.experiments import propose as experiment
+    from langpref.experiments import generate as experiment
     from langpref.reward import LearnRewardConfig
 
     small, real_open = ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2), propose.open_generation
@@ -29,7 +29,8 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
     monkeypatch.setattr(experiment, "REWARD_RUNS", {"humans": 1, "seeds": 4, "queries": 3})
     base = ImproveConfig(seeds=4, iterations=2)
     out = tmp_path / "out"
-    experiment.run_propose_experiment("metaworld", real_data.root, None, out, perfect=True, config=base, progress=False)
+    run = experiment.run_generate_experiment
+    run("metaworld", real_data.root, None, out, perfect=True, config=base, progress=False)
     together = json.loads((out / "runs.json").read_text())["runs"]
 
     monkeypatch.setattr(propose, "_ENVS", {})  # a fresh simulator, as a new process has
@@ -67,7 +68,7 @@ def test_experiment_generate_from_the_command_line(real_data, tmp_path, monkeypa
 
     from langpref import propose
     from langpref.cli import main
-    from langpref.experiments import propose as experiment
+    from langpref.experiments import generate as experiment
 
     small, real_open = ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2), propose.open_generation
     monkeypatch.setattr(

@@ -1,6 +1,5 @@
-"""`langpref experiment generate --env ENV`: beyond the fixed set of trajectories (`langpref.propose`). The module is
-named for what it studies, proposing new trajectories; `generate` alone is dataset generation (`langpref.dataset.
-generate`), and the command keeps its name.
+"""`langpref experiment generate --env ENV`: beyond the fixed set of trajectories, with trajectories generated in the
+simulator by `langpref.propose`. The module, its run function and the command share the experiment's name.
 
 Two comparisons, each on the same synthetic humans and seeds:
 - Fig. 4 with `dataset`, `recorded` and `generated` candidates: iterative improvement by Eq. 4 (cosine) and by the
@@ -90,7 +89,7 @@ def _plot_reward(picked: np.ndarray, recorded: np.ndarray, generated: np.ndarray
     return out
 
 
-def run_propose_experiment(
+def run_generate_experiment(
     env: str,
     data: str | Path | None = None,
     model: str | Path | None = None,
@@ -176,7 +175,7 @@ def _write(
         _plot_reward(picked, recorded, made, out / "generate-reward.png", f"r_xi after {queries} queries, {env}")
     )
     (out / "generate.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "generate.md").write_text(propose_markdown(summary))
+    (out / "generate.md").write_text(generate_markdown(summary))
     return summary
 
 
@@ -196,7 +195,7 @@ def _targets(improve: dict[str, dict], made: np.ndarray, recorded: np.ndarray) -
     }
 
 
-def propose_markdown(s: dict[str, Any]) -> str:
+def generate_markdown(s: dict[str, Any]) -> str:
     n = s["iterations"]
     at = sorted({0, 1, n // 3, 2 * n // 3, n})
     lines = [
