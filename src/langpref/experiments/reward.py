@@ -94,9 +94,9 @@ def run_methods(
     variant = "-".join(sorted(reward_models) + phrasing_variant(named_for or human))
     data, model, out = default_paths(kind, env, data, model, out, perfect, variant)
     space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=human.feature_scale)
-    cache = RunCache(
-        out / "runs.json", {"space": space.description, **{m: asdict(c) for m, c in methods.items()}}, force=force
-    )
+    streams = {c.eval_split for c in methods.values()} - {"test"}  # refuses val caches from before their own humans
+    key = {"space": space.description, **{m: asdict(c) for m, c in methods.items()}}
+    cache = RunCache(out / "runs.json", {**key, "humans_of": sorted(streams)} if streams else key, force=force)
     for cfg in methods.values():
         cfg.validate()
     todo = [
@@ -178,10 +178,12 @@ def ce_lower_count(a: dict, b: dict) -> dict[str, int]:
 
 def _reward_job(space, job) -> tuple[str, dict]:
     from langpref.reward import human_weights, run_reward_learning
+    from langpref.reward.loop import human_stream
 
     key, cfg, h, s = job
-    w = human_weights(len(space.feature_names), cfg.seed, h)
-    return key, asdict(run_reward_learning(space, w, cfg, (cfg.seed, h, s)))
+    stream = human_stream(cfg.seed, cfg.eval_split)  # val: other humans than the test runs'
+    w = human_weights(len(space.feature_names), stream, h)
+    return key, asdict(run_reward_learning(space, w, cfg, (*stream, h, s)))
 
 
 def paired_difference(a: np.ndarray, b: np.ndarray, confidence: float = 0.95) -> dict[str, list]:

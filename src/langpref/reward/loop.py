@@ -80,7 +80,8 @@ class LearnRewardConfig:
     query_split: Split = "train"
     """Trajectories shown in queries; the language human's tau* is the best of this split."""
     eval_split: Split = "test"
-    """Split of the metrics."""
+    """Split of the metrics. On another split than test, the humans and run seeds come from another stream of `seed`
+    (`human_stream`): what is chosen on val is chosen with other humans than the test runs'."""
     human: HumanConfig = field(default_factory=HumanConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     learner: str = "paper"
@@ -167,7 +168,7 @@ class LearnRewardConfig:
         self.reward.validate()
 
 
-NEWER_HUMAN_FIELDS = {"feature_rule": "eq10", "vague": 0.0, "no_change_logit": None}
+NEWER_HUMAN_FIELDS = {"feature_rule": "eq10", "vague": 0.0, "no_change_logit": None, "no_change_margin": None}
 """Fields of the synthetic human added with the answer-model learner, and their defaults."""
 
 
@@ -186,9 +187,23 @@ def config_record(cfg: LearnRewardConfig) -> dict:
     return record
 
 
-def human_weights(num_features: int, seed: int, human: int) -> np.ndarray:
-    """The reward weights of synthetic human number `human` of experiment seed `seed`."""
-    return sample_weights(num_features, np.random.default_rng([seed, 7919, human]))
+SPLIT_STREAMS = {"val": 0x76616C, "train": 0x747261}
+"""Tags of the seed streams of runs scored on another split than test (the bytes of "val", "tra")."""
+
+
+def human_stream(seed: int, eval_split: str = "test") -> tuple[int, ...]:
+    """The seed stream of master seed `seed`'s synthetic humans and run seeds, for runs scored on `eval_split`:
+    `(seed,)` on test (the experiments' humans, unchanged), `(seed, tag)` on val or train. So a choice made on val
+    (a prior scale, a no-change logit) never meets a test human or a test run's draws, whatever `--seed` it is
+    given: the streams differ in length, and no test seed gives a val stream."""
+    return (int(seed),) if eval_split == "test" else (int(seed), SPLIT_STREAMS[eval_split])
+
+
+def human_weights(num_features: int, seed: int | tuple[int, ...], human: int) -> np.ndarray:
+    """The reward weights of synthetic human number `human` of experiment seed `seed` (an int: the test stream), or
+    of the seed stream `seed` (`human_stream`)."""
+    stream = (seed,) if isinstance(seed, int | np.integer) else tuple(seed)
+    return sample_weights(num_features, np.random.default_rng([*stream, 7919, human]))
 
 
 def run_reward_learning(
@@ -401,13 +416,14 @@ def learn_reward(
         disable=not progress,
         file=sys.stderr,
     ) as bar:
+        stream = human_stream(cfg.seed, cfg.eval_split)
         for h in range(cfg.humans):
-            w = human_weights(len(space.feature_names), cfg.seed, h)
+            w = human_weights(len(space.feature_names), stream, h)
             for s in range(cfg.seeds):
                 learners = [] if save_reward else None
                 runs.append(
                     run_reward_learning(
-                        space, w, cfg, (cfg.seed, h, s), generation=generation, learners=learners, episodes=episodes
+                        space, w, cfg, (*stream, h, s), generation=generation, learners=learners, episodes=episodes
                     )
                 )
                 if save_reward:

@@ -1,0 +1,42 @@
+"""Runs scored on val meet other synthetic humans (and run seeds) than the test runs of the same --seed (issue 42,
+item 3): a choice made on val never sees a test human."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from langpref.feedback import toy_latent_space
+from langpref.feedback.humans import sample_weights
+from langpref.reward import LearnRewardConfig, human_weights, learn_reward, run_reward_learning
+from langpref.reward.loop import human_stream
+
+
+def test_the_test_stream_is_the_master_seed_as_before():
+    assert human_stream(4) == human_stream(4, "test") == (4,)
+    expected = sample_weights(3, np.random.default_rng([4, 7919, 2]))
+    assert np.array_equal(human_weights(3, 4, 2), expected)
+    assert np.array_equal(human_weights(3, human_stream(4), 2), expected)
+
+
+def test_val_humans_are_none_of_the_test_humans():
+    """For every master seed of a range, no val human's weights equal any test human's, of that seed or another."""
+    test = {tuple(human_weights(3, seed, h)) for seed in range(20) for h in range(10)}
+    val = {tuple(human_weights(3, human_stream(seed, "val"), h)) for seed in range(20) for h in range(10)}
+    assert len(val) == 200 and not test & val
+    assert human_stream(0, "val") != human_stream(0, "train")
+
+
+def test_learn_reward_on_val_uses_the_val_stream():
+    """Same --seed, val and test: the runs are the val stream's (humans and run seeds), not the test stream's."""
+    space = toy_latent_space("metaworld", n=40, dim=8, seed=3)
+    cfg = LearnRewardConfig(feedback="comparison", queries=3, humans=2, seeds=1, eval_split="val")
+    out = learn_reward(space, cfg, progress=False)
+    stream = human_stream(0, "val")
+    own = [run_reward_learning(space, human_weights(3, stream, h), cfg, (*stream, h, 0)) for h in range(2)]
+    assert np.allclose(out["cross_entropy"], np.mean([c.cross_entropy for c in own], axis=0))
+    as_test = [run_reward_learning(space, human_weights(3, 0, h), cfg, (0, h, 0)) for h in range(2)]
+    assert not np.allclose(out["cross_entropy"], np.mean([c.cross_entropy for c in as_test], axis=0))
+    test_out = learn_reward(space, replace(cfg, eval_split="test"), progress=False)
+    assert test_out["config"]["eval_split"] == "test"
