@@ -19,6 +19,7 @@ from langpref.feedback import (
     softmax,
     toy_latent_space,
 )
+from langpref.feedback.humans import HumanConfig
 from langpref.language.bank import load_bank
 
 
@@ -90,6 +91,26 @@ def test_a_human_who_can_say_no_change_says_it_near_its_best_and_rarely_far_from
     assert not any(paper.answer(LanguageQuery(talker.best)).no_change for _ in range(200))
     a, b = human(None), LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, seed=1)
     assert [a.answer(LanguageQuery(int(i))).text for i in pool] == [b.answer(LanguageQuery(int(i))).text for i in pool]
+
+
+def test_a_human_with_a_no_change_margin_says_it_exactly_within_the_margin_of_its_best(space):
+    """Issue 42, item 5: a "no change" rule the answer model does not follow (a threshold on the true reward, not a
+    logit beside the features'); off by default, and not with a no-change logit."""
+    w = np.array([0.6, -0.3, 0.74])
+    pool = space.split("train")
+    rewards = space.theta[pool] @ w
+    human = LanguageHuman(w, space.theta, space.table("test"), pool, space.feature_names, seed=1, no_change_margin=0.2)
+    within = rewards >= rewards.max() - 0.2 * np.ptp(rewards)
+    assert 0 < within.sum() < len(pool)
+    for i, inside in zip(pool, within):
+        answer = human.answer(LanguageQuery(int(i)))
+        assert answer.no_change == bool(inside) and human.no_change_probability(int(i)) == float(inside)
+        assert inside or answer.feature is not None
+    with pytest.raises(LangprefError, match="no-change margin"):
+        HumanConfig(no_change_margin=0.1, no_change_logit=1.0).validate()
+    with pytest.raises(LangprefError, match="no-change margin"):
+        HumanConfig(no_change_margin=1.5).validate()
+    assert HumanConfig(no_change_margin=0.05).variant() == ["nochange-margin0.05"]
 
 
 def test_language_human_is_seeded(space):

@@ -35,6 +35,11 @@ def _use_opts(experiment: bool = False) -> dict[str, Any]:
             "metavar": "C",
             "help": docs["no_change_logit"] + out("nochangeC"),
         },
+        "human.no_change_margin": {
+            "flag": "--human-no-change-margin",
+            "metavar": "M",
+            "help": docs["no_change_margin"] + out("nochange-marginM"),
+        },
         "reward.model": "--reward-model",
         "reward.hidden": "--reward-hidden",
         "reward.negative_split": None,

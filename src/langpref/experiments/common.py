@@ -174,6 +174,8 @@ def title_suffix(perfect: bool, human) -> str:
         parts.append(f"{human.vague:g} vague")
     if human.no_change_logit is not None:
         parts.append(f"says no change, logit {human.no_change_logit:g}")
+    if human.no_change_margin is not None:
+        parts.append(f"says no change within {human.no_change_margin:g} of its best")
     return f" ({', '.join(parts)})" if parts else ""
 
 

@@ -127,6 +127,8 @@ class RLConfig:
         record = asdict(self)
         for name in ("humans", "seeds", "sources", "threads"):
             del record[name]
+        if self.human.no_change_margin is None:  # added later: the runs made before it stay valid
+            del record["human"]["no_change_margin"]
         return record
 
 

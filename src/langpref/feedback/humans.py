@@ -106,6 +106,12 @@ class HumanConfig:
     """The logit of "that's good, no change" beside Eq. 10's feature logits w_f (theta*_f - theta0_f) / temperature,
     so it is likely only near the human's best trajectory (at tau* itself it has e^c / (e^c + F)); None: the human
     always names a feature (the paper's). With `largest-change`, the human says it when shown tau* itself."""
+    no_change_margin: float | None = None
+    """A "no change" rule no learner models: the human says "that's good, no change" whenever the shown
+    trajectory's true reward is within this margin of the best it knows (tau*, the best of the query split), on the
+    scale where the query split's worst is 0 and tau* is 1 (0.05: within 5% of the range), and otherwise names a
+    feature as `feature_rule` says. A threshold, not the answer model's softmax of a logit beside the features'.
+    None: off (the paper's human). Not with `no_change_logit`."""
 
     @property
     def phrase_source(self) -> str:
@@ -125,6 +131,10 @@ class HumanConfig:
             raise LangprefError(f"unknown feature rule {self.feature_rule!r}: choose one of {', '.join(FEATURE_RULES)}")
         if not 0.0 <= self.vague <= 1.0:
             raise LangprefError(f"the share of vague answers must be in [0, 1], got {self.vague}")
+        if self.no_change_margin is not None and not (
+            0.0 <= self.no_change_margin <= 1.0 and self.no_change_logit is None
+        ):
+            raise LangprefError("the no-change margin takes a value in [0, 1], and not with a no-change logit")
         if self.direction not in DIRECTION_RULES:
             raise LangprefError(
                 f"unknown direction rule {self.direction!r}: choose one of {', '.join(DIRECTION_RULES)}"
@@ -138,4 +148,5 @@ class HumanConfig:
             + ([] if self.feature_rule == "eq10" else [self.feature_rule])
             + ([] if self.vague == 0 else [f"vague{self.vague:g}"])
             + ([] if self.no_change_logit is None else [f"nochange{self.no_change_logit:g}"])
+            + ([] if self.no_change_margin is None else [f"nochange-margin{self.no_change_margin:g}"])
         )

@@ -89,6 +89,7 @@ class LanguageHuman:
         feature_rule: str = "eq10",
         vague: float = 0.0,
         no_change_logit: float | None = None,
+        no_change_margin: float | None = None,
     ):
         self.w = np.asarray(w, dtype=np.float64)
         self.theta = np.asarray(theta, dtype=np.float64)
@@ -108,8 +109,13 @@ class LanguageHuman:
         self.vague = float(vague)
         self.no_change_logit = None if no_change_logit is None else float(no_change_logit)
         cands = np.asarray(candidates, dtype=np.int64)
-        self.best = int(cands[np.argmax(true_reward(self.w, self.theta[cands]))])
+        rewards = true_reward(self.w, self.theta[cands])
+        self.best = int(cands[np.argmax(rewards)])
         """tau*, the best trajectory of the candidate set under w."""
+        self.good_enough = (
+            None if no_change_margin is None else float(rewards.max() - no_change_margin * np.ptp(rewards))
+        )
+        """With a no-change margin, the true reward from which the human says "no change" (else None)."""
         self.rng = rng_of(seed)
 
     def feature_probabilities(self, shown: int) -> np.ndarray:
@@ -126,7 +132,10 @@ class LanguageHuman:
         return 0 if self.w[feature] >= 0 else 1
 
     def no_change_probability(self, shown: int) -> float:
-        """P("that's good, no change" | shown): 0 for the paper's human (`no_change_logit` None)."""
+        """P("that's good, no change" | shown): 0 for the paper's human (`no_change_logit` None); 0 or 1 under a
+        no-change margin."""
+        if self.good_enough is not None:
+            return float(true_reward(self.w, self.theta[shown]) >= self.good_enough)
         if self.no_change_logit is None:
             return 0.0
         if self.feature_rule == "largest-change":
@@ -137,6 +146,8 @@ class LanguageHuman:
     def answer(self, query: LanguageQuery) -> LanguageAnswer:
         if self.vague > 0 and self.rng.random() < self.vague:  # draws nothing for the default human
             return LanguageAnswer(query, VAGUE_FEEDBACK[int(self.rng.integers(len(VAGUE_FEEDBACK)))])
+        if self.good_enough is not None and self.no_change_probability(query.shown):  # a threshold: draws nothing
+            return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
         if self.no_change_logit is not None and self.rng.random() < self.no_change_probability(query.shown):
             return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
         if self.feature_rule == "largest-change":
@@ -172,6 +183,7 @@ def make_human(
         feature_rule=cfg.feature_rule,
         vague=cfg.vague,
         no_change_logit=cfg.no_change_logit,
+        no_change_margin=cfg.no_change_margin,
     )
 
 
