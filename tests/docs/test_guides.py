@@ -1,6 +1,6 @@
 """The guide pages run as written: every code block of docs/start-to-finish.md, in order, in a fresh folder, at a
 smaller size (`TINY`: each replacement must still find its text, so the page and this test cannot drift apart), and
-the README's snippets on a saved reward."""
+the snippets on a saved reward of docs/policy.md."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from tests.factories import untrained_checkpoint, write_dataset
 
 ROOT = Path(__file__).parents[2]
 GUIDE = ROOT / "docs" / "start-to-finish.md"
+POLICY = ROOT / "docs" / "policy.md"
 TINY = {
     "--episodes 60": "--episodes 14",
     "--out models/drawer\n": "--out models/drawer --epochs 2 --finetune-epochs 1 --augment-phrasings 0\n",
@@ -65,12 +66,12 @@ def test_start_to_finish_runs_as_written(tmp_path):
     assert (tmp_path / "recordings" / "drawer-labelled").is_dir() and (tmp_path / "runs" / "drawer-ppo.zip").is_file()
 
 
-def test_the_readmes_reward_snippets_run(tmp_path):
-    """The README's Python blocks on a saved reward, as written, beside a reward saved by `learn-reward` (SAC's
+def test_the_policy_pages_reward_snippets_run(tmp_path):
+    """docs/policy.md's Python blocks on a saved reward, as written, beside a reward saved by `learn-reward` (SAC's
     steps cut to a few); the LeRobot one runs in LeRobot's own venv (`make lerobot-check`)."""
     from langpref.cli import main
 
-    blocks = [code for lang, code in code_blocks(ROOT / "README.md") if lang == "python"]
+    blocks = [code for lang, code in code_blocks(POLICY) if lang == "python"]
     runnable = [b for b in blocks if "langpref.reward" in b and "lerobot" not in b]
     assert len(runnable) == 2 and all("lerobot" in b for b in blocks if b not in runnable)
     data = write_dataset(tmp_path / "data", env="metaworld", n=24, horizon=8, like_task=True)
