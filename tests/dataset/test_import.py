@@ -320,17 +320,98 @@ def test_cli_import_and_errors(tmp_path):
 
 
 def test_cli_import_warns_on_a_weak_meaning(tmp_path, capsys):
+    """A meaning read as another feature is warned about; one read as its own opposite direction (near-copies of
+    the opposite here, as a frozen general model reads most directions before training) is explained in a note
+    that says what to look at after `train`, not a warning."""
     from langpref.cli import main
 
     bank = json.loads(json.dumps(BANK))
     bank["effort"]["decrease"] = [t.replace(".", ", please.") for t in bank["effort"]["increase"]]  # near-copies
+    bank["reach"]["increase"] = [t.replace(".", " now.") for t in BANK["effort"]["increase"]] + ["Push on."]
     rec, task = write_plain(tmp_path / "rec"), write_task(tmp_path / "task", bank=bank)
     assert main(["import", str(rec), "--task", str(task), "--out", str(tmp_path / "ds"), "--json"]) == 0
     captured = capsys.readouterr()
     lines = captured.err.splitlines()
     summary = [line for line in lines if line.startswith("bank check of toy-reach")]
-    assert len(summary) == 1 and "effort/decrease" in summary[0]
-    assert any(line.startswith("warning: weak meaning effort/decrease") for line in lines)
-    assert "effort/decrease" in json.loads(captured.out)["bank_check"]["weak"]
+    assert len(summary) == 1 and "meanings weak" in summary[0]
+    assert any(line.startswith("chance: 1/4 = 0.25") and "good: 0.80" in line for line in lines), lines
+    assert any(line.startswith("warning: weak meaning reach/increase") for line in lines), lines
+    assert not any(line.startswith("warning: weak meaning effort/decrease") for line in lines), lines
+    note = [line for line in lines if line.startswith("note:")]
+    assert len(note) == 1 and "effort/decrease" in note[0] and "expected" in note[0] and "evaluate" in note[0]
+    checked = json.loads(captured.out)["bank_check"]
+    assert "effort/decrease" in checked["weak"] and "effort/decrease" in checked["weak_opposite_direction"]
+    assert "reach/increase" not in checked["weak_opposite_direction"]
     assert main(["import", str(rec), "--task", str(task), "--out", str(tmp_path / "ds2"), "--no-bank-check"]) == 0
     assert "bank check" not in capsys.readouterr().err
+
+
+def test_every_bad_episode_is_named_in_one_error(tmp_path):
+    """Three bad episodes of eight: one error names all three, so the lab fixes them in one go."""
+    rec = write_plain(tmp_path / "rec")
+    (rec / "ep01.npz").write_bytes(b"truncated")
+    np.savez(rec / "ep04.npz", observations=np.zeros((5, 5), np.float32))
+    np.savez(rec / "ep06.npz", observations=np.zeros((12, 5), np.float32), actions=np.zeros((11, 2), np.float32))
+    with pytest.raises(LangprefError) as info:
+        run_import(rec, write_task(tmp_path / "task"), tmp_path / "ds")
+    msg = str(info.value)
+    assert msg.startswith("3 of 8 episodes are bad"), msg
+    assert all(name in msg for name in ("ep01.npz", "ep04.npz", "ep06.npz")), msg
+    assert "missing key 'actions'" in msg and "has 12 steps but 'actions' has 11" in msg
+    assert not (tmp_path / "ds").exists()
+
+
+def test_many_bad_episodes_are_named_up_to_a_limit(tmp_path):
+    from langpref.dataset.importer import MAX_NAMED
+
+    rec = write_plain(tmp_path / "rec", n=MAX_NAMED + 5)
+    for path in sorted(rec.glob("*.npz")):
+        np.savez(path, observations=np.zeros((5, 5), np.float32))
+    with pytest.raises(LangprefError) as info:
+        run_import(rec, write_task(tmp_path / "task"), tmp_path / "ds")
+    msg = str(info.value)
+    assert msg.startswith(f"{MAX_NAMED + 5} of {MAX_NAMED + 5} episodes are bad") and "and 5 more" in msg, msg
+    assert f"ep{MAX_NAMED - 1:02d}.npz" in msg and f"ep{MAX_NAMED:02d}.npz" not in msg
+
+
+def test_an_orphan_video_is_warned_about(tmp_path):
+    import imageio.v2 as imageio
+
+    rec = write_plain(tmp_path / "rec", n=6)
+    for i in range(7):  # ep06.mp4: its episode is gone
+        frames = np.full((4, 32, 32, 3), 30 * i, np.uint8)
+        imageio.mimwrite(rec / f"ep{i:02d}.mp4", frames, fps=10, codec="libx264", macro_block_size=8)
+    summary = run_import(rec, write_task(tmp_path / "task"), tmp_path / "ds")
+    orphans = [w for w in summary["warnings"] if "ep06.mp4" in w]
+    assert len(orphans) == 1 and "no episode" in orphans[0], summary["warnings"]
+
+
+def test_a_small_recording_is_warned_about_with_its_size(tmp_path):
+    from langpref.dataset.importer import MIN_EPISODES
+
+    small = run_import(write_plain(tmp_path / "rec", n=7), write_task(tmp_path / "task"), tmp_path / "ds")
+    warned = [w for w in small["warnings"] if "7 episodes" in w]
+    assert len(warned) == 1 and "train 3, val 2, test 2" in warned[0] and str(MIN_EPISODES) in warned[0], warned
+    enough = run_import(write_plain(tmp_path / "rec2", n=MIN_EPISODES), write_task(tmp_path / "task"), tmp_path / "ds2")
+    assert enough["warnings"] == []
+
+
+def test_cli_import_prints_the_warnings(tmp_path, capsys):
+    from langpref.cli import main
+
+    rec, task = write_plain(tmp_path / "rec", n=7), write_task(tmp_path / "task")
+    assert main(["import", str(rec), "--task", str(task), "--out", str(tmp_path / "ds"), "--no-bank-check"]) == 0
+    err = capsys.readouterr().err
+    assert any(line.startswith("warning: only 7 episodes") for line in err.splitlines()), err
+
+
+def test_an_unwritable_out_is_one_line_and_writes_nothing(tmp_path, capsys):
+    from langpref.cli import main
+
+    rec, task = write_plain(tmp_path / "rec"), write_task(tmp_path / "task")
+    blocker = tmp_path / "file"
+    blocker.write_text("a file where a folder should be")
+    assert main(["import", str(rec), "--task", str(task), "--out", str(blocker / "ds"), "--no-bank-check"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and "--out" in err and len(err.splitlines()) == 1, err
+    assert blocker.read_text() == "a file where a folder should be"

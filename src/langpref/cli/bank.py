@@ -113,16 +113,54 @@ def cmd_bank_check(args: argparse.Namespace) -> None:
             method=f"{args.utterances} against the {args.split} split",
             threshold=threshold,
         )
-    out = result.to_dict()
+    out = {**result.to_dict(), "chance": 1 / len(result.meanings), "good": threshold}
     if args.figure:
         from langpref.language.check_figure import plot_bank_check
 
         out["figure"] = str(plot_bank_check(result, args.figure))
-    emit(out, args.json, with_figure(lambda _: _human(result)))
+    note = before_training_note(result, args.where) if args.model is None else None
+    emit(out, args.json, with_figure(lambda _: _human(result) + (f"\nnote: {note}" if note else "")))
+
+
+def chance_line(result) -> str:
+    """What chance is for a bank check and the bar for a good meaning, so its numbers read by themselves."""
+    m = len(result.meanings)
+    return (
+        f"chance: 1/{m} = {1 / m:.2f} (a phrasing read as one of {m} meanings: {m // 2} features x 2 directions); "
+        f"good: {result.threshold:.2f} or more per meaning (--threshold; below it a meaning is flagged weak)"
+    )
+
+
+def opposite_only(result) -> list[str]:
+    """The weak meanings read mostly as their own feature's other direction (speed/increase as speed/decrease)."""
+    out = []
+    for name in result.weak:
+        top = next(iter(result.meanings[name].confused_with), None)
+        if top is not None and top.rsplit("/", 1)[0] == name.rsplit("/", 1)[0]:
+            out.append(name)
+    return out
+
+
+def before_training_note(result, where: str | Path) -> str | None:
+    """Why weak meanings read as their own opposite direction are expected from a pretrained model before any
+    training, and what to look at after `langpref train`; None when there are none."""
+    flipped = opposite_only(result)
+    if not flipped:
+        return None
+    shown = ", ".join(flipped[:4]) + (f" and {len(flipped) - 4} more" if len(flipped) > 4 else "")
+    return (
+        f"{len(flipped)} of {len(result.meanings)} meanings ({shown}) are read as their own opposite direction. "
+        "Before training this is expected: a frozen general sentence model reads what a phrasing is about more than "
+        "which way it asks, and `langpref train` teaches the direction from the bank. After training, look at "
+        f"`langpref evaluate --model MODEL --data DATASET` (pair accuracy: chance 0.5, good 0.80 or more) and "
+        f"`langpref bank check {where} --model MODEL --split val` (chance {1 / len(result.meanings):.2f}, good "
+        f"{result.threshold:.2f} per meaning); a meaning still weak there needs more or clearer phrasings "
+        "(`langpref bank augment`)"
+    )
 
 
 def _human(result) -> str:
-    lines = [result.summary()]
+    lines = [result.summary(), chance_line(result)]
     for name, m in result.meanings.items():
         acc = "  n/a" if m.accuracy is None else f"{m.accuracy:5.2f}"
         confused = ", ".join(f"{k} x{v}" for k, v in m.confused_with.items())

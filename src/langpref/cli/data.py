@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from langpref.cli.common import DIR, JSON, figure, with_figure
+from langpref.cli.outputs import check_writable
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.errors import LangprefError
 from langpref.extras import require
@@ -75,8 +77,11 @@ def cmd_import(args: argparse.Namespace) -> None:
         raise LangprefError(
             f"--splits {','.join(map(str, cfg.splits))} must be three positive shares TRAIN,VAL,TEST, e.g. 0.8,0.1,0.1"
         )
+    check_writable(cfg.out, "--out", folder=True)
     summary = import_recording(cfg, task, bank)
     record(args, Path(summary["out"]) / "import.config.json", cfg)
+    for warning in summary["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
     if cfg.bank_check:
         summary["bank_check"] = _bank_check(Path(summary["out"]))
     emit(
@@ -127,10 +132,14 @@ def cmd_label(args: argparse.Namespace) -> None:
 
 
 def _bank_check(dataset: Path) -> dict:
-    """`langpref bank check DATASET` with the pretrained language model: its one-line summary and a warning per weak
-    meaning on stderr; overall accuracy and weak meanings for the --json summary."""
-    import sys
+    """`langpref bank check DATASET` with the pretrained language model: its one-line summary, what chance and good
+    are, a warning per meaning weak for a reason training does not fix (read as another feature) and a note on those
+    read as their own opposite direction (expected before training), on stderr; overall accuracy and weak meanings
+    for the --json summary."""
+    from langpref.cli.bank import before_training_note, chance_line, opposite_only
+    from langpref.cli.outputs import status
 
+    status("checking the bank with the pretrained language model minilm (about 10 s; --no-bank-check skips it)")
     from langpref.language.banksource import open_bank
     from langpref.language.check import leave_one_out
     from langpref.language.transformer import sentence_embedder
@@ -144,16 +153,21 @@ def _bank_check(dataset: Path) -> dict:
         encoder="pretrained minilm",
     )
     print(result.summary(), file=sys.stderr)
+    print(chance_line(result), file=sys.stderr)
+    flipped = opposite_only(result)
     for name in result.weak:
-        m = result.meanings[name]
-        print(f"warning: weak meaning {name}: {m.advice}", file=sys.stderr)
-    if result.weak:
+        if name not in flipped:
+            print(f"warning: weak meaning {name}: {result.meanings[name].advice}", file=sys.stderr)
+    note = before_training_note(result, dataset)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
+    elif result.weak:
         print(
             "note: this reads the bank with the pretrained language model alone; training on the bank teaches it "
             f"more. After `langpref train`, check again with `langpref bank check {dataset} --model MODEL`",
             file=sys.stderr,
         )
-    return {"accuracy": result.accuracy, "weak": result.weak}
+    return {"accuracy": result.accuracy, "weak": result.weak, "weak_opposite_direction": flipped}
 
 
 @command(

@@ -28,6 +28,7 @@ from langpref.dataset.recording import (
     VIDEO_SUFFIXES,
     ImageCells,
     RecordedEpisode,
+    orphan_videos,
     plain_episode_files,
     read_plain_episode,
 )
@@ -44,6 +45,12 @@ from langpref.extras import needs, require
 from langpref.tasks.taskfile import TaskFile, save_task
 
 DEFAULT_SPLITS = (0.8, 0.1, 0.1)  # the paper's simulated datasets: 260/32/32
+MAX_NAMED = 20
+"""Bad episodes named one per line in an import's error; the rest are counted."""
+MIN_EPISODES = 30
+"""Below this many episodes an import is warned about (`small_recording`): with the default shares, validation and
+test then hold 2 or 3 trajectories each, at most 6 ordered pairs per feature, so one pair moves their accuracy by a
+sixth or more and the epoch `train` keeps is chosen on noise. From 30 on each holds 3 or more."""
 
 
 @dataclass(frozen=True)
@@ -159,10 +166,44 @@ def _prepare(cfg: ImportConfig) -> Path:
     if out.resolve() == src.resolve() or src.resolve() in out.resolve().parents:
         raise LangprefError(f"--out {out} lies inside the recording {src}; choose a folder outside it")
     tmp = out.parent / f".{out.name}.importing-{os.getpid()}"
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
+    try:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir(parents=True)
+    except OSError as exc:
+        raise LangprefError(f"cannot write --out {out} ({exc.strerror or exc}); choose another folder") from None
     return tmp
+
+
+def small_recording(counts: dict[str, int]) -> str | None:
+    """A warning when a recording is below the size that trains sensibly (`MIN_EPISODES`), with its size, its
+    splits and why; None from `MIN_EPISODES` on."""
+    n, val, test = sum(counts.values()), counts["val"], counts["test"]
+    if n >= MIN_EPISODES:
+        return None
+    pairs = min(val * (val - 1), test * (test - 1))
+    noise = f"one pair moves their accuracy by {1 / pairs:.2f}" if pairs else "there is no pair to score"
+    return (
+        f"only {n} episodes (train {counts['train']}, val {val}, test {test}): validation and test hold at most "
+        f"{pairs} ordered pairs per feature, so {noise} and the epoch `train` keeps is chosen on noise; "
+        f"record {MIN_EPISODES} or more episodes (3 or more each in val and test)"
+    )
+
+
+def _warnings(cfg: ImportConfig, layout: str, counts: dict[str, int]) -> list[str]:
+    """What the import did but a lab should know: videos without their episode, and a recording too small."""
+    out = []
+    orphans = orphan_videos(Path(cfg.src)) if layout == "plain" else []
+    if orphans:
+        shown = ", ".join(orphans[:MAX_NAMED]) + (
+            f" and {len(orphans) - MAX_NAMED} more" if len(orphans) > MAX_NAMED else ""
+        )
+        out.append(
+            f"{len(orphans)} video(s) in {cfg.src} have no episode beside them and were not imported: {shown} "
+            "(an episode is NAME.npz, its video NAME.mp4 or NAME.webm)"
+        )
+    small = small_recording(counts)
+    return out + ([small] if small else [])
 
 
 @dataclass
@@ -180,34 +221,60 @@ class _Episodes:
     """Whose frames came from its still images (a LeRobotDataset's image column)."""
 
 
+def _episode(i: int, where: str, ep: RecordedEpisode, task: TaskFile, fn: Any, seen: _Episodes) -> Trajectory:
+    """Episode `i` as a trajectory, its shapes checked against the first good episode's (a `LangprefError` naming
+    `where` otherwise)."""
+    if len(ep.actions) < 2:
+        raise LangprefError(f"{where}: the episode has {len(ep.actions)} step(s); it needs at least 2")
+    if seen.obs_dim is None:
+        seen.obs_dim, seen.action_dim = ep.observations.shape[1], ep.actions.shape[1]
+    elif (ep.observations.shape[1], ep.actions.shape[1]) != (seen.obs_dim, seen.action_dim):
+        raise LangprefError(
+            f"{where}: observations/actions have {ep.observations.shape[1]}/"
+            f"{ep.actions.shape[1]} dims, earlier episodes {seen.obs_dim}/{seen.action_dim}"
+        )
+    return Trajectory(
+        index=i,
+        observations=ep.observations,
+        actions=ep.actions,
+        step_features=_step_features(ep, task, fn, where),
+        qpos=None,
+        qvel=None,
+        success=bool(ep.success),
+        seed=None,
+        source=ep.name,
+    )
+
+
+def bad_episodes(problems: list[str], total: int, what: str = "episodes are bad") -> str:
+    """One error for every bad episode: a single one as its own line, several as a head line and one line each (the
+    first `MAX_NAMED`, then how many more), so a lab fixes them all in one go instead of one per import."""
+    if len(problems) == 1:
+        return problems[0]
+    lines = [f"{len(problems)} of {total} {what} (fix them all, then import again):"]
+    lines += [f"  {p}" for p in problems[:MAX_NAMED]]
+    if len(problems) > MAX_NAMED:
+        lines.append(f"  and {len(problems) - MAX_NAMED} more")
+    return "\n".join(lines)
+
+
 def _store_episodes(tmp: Path, loaders: list[Any], task: TaskFile, spec: FrameSpec | None, progress: bool) -> _Episodes:
-    """Read every episode, check its shapes against the first, and store it (with its still frames, if any)."""
+    """Read every episode, check its shapes against the first, and store it (with its still frames, if any). A bad
+    episode does not stop the reading: every one is checked and all the bad ones are named in one error."""
     fn = task.step_features()
     seen = _Episodes()
+    problems: list[str] = []
     for i, load in enumerate(
         tqdm(loaders, desc=f"import {task.name}", unit="episode", disable=not progress, dynamic_ncols=True)
     ):
-        where, ep = load()
-        if len(ep.actions) < 2:
-            raise LangprefError(f"{where}: the episode has {len(ep.actions)} step(s); it needs at least 2")
-        if seen.obs_dim is None:
-            seen.obs_dim, seen.action_dim = ep.observations.shape[1], ep.actions.shape[1]
-        elif (ep.observations.shape[1], ep.actions.shape[1]) != (seen.obs_dim, seen.action_dim):
-            raise LangprefError(
-                f"{where}: observations/actions have {ep.observations.shape[1]}/"
-                f"{ep.actions.shape[1]} dims, earlier episodes {seen.obs_dim}/{seen.action_dim}"
-            )
-        traj = Trajectory(
-            index=i,
-            observations=ep.observations,
-            actions=ep.actions,
-            step_features=_step_features(ep, task, fn, where),
-            qpos=None,
-            qvel=None,
-            success=bool(ep.success),
-            seed=None,
-            source=ep.name,
-        )
+        try:
+            where, ep = load()
+            traj = _episode(i, where, ep, task, fn, seen)
+        except LangprefError as exc:
+            problems.append(str(exc))
+            continue
+        if problems:  # the import fails anyway: check the rest, store nothing more
+            continue
         save_trajectory(tmp, traj)
         seen.imaged.append(spec is not None and ep.images is not None)
         if spec is not None and ep.images is not None:
@@ -217,6 +284,8 @@ def _store_episodes(tmp: Path, loaders: list[Any], task: TaskFile, spec: FrameSp
         seen.success.append(ep.success)
         seen.videos.append(ep.video)
         seen.wheres.append(where)
+    if problems:
+        raise LangprefError(bad_episodes(problems, len(loaders)))
     return seen
 
 
@@ -225,10 +294,13 @@ def _check_videos(seen: _Episodes, spec: FrameSpec | None) -> FrameSpec | None:
     the frame spec as stored (its source the image column when an episode's frames came from there)."""
     with_video = [v is not None for v in seen.videos]
     if any(with_video) and not all(with_video):
-        missing = with_video.index(False)
+        missing = [f"episode {w} has no video" for w, v in zip(seen.wheres, with_video) if not v]
+        if len(missing) == 1:
+            missing[0] += " while others have one"
         raise LangprefError(
-            f"episode {seen.wheres[missing]} has no video while others have one; give every "
-            "episode its video (NAME.mp4 or NAME.webm) or none"
+            bad_episodes(missing, len(with_video), "episodes have no video while others have one")
+            + ("; " if len(missing) == 1 else "\n")
+            + "give every episode its video (NAME.mp4 or NAME.webm) or none"
         )
     bare = [w for w, v, m in zip(seen.wheres, with_video, seen.imaged) if not (v or m)]
     if spec is not None and bare:
@@ -328,4 +400,5 @@ def import_recording(cfg: ImportConfig, task: TaskFile, bank: dict[str, Any], pr
         "features_from": meta.config["features_from"],
         "wall_s": wall,
         "episodes_per_s": n / wall if wall > 0 else None,
+        "warnings": _warnings(cfg, layout, counts),
     }

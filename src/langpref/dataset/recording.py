@@ -105,3 +105,16 @@ def plain_episode_files(src: Path) -> list[Path]:
             f"{src}: no episodes (NAME.npz files) in the folder, and it is not a LeRobotDataset (no meta/info.json)"
         )
     return files
+
+
+def orphan_videos(src: Path) -> list[str]:
+    """The videos of a plain recording folder whose episode (the NAME.npz of its NAME.mp4/.webm) is not there, by
+    name: footage that an import would otherwise pass over without a word."""
+    return sorted(
+        p.name
+        for p in src.iterdir()
+        if p.suffix in VIDEO_SUFFIXES
+        and p.is_file()
+        and not p.name.startswith(".")
+        and not p.with_suffix(".npz").is_file()
+    )
