@@ -225,3 +225,15 @@ def test_the_share_of_the_true_reward_policy_counts_humans_not_seeds():
     )
     assert one["as_evaluated"]["low"] < one["as_evaluated"]["mean"] < one["as_evaluated"]["high"]
     assert one == three and one["untrained_true_reward"] == 0.5
+
+
+def test_paired_differences_count_humans_not_seeds():
+    """Issue 42, item 4: with a human's seeds copied, the contrast's interval is the same as from one seed each (the
+    unit is the human), and narrower than runs counted as independent would give."""
+    from langpref.experiments.rl_report import paired
+
+    a, b = [1.0, 2.0, 3.0], [0.0, 1.0, 1.0]
+    copied = paired([x for x in a for _ in range(3)], [x for x in b for _ in range(3)], humans=3)
+    assert copied == paired(a, b, humans=3) == paired(a, b)
+    as_runs = paired([x for x in a for _ in range(3)], [x for x in b for _ in range(3)])
+    assert as_runs["mean"] == pytest.approx(copied["mean"]) and as_runs["high"] < copied["high"]

@@ -49,12 +49,16 @@ def source_summary(runs: dict[str, dict], source: str, cfg) -> dict[str, Any]:
     return out
 
 
-def paired(a: list[float], b: list[float]) -> dict[str, float | None]:
-    """Mean of a - b over paired runs (same human and seed) with its two-sided 95% t-interval (None from one run)."""
+def paired(a: list[float], b: list[float], humans: int = 0) -> dict[str, float | None]:
+    """Mean of a - b over paired runs (same human and seed; ordered human by human, as `_pairs`) with its two-sided
+    95% t-interval over humans: each human's seeds are averaged first, so the unit is the human and correlated seeds
+    never count as more people (`humans` 0: every run its own unit). None: one human, no interval."""
     from langpref.experiments.reward import paired_difference
 
-    d = paired_difference(np.array(a)[:, None], np.array(b)[:, None])
-    return {k: float(v[0]) if np.isfinite(v[0]) else None for k, v in d.items()}  # None: one run, no interval
+    units = humans or len(a)
+    a_h, b_h = (np.asarray(x, dtype=np.float64).reshape(units, -1).mean(axis=1) for x in (a, b))
+    d = paired_difference(a_h[:, None], b_h[:, None])
+    return {k: float(v[0]) if np.isfinite(v[0]) else None for k, v in d.items()}  # None: one unit, no interval
 
 
 def reward_summary(rewards: dict[str, dict], cfg) -> dict[str, Any]:
@@ -140,17 +144,40 @@ def summarise(runs: dict[str, dict], rewards: dict[str, dict], cfg) -> dict[str,
     """The experiment's results: per source, paired contrasts, the learned rewards, the targets."""
     sources = {s: source_summary(runs, s, cfg) for s in cfg.sources}
     contrasts = {
-        f"{a} - {b}": {key: paired(sources[a][f"final_{key}_runs"], sources[b][f"final_{key}_runs"]) for key in METRICS}
+        f"{a} - {b}": {
+            key: paired(sources[a][f"final_{key}_runs"], sources[b][f"final_{key}_runs"], cfg.humans) for key in METRICS
+        }
         for a, b in CONTRASTS
         if a in sources and b in sources
     }
     return {
         "sources": sources,
+        "untrained": untrained(runs, cfg),
         "contrasts": contrasts,
         "learned_rewards": reward_summary(rewards, cfg),
         "targets": targets(sources),
         "ratios": ratios(runs, cfg),
     }
+
+
+def untrained(runs: dict[str, dict], cfg) -> dict[str, float]:
+    """The untrained policy, a baseline beside the task-success policy: every run's evaluation at step 0, before
+    any update (the same network for every source of a human and seed), averaged over all of them."""
+    mine = [runs[f"policy-{source}-{p}"]["curve"] for source in cfg.sources for p in _pairs(cfg)]
+    return {key: float(np.mean([c[key][0] for c in mine])) for key in METRICS}
+
+
+def per_human(runs: dict[str, dict], cfg, feature_names, weights) -> list[dict[str, Any]]:
+    """Per human: its weights (which say whether it wants the task done) and each source's final true reward and
+    success, its seeds averaged."""
+    out = []
+    for h, w in enumerate(weights):
+        row: dict[str, Any] = {"human": h, "weights": dict(zip(feature_names, (float(x) for x in w)))}
+        for source in cfg.sources:
+            finals = [runs[f"policy-{source}-h{h}-s{s}"]["final"] for s in range(cfg.seeds)]
+            row[source] = {key: float(np.mean([f[key] for f in finals])) for key in METRICS}
+        out.append(row)
+    return out
 
 
 def plot_rl(summary: dict[str, Any], out: Path, title: str) -> Path:
@@ -193,12 +220,19 @@ def markdown(summary: dict[str, Any]) -> str:
         f"`{summary['command']}` ({summary['date']}; {summary['space']}; {cfg['algorithm'].upper()}, "
         f"{cfg['steps']} steps of {cfg['horizon']}-step episodes; {summary['humans']} humans x {summary['seeds']} "
         f"seeds; Q = {cfg['queries']}). True reward: of the policy's deterministic rollouts from "
-        f"{cfg['eval_episodes']} fixed scenes, 0 = the test split's worst trajectory, 1 its best; success at the last "
-        "step.",
+        f"{cfg['eval_episodes']} fixed scenes, on a scale whose 0 is the test split's worst recorded trajectory and 1 "
+        f"its best (recordings of the dataset's own length; theta is a per-step mean, so the {cfg['horizon']}-step "
+        "rollouts share its features, not its length; above 1 is better than any test recording); success at the "
+        "last step.",
         "",
         "| trained on | true reward (final) | success (final) | its own learned reward | minutes per run |",
         "|---|---|---|---|---|",
     ]
+    if "untrained" in summary:
+        base = summary["untrained"]
+        lines.append(
+            f"| nothing (the untrained policy, step 0) | {base['true_reward']:.3f} | {base['success']:.2f} | | |"
+        )
     for name, res in summary["sources"].items():
         own = f"{res['final_own_reward']:.3f}" if "final_own_reward" in res else "n/a"
         lines.append(
@@ -211,29 +245,56 @@ def markdown(summary: dict[str, Any]) -> str:
                 f"| {kind}: CMA-ES optimum, no RL | {res['cmaes_true_reward']:.3f} | {res['cmaes_success']:.2f} | | |"
             )
     if summary["contrasts"]:
-        lines += ["", "Paired differences of the final evaluation (same human and seed), 95% t-intervals:", ""]
+        lines += ["", "Paired differences of the final evaluation (same human and seed), 95% t-intervals over the "]
+        lines[-1] += f"{summary['humans']} humans (each human's seeds averaged first: the unit is the human):"
+        lines += [""]
         lines += ["| contrast | true reward | success |", "|---|---|---|"]
         for name, c in summary["contrasts"].items():
             cells = [_interval(c[k]) for k in METRICS]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    if summary.get("ratios"):
-        lines += ["", "Share of the true-reward policies' true reward (ratio of means over humans; 95% bootstrap over "]
-        lines[-1] += "humans; the untrained policy's true reward is each run's step-0 evaluation):"
-        lines += [
-            "",
-            "| trained on | as evaluated (0 = worst test trajectory) | above the untrained policy |",
-            "|---|---|---|",
-        ]
-        for name, r in summary["ratios"].items():
-            cells = [
-                f"{r[k]['mean']:.0%} ({r[k]['low']:.0%} to {r[k]['high']:.0%})" if r[k]["mean"] is not None else "n/a"
-                for k in ("as_evaluated", "above_untrained")
-            ]
-            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += _ratio_lines(summary)
+    lines += _human_lines(summary)
     if summary["targets"]:
         lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
     lines += ["", f"![Policies on the learned reward, {summary['env']}]({figure_link(summary['figure'])})"]
     return "\n".join(lines) + "\n"
+
+
+def _ratio_lines(summary: dict[str, Any]) -> list[str]:
+    """The shares of the true-reward policies' true reward, on both scales, with their intervals."""
+    if not summary.get("ratios"):
+        return []
+    lines = ["", "Share of the true-reward policies' true reward (ratio of means over humans; 95% percentile bootstrap"]
+    lines[-1] += " over humans, each human's seeds averaged first; the untrained policy's true reward is each run's "
+    lines[-1] += "step-0 evaluation):"
+    lines += [
+        "",
+        "| trained on | as evaluated (0 = worst test trajectory) | above the untrained policy |",
+        "|---|---|---|",
+    ]
+    for name, r in summary["ratios"].items():
+        cells = [
+            f"{r[k]['mean']:.0%} ({r[k]['low']:.0%} to {r[k]['high']:.0%})" if r[k]["mean"] is not None else "n/a"
+            for k in ("as_evaluated", "above_untrained")
+        ]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _human_lines(summary: dict[str, Any]) -> list[str]:
+    """The per-human table: weights, then each source's final true reward / success (seeds averaged)."""
+    rows = summary.get("per_human")
+    if not rows:
+        return []
+    names, sources = list(rows[0]["weights"]), summary["config"]["sources"]
+    lines = ["", "Per human (its weights on the standardised features; each source's final true reward / success):", ""]
+    lines += ["| human | " + " | ".join(f"w {n}" for n in names) + " | " + " | ".join(sources) + " |"]
+    lines += ["|---|" + "---|" * (len(names) + len(sources))]
+    for row in rows:
+        cells = [f"{row['weights'][n]:+.2f}" for n in names]
+        cells += [f"{row[s]['true_reward']:.3f} / {row[s]['success']:.2f}" for s in sources]
+        lines.append(f"| {row['human']} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def _interval(d: dict[str, float | None]) -> str:
@@ -257,6 +318,7 @@ def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, co
         "seeds": cfg.seeds,
         "queries": cfg.queries,
         **summarise(runs, rewards, cfg),
+        "per_human": per_human(runs, cfg, space.feature_names, _weights(space, cfg)),
         "config": {**asdict(cfg), "hidden": list(cfg.hidden), "sources": list(cfg.sources)},
         "command": command or base_command("rl", env, data, model, out),
         "date": datetime.date.today().isoformat(),
@@ -265,3 +327,10 @@ def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, co
     (out / "rl.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "rl.md").write_text(markdown(summary))
     return summary
+
+
+def _weights(space, cfg) -> list[np.ndarray]:
+    """The synthetic humans' weights, as `experiments.rl.judges` draws them."""
+    from langpref.reward import human_weights
+
+    return [human_weights(len(space.feature_names), cfg.seed, h) for h in range(cfg.humans)]
