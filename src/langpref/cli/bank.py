@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 from langpref.cli.common import JSON, NEGATION, figure, with_figure
+from langpref.cli.outputs import check_writable, status
 from langpref.cli_config import RERUN, command, emit, opt, path, record
 from langpref.errors import LangprefError
 from langpref.extras import require
@@ -97,6 +98,12 @@ def cmd_bank_check(args: argparse.Namespace) -> None:
         require("plots", "bank check --figure")  # before the model loads, not after
     args.lang_model_given = args.lang_model is not None
     args.lang_model = args.lang_model or "minilm"
+    check_writable(args.figure, "--figure")
+    if args.model is None:
+        from langpref.language.models import check_available
+
+        check_available(args.lang_model)  # an unknown name fails here, before the slow imports
+    status(f"loading {'the model ' + str(args.model) if args.model else 'the language model ' + args.lang_model}")
     embed, encoder = _embedder(args, source.task)
     if queries is None:
         result = leave_one_out(

