@@ -121,3 +121,15 @@ def test_an_unwritable_output_is_one_line_and_nothing_is_lost(tiny_data, tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and str(blocker) in err[0], err
     assert blocker.read_text() == "kept"
+
+
+def test_evaluate_and_bank_check_say_what_chance_and_good_are(trained, tiny_data, capsys):
+    assert main(["evaluate", "--model", str(trained.out), "--data", str(tiny_data), "--split", "val"]) == 0
+    text = capsys.readouterr().out
+    assert "chance: accuracy 0.5" in text and "good: 0.80 or more" in text, text
+    assert main(["evaluate", "--model", str(trained.out), "--data", str(tiny_data), "--split", "val", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["chance"] == {"accuracy": 0.5, "reading_accuracy": 1 / 6} and out["good"] == 0.8
+    assert main(["bank", "check", "metaworld"]) == 0
+    text = capsys.readouterr().out
+    assert "chance: 1/6 = 0.17" in text and "good: 0.80 or more per meaning" in text, text

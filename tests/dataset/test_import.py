@@ -415,3 +415,12 @@ def test_an_unwritable_out_is_one_line_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "--out" in err and len(err.splitlines()) == 1, err
     assert blocker.read_text() == "a file where a folder should be"
+
+
+def test_inspect_prints_the_range_of_episode_lengths(tmp_path):
+    from langpref.dataset.inspect import describe, format_description
+
+    run_import(write_plain(tmp_path / "rec"), write_task(tmp_path / "task"), tmp_path / "ds")
+    d = describe(tmp_path / "ds")
+    assert d["lengths"] == {"min": 10, "max": 31, "mean": 20.5}
+    assert "8 trajectories of 10-31 steps (mean 20)" in format_description(d).splitlines()[0]

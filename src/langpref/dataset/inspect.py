@@ -25,6 +25,7 @@ def describe(root: str | Path) -> dict[str, Any]:
         "schema_version": ds.meta.schema_version,
         "num_trajectories": len(ds),
         "horizon": ds.meta.horizon,
+        "lengths": _lengths(ds.meta.lengths, ds.meta.horizon, len(ds)),
         "obs_dim": ds.meta.obs_dim,
         "action_dim": ds.meta.action_dim,
         "splits": {name: len(idx) for name, idx in ds.meta.splits.items()},
@@ -44,6 +45,21 @@ def describe(root: str | Path) -> dict[str, Any]:
         "checksum": combine(parts),
         "checksum_parts": parts,
     }
+
+
+def _lengths(lengths: list[int] | None, horizon: int, n: int) -> dict[str, float]:
+    """The episodes' lengths in steps (min, max, mean): a recording's episodes differ, a generated dataset's are all
+    `horizon` long (its meta.json stores no lengths)."""
+    steps = np.asarray(lengths if lengths is not None else [horizon] * n, dtype=np.float64)
+    return {"min": int(steps.min()), "max": int(steps.max()), "mean": float(steps.mean())}
+
+
+def _size_line(d: dict[str, Any]) -> str:
+    """ "N trajectories x T steps", or with lengths that differ "N trajectories of MIN-MAX steps (mean M)"."""
+    ln = d.get("lengths") or {"min": d["horizon"], "max": d["horizon"], "mean": d["horizon"]}
+    if ln["min"] == ln["max"]:
+        return f"{d['num_trajectories']} trajectories x {ln['max']} steps"
+    return f"{d['num_trajectories']} trajectories of {ln['min']}-{ln['max']} steps (mean {ln['mean']:.0f})"
 
 
 def _current_env_version(ds) -> int | None:
@@ -68,8 +84,7 @@ def _frames_line(frames: dict[str, Any] | None) -> str:
 
 def format_description(d: dict[str, Any]) -> str:
     lines = [
-        f"{d['path']}: {d['env']} dataset, {d['num_trajectories']} trajectories x {d['horizon']} steps "
-        f"(obs {d['obs_dim']}, action {d['action_dim']})",
+        f"{d['path']}: {d['env']} dataset, {_size_line(d)} (obs {d['obs_dim']}, action {d['action_dim']})",
         "splits: " + ", ".join(f"{k} {v}" for k, v in d["splits"].items()),
         f"camera frames: {_frames_line(d.get('frames'))}",
         f"task success: {d['success_rate']:.1%}",
