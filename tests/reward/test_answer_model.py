@@ -125,7 +125,7 @@ def test_mixed_scores_both_kinds_in_the_same_unit(space):
     learner = learner_of(space)
     learner.observe("language", LanguageAnswer(LanguageQuery(int(pool[0])), speed_up(space)))
     learner.fit()
-    costs = query_costs(None, None)
+    costs = query_costs()
     scored = {}
     for kinds in (("language",), ("comparison",), ("language", "comparison")):
         selector = AnswerModelInfoGain(space, pool, kinds, costs, candidates=12, samples=32)

@@ -11,7 +11,7 @@ import torch
 
 from langpref.feedback import toy_latent_space
 from langpref.reward import LearnRewardConfig, RewardConfig, RewardLearner, human_weights, run_reward_learning
-from langpref.reward.batch import comparison_candidates, join, language_candidates, pick, similarity_to
+from langpref.reward.batch import join, pair_candidates, pick, shown_candidates, similarity_to
 from langpref.reward.selection import ComparisonActive, LanguageInfoGain
 
 torch.set_num_threads(1)
@@ -22,7 +22,7 @@ def test_a_batch_skips_a_near_duplicate_of_what_it_already_asks():
     # angle, 3 the opposite way from 0 (the same question, sign aside)
     phi = np.array([[1.0, 0.0], [2.0, 0.01], [0.0, 1.0], [-1.5, 0.0]])
     gains = np.array([1.0, 0.99, 0.6, 0.95])
-    scored = language_candidates(np.array([10, 11, 12, 13]), gains, phi, np.zeros(2))
+    scored = shown_candidates("language", np.array([10, 11, 12, 13]), gains, phi, np.zeros(2))
     assert pick(scored, 1) == [0]
     assert pick(scored, 2) == [0, 2]  # not 1 nor 3: they point along 0's direction
     assert sorted(pick(scored, 4)) == [0, 1, 2, 3]  # K distinct items, as many as there are
@@ -30,23 +30,24 @@ def test_a_batch_skips_a_near_duplicate_of_what_it_already_asks():
     np.testing.assert_allclose(similarity_to(scored, 0)[[1, 3]], 1.0, atol=1e-3)
     assert similarity_to(scored, 0)[2] == pytest.approx(0.0)
     # comparisons: (a, b) and (b, a) are one question, a pair along another axis is a new one
-    cmp = comparison_candidates(
-        np.arange(4), np.array([0, 1, 0]), np.array([1, 0, 2]), np.array([0.5, 0.49, 0.3]), np.eye(4)
+    cmp = pair_candidates(
+        "comparison", np.arange(4), np.array([0, 1, 0]), np.array([1, 0, 2]), np.array([0.5, 0.49, 0.3]), np.eye(4)
     )
     assert pick(cmp, 2) == [0, 2]
 
 
 def test_a_direction_of_length_zero_is_like_nothing_and_ties_go_to_the_least_alike():
     phi = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.1], [0.0, 1.0]])
-    scored = language_candidates(np.arange(4), np.zeros(4), phi, np.zeros(2))  # every answer certain: all score 0
+    # every answer certain: all score 0
+    scored = shown_candidates("language", np.arange(4), np.zeros(4), phi, np.zeros(2))
     assert similarity_to(scored, 0).tolist() == [0.0, 0.0, 0.0, 0.0]
     assert pick(scored, 3) == [0, 1, 3]  # after 1, the tie among 2 and 3 goes to 3, at a right angle to 1
 
 
 def test_costs_rank_by_gain_per_second():
     phi = np.eye(3)
-    lang = language_candidates(np.arange(3), np.array([0.5, 0.4, 0.1]), phi, np.zeros(3))
-    cmp = comparison_candidates(np.arange(3), np.array([0]), np.array([1]), np.array([0.5]), phi)
+    lang = shown_candidates("language", np.arange(3), np.array([0.5, 0.4, 0.1]), phi, np.zeros(3))
+    cmp = pair_candidates("comparison", np.arange(3), np.array([0]), np.array([1]), np.array([0.5]), phi)
     both = join([lang, cmp], {"language": 0.887, "comparison": 1.0})
     assert both.kinds == ("language", "comparison") and both.costs.tolist() == [0.887] * 3 + [1.0]
     assert both.query(pick(both, 1)[0]).__class__.__name__ == "LanguageQuery"

@@ -21,7 +21,7 @@ from langpref.reward import (
     learn_reward,
     run_reward_learning,
 )
-from langpref.reward.cost import PAPER_COSTS, on_time_grid, query_costs, time_average
+from langpref.reward.cost import on_time_grid, query_costs, time_average
 from langpref.reward.mixed import MixedInfoGain
 from langpref.reward.posterior import laplace_posterior
 from langpref.reward.selection import candidate_rows
@@ -36,34 +36,35 @@ def _selector(costs: dict[str, float], seed: int = 0) -> tuple[MixedInfoGain, Re
 
 def _with_scores(monkeypatch, selector: MixedInfoGain, language, comparison) -> None:
     """Replace each kind's scores by `language(rows)` and `comparison(number of pairs)`, keeping the pairs."""
-    pairs = selector.comparison.scores
-    monkeypatch.setattr(selector.language, "scores", lambda xi, rows: language(len(rows)))
+    pairs = selector.selectors["comparison"].scores
+    monkeypatch.setattr(selector.selectors["language"], "scores", lambda xi, rows: language(len(rows)))
 
     def scores(xi, rows):
         i, j, _ = pairs(xi, rows)
         return i, j, comparison(len(i))
 
-    monkeypatch.setattr(selector.comparison, "scores", scores)
+    monkeypatch.setattr(selector.selectors["comparison"], "scores", scores)
 
 
 def test_the_paper_costs_language_113_percent_less_time():
-    assert PAPER_COSTS == {"comparison": 1.0, "language": pytest.approx(0.887)}
-    assert query_costs() == PAPER_COSTS and query_costs(12.0, 15.0) == {"language": 12.0, "comparison": 15.0}
+    assert query_costs() == {"language": pytest.approx(0.887), "comparison": 1.0}  # each kind's own `seconds`
+    assert query_costs({"language": 12.0, "comparison": 15.0}) == {"language": 12.0, "comparison": 15.0}
+    assert query_costs({"language": None, "comparison": 2.0}) == {"language": pytest.approx(0.887), "comparison": 2.0}
     with pytest.raises(LangprefError, match="positive"):
-        query_costs(0.0)
+        query_costs({"language": 0.0})
 
 
 def test_equal_information_goes_to_the_cheaper_kind(monkeypatch):
     selector, learner = _selector(query_costs())
     _with_scores(monkeypatch, selector, lambda n: np.full(n, 0.3), lambda n: np.full(n, 0.3))
     assert isinstance(selector.select(learner, np.random.default_rng(0)).query, LanguageQuery)  # 0.887 < 1
-    selector.costs = query_costs(language=1.2)
+    selector.costs = query_costs({"language": 1.2})
     chosen = selector.select(learner, np.random.default_rng(0))
     assert isinstance(chosen.query, ComparisonQuery) and chosen.score == pytest.approx(0.3)
 
 
 def test_equal_costs_go_to_the_more_informative_query(monkeypatch):
-    selector, learner = _selector(query_costs(1.0, 1.0))
+    selector, learner = _selector(query_costs({"language": 1.0, "comparison": 1.0}))
     rows = candidate_rows(selector.pool, None, np.random.default_rng(0))
 
     def one_high(value, at):
@@ -83,14 +84,14 @@ def test_equal_costs_go_to_the_more_informative_query(monkeypatch):
 
 @pytest.mark.parametrize("costs", [(1.0, 1.0), (None, None), (3.0, 1.0)])
 def test_the_choice_is_the_best_information_per_second_of_either_kind_from_the_same_draws(costs):
-    selector, learner = _selector(query_costs(*costs), seed=4)
+    selector, learner = _selector(query_costs(dict(zip(("language", "comparison"), costs))), seed=4)
     chosen = selector.select(learner, np.random.default_rng(3))
     # the same draws again, each kind scored alone
     rng = np.random.default_rng(3)
     rows = candidate_rows(selector.pool, None, rng)
     xi = laplace_posterior(learner).sample(selector.samples, rng)
-    lang = selector.language.scores(xi, rows)
-    _, _, comp = selector.comparison.scores(xi, rows)
+    lang = selector.selectors["language"].scores(xi, rows)
+    _, _, comp = selector.selectors["comparison"].scores(xi, rows)
     c = selector.costs
     best = max(lang.max() / c["language"], comp.max() / c["comparison"])
     assert chosen.score / c[kind_of(chosen.query).name] == pytest.approx(best)

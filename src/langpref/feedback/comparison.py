@@ -126,6 +126,7 @@ COMPARISON = register_kind(
         table="comparisons",
         to_record=to_record,
         from_record=from_record,
+        mixed=True,
         page=StudyPage(
             widget="choice",
             label="Pair-wise comparison",

@@ -117,6 +117,17 @@ class FeedbackKind:
     selector can score the rows it is given (`Selector.score_rows`)."""
     page: StudyPage | None = None
     """How the study web app asks this kind (`langpref study serve --kinds`); None: the study cannot run it."""
+    seconds: float = 1.0
+    """Modelled time a person takes per query, in units of one comparison's (`langpref.reward.cost`): what a mixed
+    learner weighs information against, and the time axis of the learning curves."""
+    says_no_change: bool = False
+    """Whether an answer may be "that's good, no change" (`answer.no_change`), which the curves count."""
+    mixed: bool = False
+    """Whether `--feedback mixed` asks this kind beside the others that say so (each needs an `infogain` selection
+    whose selector scores candidates, `scored`)."""
+    readings: dict[str, Any] = field(default_factory=dict)
+    """learner name -> how that learner reads this kind beyond `pairs` (the answer-model learner's is its
+    `langpref.reward.answer_model.AnswerKind`); the paper's kinds' readings are registered from the reward side."""
 
 
 RANDOM = "random"
@@ -130,8 +141,6 @@ MIXED = "mixed"
 """The `feedback` of a learner that asks either kind, chosen per query (`langpref.reward.mixed`); not a kind."""
 PAPER_KINDS = ("language", "comparison")
 """The paper's two kinds, in its order: those Study 2 and the demo compare by default."""
-MIXED_KINDS = PAPER_KINDS
-"""The kinds a mixed learner chooses between, in this order."""
 
 
 def register_kind(kind: FeedbackKind) -> FeedbackKind:
@@ -180,6 +189,21 @@ def get_kind(name: str) -> FeedbackKind:
         return KINDS[name]
     except (KeyError, TypeError):
         raise LangprefError(f"unknown feedback {name!r}: choose one of {', '.join(KINDS)}") from None
+
+
+def paper_first(names: Sequence[str]) -> tuple[str, ...]:
+    """`names` with the paper's kinds first, in its order, then the others as given."""
+    return tuple(sorted(names, key=lambda n: PAPER_KINDS.index(n) if n in PAPER_KINDS else len(PAPER_KINDS)))
+
+
+def mixed_kinds() -> tuple[str, ...]:
+    """The kinds a mixed learner chooses between (`FeedbackKind.mixed`), the paper's first."""
+    return paper_first([name for name in kind_names() if KINDS[name].mixed])
+
+
+def asked_kinds(feedback: str) -> tuple[str, ...]:
+    """The kinds a learner of `feedback` asks: every mixed kind for `mixed`, else that kind."""
+    return mixed_kinds() if feedback == MIXED else (feedback,)
 
 
 def random_query(kind: FeedbackKind, pool: np.ndarray, rng: np.random.Generator) -> Any:

@@ -47,7 +47,7 @@ worth less); for a comparison, over the binary choice; for `--feedback mixed`, b
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
@@ -56,7 +56,8 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.space import LatentSpace
 from langpref.language.bank import DIRECTIONS
-from langpref.reward.batch import Scored, comparison_candidates, join, language_candidates
+from langpref.reward.batch import Scored, join
+from langpref.reward.readings import reading_of
 from langpref.reward.selection import (
     Selector,
     binary_mutual_information,
@@ -271,7 +272,7 @@ class AnswerModelLearner:
 
     def _log_likelihood(self, v: np.ndarray, best: np.ndarray, answer: tuple) -> np.ndarray:
         """(n,) log-likelihood of one recorded answer under each particle."""
-        return ANSWER_KINDS[answer[0]].log_likelihood(self, v, best, answer)
+        return reading_of(answer[0]).log_likelihood(self, v, best, answer)
 
     def _total_log_likelihood(self, v: np.ndarray, best: np.ndarray) -> np.ndarray:
         total = np.zeros(len(v))
@@ -293,12 +294,10 @@ class AnswerModelLearner:
         return 2 * int(position[0]) + int(direction)
 
     def observe(self, kind: str, answer: Any, meaning: int | None = None) -> None:
-        """Record an answer of `kind` (a kind of `ANSWER_KINDS`); `fit` folds it into the belief. For a kind that
-        can be confirmed, `meaning` (`meaning_index`), when the person confirmed what they meant, replaces the
-        model's reading."""
-        if kind not in ANSWER_KINDS:
-            raise LangprefError(f"the answer-model learner takes {' and '.join(ANSWER_KINDS)} feedback, not {kind!r}")
-        self._pending.append((kind, *ANSWER_KINDS[kind].record(self, answer, meaning)))
+        """Record an answer of `kind` (a kind with a reading, `reading_of`); `fit` folds it into the belief. For a
+        kind that can be confirmed, `meaning` (`meaning_index`), when the person confirmed what they meant, replaces
+        the model's reading."""
+        self._pending.append((kind, *reading_of(kind).record(self, answer, meaning)))
 
     def fit(self) -> None:
         """Reweight the particles by every answer observed since the last fit; resample and move them when the
@@ -402,9 +401,8 @@ class AnswerModelInfoGain(Selector):
         candidates: int | None = None,
         samples: int = 64,
     ):
-        unknown = [k for k in kinds if k not in ANSWER_KINDS]
-        if unknown:
-            raise LangprefError(f"the answer-model learner asks {' and '.join(ANSWER_KINDS)}, not {', '.join(unknown)}")
+        for kind in kinds:
+            reading_of(kind)  # a one-line error for a kind it cannot read
         self.space = space
         self.pool = np.asarray(pool, dtype=np.int64)
         self.kinds = tuple(kinds)
@@ -416,69 +414,5 @@ class AnswerModelInfoGain(Selector):
         rows = candidate_rows(self.pool, self.candidates, rng)
         v, best = learner.draw(self.samples, rng)
         phi = self.space.phi[rows]
-        parts = [m.candidates(learner, v, best, rows, phi) for k, m in ANSWER_KINDS.items() if k in self.kinds]
+        parts = [reading_of(k).candidates(learner, v, best, rows, phi) for k in self.kinds]
         return parts[0] if len(parts) == 1 else join(parts, self.costs)
-
-
-# ---- how the learner reads each kind of feedback ---------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class AnswerKind:
-    """How the answer-model learner reads one kind of feedback: what it keeps of an answer (`record`, after the
-    kind's name), the log-likelihood of what it kept under each particle, and the candidate queries it scores."""
-
-    record: Callable[[AnswerModelLearner, Any, int | None], tuple]
-    log_likelihood: Callable[[AnswerModelLearner, np.ndarray, np.ndarray, tuple], np.ndarray]
-    candidates: Callable[[AnswerModelLearner, np.ndarray, np.ndarray, np.ndarray, np.ndarray], Scored]
-    confirmable: bool = False
-    """Whether the person can be asked to confirm the learner's reading of an answer (`confirm`)."""
-
-
-def _record_language(learner: AnswerModelLearner, answer: Any, meaning: int | None) -> tuple:
-    """(shown trajectory, P(m | answer) over the 2F + 1 meanings); a confirmed meaning replaces the reading, and "no
-    change" is its own meaning (a sentence is never read as it)."""
-    reading = np.zeros(2 * learner.num_features + 1)
-    if answer.no_change:
-        reading[learner.no_change] = 1.0
-    elif meaning is None:
-        reading[:-1] = learner.reading(answer.text)
-    else:
-        reading[int(meaning)] = 1.0
-    return int(answer.query.shown), reading
-
-
-def _language_log_likelihood(learner: AnswerModelLearner, v: np.ndarray, best: np.ndarray, rec: tuple) -> np.ndarray:
-    """log sum_m P(m | l) P(m | v, tau): the sentence about the shown trajectory, under each particle."""
-    _, shown, reading = rec
-    p = learner.meaning_probabilities(v, best, np.array([shown]))[:, 0, :]
-    return np.log(np.maximum(p @ reading, 1e-300))
-
-
-def _language_candidates(learner: AnswerModelLearner, v, best, rows, phi) -> Scored:
-    star = learner.space.phi[learner.pool[best]].mean(axis=0)
-    return language_candidates(rows, learner.language_gains(v, best, rows), phi, star)
-
-
-def _record_comparison(learner: AnswerModelLearner, answer: Any, meaning: int | None) -> tuple:
-    """(winner, loser)."""
-    q = answer.query
-    return int(answer.preferred), int(q.a if answer.preferred == q.b else q.b)
-
-
-def _comparison_log_likelihood(learner: AnswerModelLearner, v: np.ndarray, best: np.ndarray, rec: tuple) -> np.ndarray:
-    """Bradley-Terry: log sigmoid(beta v . (z_winner - z_loser))."""
-    _, winner, loser = rec
-    margin = learner.cfg.comparison_rationality * (v @ (learner.z[winner] - learner.z[loser]))
-    return -np.logaddexp(0.0, -margin)
-
-
-def _comparison_candidates(learner: AnswerModelLearner, v, best, rows, phi) -> Scored:
-    return comparison_candidates(rows, *learner.comparison_gains(v, rows), phi)
-
-
-ANSWER_KINDS: dict[str, AnswerKind] = {
-    "language": AnswerKind(_record_language, _language_log_likelihood, _language_candidates, confirmable=True),
-    "comparison": AnswerKind(_record_comparison, _comparison_log_likelihood, _comparison_candidates),
-}
-"""The kinds the answer-model learner reads, by `FeedbackKind.name`, in the order its selection scores them."""

@@ -73,11 +73,12 @@ class Scored:
         return kind.query(int(self.first[c]), int(self.second[c]))
 
 
-def language_candidates(rows: np.ndarray, gains: np.ndarray, phi_rows: np.ndarray, star: np.ndarray) -> Scored:
-    """Language queries showing each of `rows` (latent points `phi_rows`), pointing from it to `star` (phi*)."""
+def shown_candidates(kind: str, rows: np.ndarray, gains: np.ndarray, phi_rows: np.ndarray, star: np.ndarray) -> Scored:
+    """Queries of `kind` (one that shows one trajectory, as language does) showing each of `rows` (latent points
+    `phi_rows`), pointing from it to `star` (phi*)."""
     n = len(rows)
     return Scored(
-        ("language",),
+        (kind,),
         np.zeros(n, dtype=np.int64),
         np.asarray(rows, dtype=np.int64),
         np.full(n, -1, dtype=np.int64),
@@ -88,13 +89,14 @@ def language_candidates(rows: np.ndarray, gains: np.ndarray, phi_rows: np.ndarra
     )
 
 
-def comparison_candidates(
-    rows: np.ndarray, i: np.ndarray, j: np.ndarray, gains: np.ndarray, phi_rows: np.ndarray
+def pair_candidates(
+    kind: str, rows: np.ndarray, i: np.ndarray, j: np.ndarray, gains: np.ndarray, phi_rows: np.ndarray
 ) -> Scored:
-    """Comparisons of rows[i] with rows[j] (positions into `rows`, latent points `phi_rows`)."""
+    """Queries of `kind` (one that shows two trajectories, as a comparison does) of rows[i] with rows[j] (positions
+    into `rows`, latent points `phi_rows`)."""
     rows = np.asarray(rows, dtype=np.int64)
     return Scored(
-        ("comparison",),
+        (kind,),
         np.zeros(len(i), dtype=np.int64),
         rows[i],
         rows[j],

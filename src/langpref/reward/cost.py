@@ -10,30 +10,29 @@ prints no seconds). So the defaults are relative: a comparison costs 1.0 and a p
 in units of one comparison's time. Set them in seconds where they were measured (the study app records `client_ms`
 for every answer); only their ratio changes what a mixed learner asks.
 
-    costs = query_costs(None, None)                    # {"language": 0.887, "comparison": 1.0}
+    costs = query_costs()                              # {"language": 0.887, "comparison": 1.0}
     at = on_time_grid(curve, seconds, np.linspace(0, 30, 121))
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.feedback.kind import get_kind, mixed_kinds
+from langpref.feedback.language import PAPER_TIME_SAVING
 
-PAPER_TIME_SAVING = 0.113
-"""Language's time per query is 11.3% below that of comparisons (paper Sec. 5.2)."""
-PAPER_COSTS = {"comparison": 1.0, "language": 1.0 - PAPER_TIME_SAVING}
-"""Modelled time per query by kind, in units of one comparison's time (the paper gives no absolute seconds)."""
+__all__ = ["PAPER_TIME_SAVING", "elapsed", "on_time_grid", "query_costs", "time_average"]
 
 
-def query_costs(language: float | None = None, comparison: float | None = None) -> dict[str, float]:
-    """{kind: modelled seconds per query}: the given ones, the paper's relative measurement where None."""
-    costs = {
-        "language": PAPER_COSTS["language"] if language is None else float(language),
-        "comparison": PAPER_COSTS["comparison"] if comparison is None else float(comparison),
-    }
+def query_costs(given: Mapping[str, float | None] | None = None) -> dict[str, float]:
+    """{kind: modelled seconds per query} of every kind a mixed learner asks and every kind in `given`: the given
+    seconds, each kind's own (`FeedbackKind.seconds`, the paper's relative measurement) where None."""
+    given = dict(given or {})
+    names = dict.fromkeys([*mixed_kinds(), *given])
+    costs = {k: float(get_kind(k).seconds if given.get(k) is None else given[k]) for k in names}
     for kind, cost in costs.items():
         if not (np.isfinite(cost) and cost > 0):
             raise LangprefError(f"the time per {kind} query must be a positive number of seconds, got {cost}")

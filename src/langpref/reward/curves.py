@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from langpref.feedback.kind import get_kind
 from langpref.feedback.space import LatentSpace
 from langpref.reward.learner import RewardLearner
 from langpref.reward.metrics import cross_entropy, epic_distance, kendall_tau, reward_of_best
@@ -31,7 +32,8 @@ class Curves:
     """Answer-model learner: whether the true weights' direction lies in the belief's 90% credible region of
     directions after the last query (a calibration check; read by the metrics only)."""
     confirmed: list[int] = field(default_factory=list)
-    """With `confirm_margin`, per language answer: -1 not asked, -2 "none of these", else the meaning clicked."""
+    """With `confirm_margin`, per answer of a kind that can be confirmed: -1 not asked, -2 "none of these", else the
+    meaning clicked (2 x its dataset feature index + its direction)."""
     no_change: list[int] = field(default_factory=list)
     """The queries (1..Q) the person answered "that's good, no change"."""
     kendall_tau: list[float] = field(default_factory=list)
@@ -113,14 +115,16 @@ def confirm_summary(runs: list[Curves]) -> dict:
     """Of answer-model runs, `credible_90`: the share whose true direction lies in the belief's 90% credible region
     (calibrated: about 0.9). Of runs that asked people to confirm their sentences: the share of language answers
     confirmed, and of those the share answered "none of these". Of runs whose person said "that's good, no change",
-    the share of language answers that were it (`no_change_share`). Empty for the paper's learner and human."""
+    the share of the answers that could have been it (`FeedbackKind.says_no_change`: language) that were
+    (`no_change_share`). Empty for the paper's learner and human."""
     out = {}
     credible = [c.credible for c in runs if c.credible is not None]
     if credible:
         out["credible_90"] = float(np.mean(credible))
     said = sum(len(c.no_change) for c in runs)
     if said:
-        out["no_change_share"] = said / max(sum(k == "language" for c in runs for k in c.kinds), 1)
+        could = sum(get_kind(k).says_no_change for c in runs for k in c.kinds)  # answers that could have said it
+        out["no_change_share"] = said / max(could, 1)
     marks = np.array([m for c in runs for m in c.confirmed])
     if len(marks):
         asked = marks != -1

@@ -9,7 +9,12 @@ A learner (`RewardLearner` of the paper, `AnswerModelLearner`) is taught answers
 - `teach(learner, space, kind, answer, settings, rng, meaning)`: one answer of feedback kind `kind`, read as the
   model reads it, or as `meaning` (dataset feature index, direction 0 increase / 1 decrease) when the person said
   what they meant; not fit yet;
-- `saved(learner)`: (reward model kind, parameters, settings) as a saved reward holds them.
+- `saved(learner)`: (reward model kind, parameters, settings) as a saved reward holds them;
+- what else is its own: the config field it reads (`own_config`), its check of a run's config (`check`), the kinds it
+  can read (`reads`), its active query selection in `learn-reward` (`selector`) and in the study (`scores`), asking a
+  person to confirm what they meant (`confirm`), and a check of its belief after a run (`credible`).
+
+No caller compares a learner's name: each asks its type.
 
 A learner from another package registers its own type (`register_learner`) or names one under the entry-point group
 `langpref.learners`.
@@ -24,9 +29,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.kind import FeedbackKind
+from langpref.feedback.kind import MIXED, FeedbackKind, asked_kinds, get_kind
 from langpref.feedback.space import LatentSpace
-from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
+from langpref.reward import answer_model as am
+from langpref.reward import readings
+from langpref.reward.answer_model import AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner
 from langpref.reward.learner import RewardConfig, RewardLearner
 
 Meaning = tuple[int, int]
@@ -61,6 +68,24 @@ class LearnerType:
     description: str = ""
     selections: tuple[str, ...] | None = ("random",)
     """The query selections it can ask with (`--query-selection`; an active one reads its posterior); None: all."""
+    own_config: str | None = None
+    """The field of the settings that holds its own config (`answer_model`), recorded with its results only."""
+    check: Callable[[Any], None] | None = None
+    """(a run's config: `feedback`, its own config) -> None, or a one-line LangprefError."""
+    reads: Callable[[str], bool] = lambda kind: True
+    """Whether it can learn from answers of feedback `kind`."""
+    selector: Callable[[Any, LatentSpace, np.ndarray], Any] | None = None
+    """(a run's config, space, pool) -> the selector of its active query selection (None: random); None: each kind's
+    own strategies (`langpref.reward.selection`), or `mixed`'s."""
+    scores: Callable[[Any, str, np.ndarray, np.random.Generator, int], Any] | None = None
+    """(learner, kind, rows, rng, draws) -> Study 2's candidate queries scored by the learner itself; None: by the
+    kind's selector."""
+    confirm: Callable[[Any, FeedbackKind, Any, float], tuple[bool, Meaning | None] | None] | None = None
+    """(learner, kind, answer, margin) -> (asked, the meaning clicked or None for "none of these"), or None where it
+    never asks about that kind: a person asked what they meant when the learner is unsure (`--confirm-margin`).
+    None: it never asks."""
+    credible: Callable[[Any, np.ndarray], bool] | None = None
+    """(learner, true weights w) -> whether w lies in its belief's credible region (a calibration check)."""
 
 
 def meaning_psi(space: LatentSpace, split: str, meaning: Meaning) -> np.ndarray:
@@ -127,7 +152,62 @@ def _teach_answer_model(
 def _saved_answer_model(learner: AnswerModelLearner) -> tuple[str, dict[str, list], dict[str, Any]]:
     """The posterior-mean reward as the linear r = xi . phi it is (up to a constant, which shifts every trajectory
     alike)."""
-    return "linear", {"xi": learner.latent_weights().tolist()}, {"learner": "answer-model", **asdict(learner.cfg)}
+    return "linear", {"xi": learner.latent_weights().tolist()}, {"learner": readings.NAME, **asdict(learner.cfg)}
+
+
+def _reads_answer_model(kind: str) -> bool:
+    return readings.NAME in get_kind(kind).readings
+
+
+def _check_answer_model(cfg: Any) -> None:
+    """Its own config, and feedback of kinds it reads."""
+    cfg.answer_model.validate()
+    unread = [k for k in asked_kinds(cfg.feedback) if not _reads_answer_model(k)]
+    if unread:
+        read = " and ".join(readings.read_kinds())
+        raise LangprefError(f"the answer-model learner takes {read}, not {cfg.feedback!r}")
+
+
+def _answer_model_selector(cfg: Any, space: LatentSpace, pool: np.ndarray) -> AnswerModelInfoGain | None:
+    """`infogain` under its own answer model (None for `random`: the loop draws uniformly)."""
+    from langpref.reward.selection import DEFAULT_SAMPLES
+
+    if cfg.selection == "random":
+        return None
+    samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
+    return AnswerModelInfoGain(space, pool, asked_kinds(cfg.feedback), cfg.costs, cfg.candidates, samples)
+
+
+def _answer_model_scores(learner: AnswerModelLearner, kind: str, rows: np.ndarray, rng: np.random.Generator, n: int):
+    """Study 2's candidates `rows` of `kind`, scored under the learner's answer model from `n` draws of its belief."""
+    v, best = learner.draw(n, rng)
+    return readings.reading_of(kind).candidates(learner, v, best, rows, learner.space.phi[rows])
+
+
+def _confirm_answer_model(
+    learner: AnswerModelLearner, kind: FeedbackKind, answer: Any, margin: float
+) -> tuple[bool, Meaning | None] | None:
+    """`answer_model.confirm` for a kind whose reading can be confirmed, its meaning as (feature, direction)."""
+    if not readings.reading_of(kind).confirmable:
+        return None
+    asked, meaning = am.confirm(learner, answer, margin)
+    if not asked or meaning is None:
+        return asked, None
+    return True, (int(learner.features[meaning // 2]), meaning % 2)
+
+
+def paper_selector(cfg: Any, space: LatentSpace, pool: np.ndarray):
+    """The paper's learner's active strategy of `cfg` (None for random: the loop draws uniformly): each kind's own
+    (`langpref.reward.selection.make_selector`), or `mixed`'s information per second."""
+    from langpref.reward.selection import DEFAULT_SAMPLES, make_selector
+
+    if cfg.feedback == MIXED:  # the config's check has seen the strategy (infogain) and the linear reward
+        from langpref.reward.mixed import MixedInfoGain
+
+        samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
+        return MixedInfoGain(space, pool, cfg.reward, cfg.costs, cfg.candidates, samples)
+    kind = get_kind(cfg.feedback)
+    return make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
 
 
 _LEARNERS: dict[str, LearnerType] = {}
@@ -186,12 +266,19 @@ register_learner(
 )
 register_learner(
     LearnerType(
-        "answer-model",
+        readings.NAME,
         AnswerModelLearner,
         _make_answer_model,
         _teach_answer_model,
         _saved_answer_model,
         "a belief over the reward; a sentence read given the trajectory it was said about",
         selections=("random", "infogain"),
+        own_config="answer_model",
+        check=_check_answer_model,
+        reads=_reads_answer_model,
+        selector=_answer_model_selector,
+        scores=_answer_model_scores,
+        confirm=_confirm_answer_model,
+        credible=lambda learner, w: learner.credible(np.asarray(w)[learner.features]),
     )
 )

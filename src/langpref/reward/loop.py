@@ -35,19 +35,13 @@ import numpy as np
 from langpref.dataset.splits import Split
 from langpref.errors import LangprefError
 from langpref.feedback.humans import HumanConfig, normalised_reward, sample_weights, true_reward
-from langpref.feedback.kind import MIXED, MIXED_KINDS, FeedbackKind, get_kind, kind_names, kind_of, random_query
+from langpref.feedback.kind import MIXED, FeedbackKind, get_kind, kind_names, kind_of, mixed_kinds, random_query
 from langpref.feedback.space import LatentSpace
-from langpref.reward.answer_model import (
-    ANSWER_KINDS,
-    AnswerModelConfig,
-    AnswerModelInfoGain,
-    AnswerModelLearner,
-    confirm,
-)
+from langpref.reward.answer_model import AnswerModelConfig, AnswerModelLearner
 from langpref.reward.cost import query_costs
 from langpref.reward.curves import Curves, summarise_curves
 from langpref.reward.learner import RewardConfig, RewardLearner
-from langpref.reward.learners import get_learner, learner_names
+from langpref.reward.learners import get_learner, learner_names, paper_selector
 from langpref.reward.metrics import value_order_correlation
 from langpref.reward.steps import SuccessEpisodes
 
@@ -130,7 +124,7 @@ class LearnRewardConfig:
     @property
     def costs(self) -> dict[str, float]:
         """Modelled seconds per query by kind (`langpref.reward.cost.query_costs`)."""
-        return query_costs(self.language_seconds, self.comparison_seconds)
+        return query_costs({"language": self.language_seconds, "comparison": self.comparison_seconds})
 
     def validate(self) -> None:
         from langpref.reward.posterior import require_linear
@@ -140,23 +134,22 @@ class LearnRewardConfig:
             raise LangprefError(f"unknown feedback {self.feedback!r}: choose one of {', '.join(feedback_choices())}")
         if self.learner not in learner_names():
             raise LangprefError(f"unknown learner {self.learner!r}: choose one of {', '.join(learner_names())}")
-        asks = get_learner(self.learner).selections
+        learner = get_learner(self.learner)
+        asks = learner.selections
         if asks is not None and self.selection not in asks:
             raise LangprefError(
                 f"the {self.learner} learner asks with {' or '.join(asks)} queries, not {self.selection!r}"
             )
-        if self.learner == "answer-model":
-            self.answer_model.validate()
-            if self.feedback not in (*MIXED_KINDS, MIXED):
-                raise LangprefError(f"the answer-model learner takes language and comparisons, not {self.feedback!r}")
-        if self.confirm_margin is not None and (self.learner != "answer-model" or not 0 <= self.confirm_margin <= 1):
-            raise LangprefError("--confirm-margin takes a value in [0, 1] and needs --learner answer-model")
+        if learner.check is not None:
+            learner.check(self)
+        if self.confirm_margin is not None and (learner.confirm is None or not 0 <= self.confirm_margin <= 1):
+            raise LangprefError("--confirm-margin takes a value in [0, 1] and needs a learner that asks to confirm")
         if self.confirm_seconds < 0:
             raise LangprefError(f"confirm_seconds must be >= 0, got {self.confirm_seconds}")
         check_strategy(self.selection, self.feedback)
         if self.query_batch is not None and self.query_batch < 1:
             raise LangprefError(f"query_batch must be >= 1, got {self.query_batch}")
-        query_costs(self.language_seconds, self.comparison_seconds)
+        self.costs  # noqa: B018 (checks the seconds)
         require_linear(self.reward.model, self.selection)
         if self.candidates is not None and self.candidates < 2:
             raise LangprefError(f"candidates must be >= 2, got {self.candidates}")
@@ -177,8 +170,11 @@ def config_record(cfg: LearnRewardConfig) -> dict:
     their defaults (the paper's learner, the Eq. 10 human), so that the paper's output stays what it was before that
     learner existed, byte for byte (tests/reward/test_answer_model.py pins it)."""
     record = asdict(cfg)
-    if cfg.learner == "paper":
-        del record["learner"], record["answer_model"]
+    if cfg.learner == LearnRewardConfig.learner:  # the default learner's record is as before learners were parts
+        del record["learner"]
+    own = get_learner(cfg.learner).own_config
+    for name in {t.own_config for t in map(get_learner, learner_names())} - {own, None}:
+        del record[name]
     if cfg.confirm_margin is None:
         del record["confirm_margin"], record["confirm_seconds"]
     for name, default in NEWER_HUMAN_FIELDS.items():
@@ -288,7 +284,7 @@ def _make_humans(
     if cfg.feedback == MIXED:
         return {
             name: get_kind(name).make_human(w, space, pool, cfg.human, np.random.default_rng([*run_seed, 2]))
-            for name in MIXED_KINDS
+            for name in mixed_kinds()
         }
     return {cfg.feedback: get_kind(cfg.feedback).make_human(w, space, pool, cfg.human, rng_human)}
 
@@ -303,16 +299,17 @@ def _learn_from(
     curves: Curves,
 ) -> float:
     """Give `answer` to the learner (not fit yet); the extra modelled seconds it cost (a confirmation asked of the
-    person, answer-model learner with `confirm_margin` only)."""
-    if cfg.learner != "answer-model":
-        get_learner(cfg.learner).teach(learner, space, kind, answer, cfg, rng_neg)
+    person, with `confirm_margin` and a learner that asks, `LearnerType.confirm`)."""
+    learner_type = get_learner(cfg.learner)
+    asks = cfg.confirm_margin is not None and learner_type.confirm is not None
+    confirmed = learner_type.confirm(learner, kind, answer, cfg.confirm_margin) if asks else None
+    if confirmed is None:
+        learner_type.teach(learner, space, kind, answer, cfg, rng_neg)
         return 0.0
-    asked, meaning = False, None
-    if cfg.confirm_margin is not None and ANSWER_KINDS[kind.name].confirmable:
-        asked, meaning = confirm(learner, answer, cfg.confirm_margin)
-        curves.confirmed.append(-1 if not asked else (meaning if meaning is not None else -2))
+    asked, meaning = confirmed
+    curves.confirmed.append(-1 if not asked else (2 * meaning[0] + meaning[1] if meaning is not None else -2))
     if not (asked and meaning is None):  # "none of these": stored, not learned from
-        learner.observe(kind.name, answer, meaning if asked else None)
+        learner_type.teach(learner, space, kind, answer, cfg, rng_neg, meaning)
     return cfg.confirm_seconds if asked else 0.0
 
 
@@ -331,8 +328,9 @@ def _score_final(
     (with `generation`) beside its best recorded trajectory over every split (the baseline the optimum, which starts
     from and is fitted on all of them, must beat), and the value-order correlations through successful episodes
     (with `episodes`)."""
-    if cfg.learner == "answer-model":
-        curves.credible = learner.credible(np.asarray(w)[learner.features])  # the experimenter's check
+    credible = get_learner(cfg.learner).credible
+    if credible is not None:
+        curves.credible = credible(learner, w)  # the experimenter's check
     if generation is not None:
         best = optimize_reward(generation, learner, run_seed).trajectories[0]
         raw = true_reward(w, generation.theta(best)[None])  # the experimenter scores it; the proposer never does
@@ -346,22 +344,9 @@ def _score_final(
 
 
 def _selector(cfg: LearnRewardConfig, space: LatentSpace, pool: np.ndarray):
-    """The active strategy of `cfg` (None for random: the loop draws uniformly)."""
-    from langpref.reward.selection import DEFAULT_SAMPLES, make_selector
-
-    if cfg.learner == "answer-model":
-        if cfg.selection == "random":
-            return None
-        kinds = MIXED_KINDS if cfg.feedback == MIXED else (cfg.feedback,)
-        samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
-        return AnswerModelInfoGain(space, pool, kinds, cfg.costs, cfg.candidates, samples)
-    if cfg.feedback == MIXED:  # validate() has checked the strategy (infogain) and the linear reward
-        from langpref.reward.mixed import MixedInfoGain
-
-        samples = DEFAULT_SAMPLES if cfg.posterior_samples is None else cfg.posterior_samples
-        return MixedInfoGain(space, pool, cfg.reward, cfg.costs, cfg.candidates, samples)
-    kind = get_kind(cfg.feedback)
-    return make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
+    """The active strategy of `cfg` (None for random: the loop draws uniformly): the learner's own
+    (`LearnerType.selector`), else the paper's learner's (`langpref.reward.learners.paper_selector`)."""
+    return (get_learner(cfg.learner).selector or paper_selector)(cfg, space, pool)
 
 
 def _random_batch(kind: FeedbackKind, pool: np.ndarray, rng: np.random.Generator, size: int) -> list:

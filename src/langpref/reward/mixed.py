@@ -1,14 +1,15 @@
-"""Both kinds in one learner (`learn-reward --feedback mixed`): at every query, the kind (language or comparison)
-and the item with the most expected information per expected second of the person's time.
+"""Several kinds in one learner (`learn-reward --feedback mixed`): at every query, the kind (language or comparison,
+and any kind registered with `FeedbackKind.mixed`) and the item with the most expected information per expected
+second of the person's time.
 
-One candidate set of trajectories per query (the query split, or `candidates` of it drawn afresh), one set of draws
-xi from the Laplace posterior of the one learner that fits every answer, and on them each kind's `infogain` score
-(`langpref.reward.selection`): for language, I(xi; answer | tau) under the latent Eq. 10 answer model, over every
-trajectory; for comparisons, I(xi; choice) under Bradley-Terry, over every pair. Both are mutual information in nats
-between the reward and the person's answer, from the same draws, so they are on one scale. Each is divided by its
-kind's modelled seconds per query (`langpref.reward.cost`: by default the paper's measurement, language 11.3% faster
-than comparisons) and the best rate is asked, of whichever kind. Equal information goes to the cheaper kind; equal
-costs to the more informative query. A batch (`--query-batch K`) mixes kinds too (`langpref.reward.batch`).
+One candidate set of trajectories per query (the query split, or `candidates` of it drawn afresh), one set of draws xi
+from the Laplace posterior of the one learner that fits every answer, and on them each kind's `infogain` score (its
+selector's `scored`, `langpref.reward.selection`): for language, I(xi; answer | tau) under the latent Eq. 10 answer
+model, over every trajectory; for comparisons, I(xi; choice) under Bradley-Terry, over every pair. Both are mutual
+information in nats between the reward and the person's answer, from the same draws, so they are on one scale. Each is
+divided by its kind's modelled seconds per query (`langpref.reward.cost`: by default the paper's measurement, language
+11.3% faster than comparisons) and the best rate is asked, of whichever kind. Equal information goes to the cheaper
+kind; equal costs to the more informative query. A batch (`--query-batch K`) mixes kinds too (`langpref.reward.batch`).
 
 The answers go into the same learner whatever their kind (`langpref.reward.RewardLearner`): each kind's `pairs`
 turns an answer into weighted Bradley-Terry pairs, and the fit is their weighted mean loss plus the prior. In
@@ -25,20 +26,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from langpref.feedback.kind import MIXED, MIXED_KINDS
+from langpref.errors import LangprefError
+from langpref.feedback.kind import MIXED, get_kind, mixed_kinds
 from langpref.reward.batch import Scored, join
 from langpref.reward.posterior import laplace_posterior
-from langpref.reward.selection import DEFAULT_SAMPLES, ComparisonActive, LanguageInfoGain, Selector, candidate_rows
+from langpref.reward.selection import DEFAULT_SAMPLES, Selector, candidate_rows, selector_factories
 
 if TYPE_CHECKING:
     from langpref.feedback.space import LatentSpace
     from langpref.reward import RewardConfig, RewardLearner
 
-__all__ = ["MIXED", "MIXED_KINDS", "MixedInfoGain"]
+__all__ = ["MIXED", "MixedInfoGain"]
 
 
 class MixedInfoGain(Selector):
-    """`infogain` over language queries and comparisons at once, ranked by nats per modelled second."""
+    """`infogain` over the queries of every mixed kind (`mixed_kinds`) at once, ranked by nats per modelled second."""
 
     name = "infogain"
 
@@ -55,11 +57,18 @@ class MixedInfoGain(Selector):
         self.candidates = candidates
         self.samples = int(samples)
         self.costs = dict(costs)
-        # only their `scored` is used, on this selector's candidates and draws
-        self.language = LanguageInfoGain(space, pool, reward)
-        self.comparison = ComparisonActive(space, pool, "infogain")
+        # each kind's `infogain` selector; only its `scored` is used, on this selector's candidates and draws
+        self.selectors = {k: _infogain(k)(space, pool, reward, candidates, self.samples) for k in mixed_kinds()}
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         rows = candidate_rows(self.pool, self.candidates, rng)
         xi = laplace_posterior(learner).sample(self.samples, rng)
-        return join([self.language.scored(xi, rows), self.comparison.scored(xi, rows)], self.costs)
+        return join([s.scored(xi, rows) for s in self.selectors.values()], self.costs)
+
+
+def _infogain(name: str):
+    """The factory of kind `name`'s `infogain` selector; a one-line error when it has none."""
+    factory = selector_factories(get_kind(name)).get("infogain")
+    if factory is None:
+        raise LangprefError(f"feedback {name!r} is mixed but has no infogain query selection to be scored by")
+    return factory

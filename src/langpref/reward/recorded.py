@@ -22,7 +22,7 @@ import numpy as np
 
 from langpref.errors import LangprefError
 from langpref.feedback.answers import RecordedAnswer
-from langpref.feedback.kind import MIXED, MIXED_KINDS, get_kind
+from langpref.feedback.kind import MIXED, asked_kinds, get_kind
 from langpref.feedback.space import LatentSpace
 from langpref.language.bank import DIRECTIONS
 from langpref.reward.learners import get_learner
@@ -40,11 +40,6 @@ class LearnedFrom:
     learner: Any
     answers: int
     participants: tuple[str, ...]
-
-
-def taught_kinds(feedback: str) -> tuple[str, ...]:
-    """The kinds of answers a `--feedback` learns from."""
-    return tuple(MIXED_KINDS) if feedback == MIXED else (feedback,)
 
 
 def groups(
@@ -99,7 +94,7 @@ def learn_from_answers(
 ) -> tuple[list[LearnedFrom], int]:
     """A reward per group of `answers` (`groups`) of the kinds `cfg.feedback` learns from; and how many answers of
     other kinds were left out. A one-line error when no answer of those kinds is left."""
-    kinds = taught_kinds(cfg.feedback)
+    kinds = asked_kinds(cfg.feedback)
     taught = [a for a in answers if a.kind in kinds]
     if not taught:
         found = sorted({a.kind for a in answers})
@@ -117,7 +112,8 @@ def in_task(answers: Sequence[RecordedAnswer], task: str) -> tuple[list[Recorded
     task's features, which the person never asked for."""
     from langpref.language.relevance import FeedbackGate
 
-    sentences = [a for a in answers if a.kind == "language" and a.meaning is None and not a.answer.no_change]
+    said = [a for a in answers if isinstance(getattr(a.answer, "text", None), str)]  # answers that are sentences
+    sentences = [a for a in said if a.meaning is None and not getattr(a.answer, "no_change", False)]
     if not sentences:
         return list(answers), 0
     gate = FeedbackGate(task)

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.reward.batch import Scored, comparison_candidates, language_candidates, pick
+from langpref.reward.batch import Scored, pair_candidates, pick, shown_candidates
 from langpref.reward.posterior import laplace_posterior, require_linear
 
 if TYPE_CHECKING:
@@ -226,6 +226,8 @@ class LanguageInfoGain(Selector):
     """`infogain` for language: I(xi; answer | tau) under the latent Eq. 10 answer model (module docstring)."""
 
     name = "infogain"
+    kind = "language"
+    """The feedback kind of the queries it scores (registered for it below)."""
 
     def __init__(
         self,
@@ -271,7 +273,7 @@ class LanguageInfoGain(Selector):
     def scored(self, xi: np.ndarray, rows: np.ndarray) -> Scored:
         """`rows` scored from the draws `xi`, each pointing to the mean over draws of phi*_xi."""
         star = self._pool_phi[self.best(xi)].mean(axis=0)
-        return language_candidates(rows, self.scores(xi, rows), self.space.phi[rows], star)
+        return shown_candidates(self.kind, rows, self.scores(xi, rows), self.space.phi[rows], star)
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         return self.score_rows(learner, candidate_rows(self.pool, self.candidates, rng), rng)
@@ -284,6 +286,7 @@ class LalInfoGain(Selector):
     """`lal-infogain`: the follow-up's information gain over trajectories not shown before (module docstring)."""
 
     name = "lal-infogain"
+    kind = "language"
     reads_learner = False
     observes = True
 
@@ -340,7 +343,7 @@ class LalInfoGain(Selector):
     def score_rows(self, learner: RewardLearner | None, rows: np.ndarray, rng: np.random.Generator) -> Scored:
         w, l_samples = self.samples(rng)
         star = self.space.phi[self.pool].mean(axis=0)
-        return language_candidates(rows, self.scores(w, l_samples, rows), self.space.phi[rows], star)
+        return shown_candidates(self.kind, rows, self.scores(w, l_samples, rows), self.space.phi[rows], star)
 
 
 # ---- comparisons ----------------------------------------------------------------------------------------------
@@ -348,6 +351,8 @@ class LalInfoGain(Selector):
 
 class ComparisonActive(Selector):
     """`infogain` (mutual information) or `volume-removal` over every pair of candidates."""
+
+    kind = "comparison"
 
     def __init__(
         self,
@@ -378,7 +383,7 @@ class ComparisonActive(Selector):
     def scored(self, xi: np.ndarray, rows: np.ndarray) -> Scored:
         """Every pair of `rows` scored from the draws `xi`."""
         i, j, s = self.scores(xi, rows)
-        return comparison_candidates(rows, i, j, s, self.space.phi[rows])
+        return pair_candidates(self.kind, rows, i, j, s, self.space.phi[rows])
 
     def score(self, learner: RewardLearner, rng: np.random.Generator) -> Scored:
         return self.score_rows(learner, candidate_rows(self.pool, self.candidates, rng), rng)

@@ -83,8 +83,8 @@ class StudyConfig:
             isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0 <= margin <= 1
         ):
             raise LangprefError(f"--confirm-margin must be a number from 0 to 1 (or unset: never ask), got {margin!r}")
-        from langpref.reward.answer_model import ANSWER_KINDS
-        from langpref.reward.learners import learner_names
+        from langpref.feedback.kind import kind_names, paper_first
+        from langpref.reward.learners import get_learner, learner_names
 
         known = learner_names()
 
@@ -94,17 +94,18 @@ class StudyConfig:
 
         self.kinds = check_kinds(self.kinds)
         selections = self.selections()
-        unread = sorted(k for k in self.kinds if k not in ANSWER_KINDS)
-        if unread and self.learner == "answer-model":
-            read = " and ".join(ANSWER_KINDS)
-            raise LangprefError(f"--learner answer-model reads {read} only, not {', '.join(unread)}")
-        if self.learner == "answer-model":
-            other = sorted({s for s in selections.values() if s not in ("random", "infogain")})
-            if other:
-                raise LangprefError(
-                    f"--learner answer-model asks with random or infogain queries, not {', '.join(other)}; "
-                    "pass --query-selection infogain (or random)"
-                )
+        learner = get_learner(self.learner)
+        unread = sorted(k for k in self.kinds if not learner.reads(k))
+        if unread:
+            read = " and ".join(paper_first([k for k in kind_names() if learner.reads(k)]))
+            raise LangprefError(f"--learner {self.learner} reads {read} only, not {', '.join(unread)}")
+        other = sorted({s for s in selections.values() if learner.selections and s not in learner.selections})
+        if other:
+            asks = learner.selections
+            raise LangprefError(
+                f"--learner {self.learner} asks with {' or '.join(asks)} queries, not {', '.join(other)}; "
+                f"pass --query-selection {asks[-1]}" + (f" (or {' or '.join(asks[:-1])})" if len(asks) > 1 else "")
+            )
 
     def selections(self) -> dict[str, str]:
         """The query selection strategy of each Study-2 method, checked (one line naming the choices otherwise)."""

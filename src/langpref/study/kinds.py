@@ -11,10 +11,10 @@ data: Study 2 asks each in turn, and everything it needs of one is the kind's ow
 
 A kind from an installed package (entry-point group `langpref.feedback`) runs with no edit here. Study 1 stays the
 paper's improvement with language (`STUDY1`: Eq. 4 reads a sentence). A kind's own active query selections
-(`FeedbackKind.strategies`) choose its queries (`langpref.study.queries`, through `Selector.score_rows`); the
-answer-model learner reads the kinds it has a record of (`langpref.reward.answer_model.ANSWER_KINDS`); a study with
-any other kind under it is refused before it starts (`StudyConfig.validate`). The paper's two keep their own pages and
-the analyses (`langpref.study.analysis`) compare them.
+(`FeedbackKind.strategies`) choose its queries (`langpref.study.queries`, through `Selector.score_rows`); a learner
+reads the kinds it says it reads (`LearnerType.reads`: the answer-model learner, those with a reading in
+`FeedbackKind.readings`); a study of any other kind under it is refused before it starts (`StudyConfig.validate`). The
+paper's two keep their own pages and the analyses (`langpref.study.analysis`) compare them.
 """
 
 from __future__ import annotations

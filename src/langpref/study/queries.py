@@ -9,10 +9,10 @@
   participant's reward learner fit on their answers so far (`infogain`, `volume-removal`: its Laplace posterior) or
   from their answers themselves (`lal-infogain`, a selector that `observes`). The highest score is shown.
 
-With the answer-model learner (`--learner answer-model`), `infogain` is that learner's own: the mutual information
-between its belief and the person's answer under its answer model (the kind's `ANSWER_KINDS` record in
-`langpref.reward.answer_model`), from draws of its belief made with the query's generator (never the learner's own
-stream, which its fits use).
+A learner that scores queries itself (`LearnerType.scores`; the answer-model learner, `--learner answer-model`) has
+its `infogain` its own: the mutual information between its belief and the person's answer under its answer model
+(the kind's reading, `langpref.reward.answer_model.reading_of`), from draws of its belief made with the query's
+generator (never the learner's own stream, which its fits use).
 
 Study-specific choices (the reward loop of `langpref.reward` does not make them): a query that shows one trajectory
 never shows one the participant already gave feedback on in this method while unseen ones remain (as random's pass
@@ -38,11 +38,12 @@ from langpref.feedback.kind import RANDOM, get_kind, shown_by
 from langpref.feedback.space import LatentSpace
 from langpref.reward import RewardConfig
 from langpref.reward.batch import Scored
+from langpref.reward.learners import get_learner
 from langpref.reward.selection import DEFAULT_SAMPLES, Selector, candidate_rows, selector_factories
 from langpref.study.config import StudyConfig
 
 ANSWER_MODEL_SAMPLES = 64
-"""Draws of the answer-model learner's belief per active query (as `AnswerModelInfoGain` in `langpref.reward`)."""
+"""Draws of a learner's belief per active query it scores itself (as `AnswerModelInfoGain` in `langpref.reward`)."""
 Rng = Callable[..., np.random.Generator]
 """(*keys) -> a generator seeded by the study seed, the participant's seed and `keys`."""
 
@@ -71,11 +72,11 @@ class QueryChooser:
         self.cfg = cfg
         self.reward = reward
         self.strategies = cfg.selections()
-        self.answer_model = cfg.learner == "answer-model"
+        self.own_scores = get_learner(cfg.learner).scores
         # each active method's selector, built once (language's infogain embeds the bank's feature axes); one that
-        # keeps a record of the answers is made again per query; the answer-model learner scores with its own model
+        # keeps a record of the answers is made again per query; a learner that scores queries uses its own model
         active = [m for m, s in self.strategies.items() if s != RANDOM]
-        self._selectors = {} if self.answer_model else {m: self._selector(m) for m in active}
+        self._selectors = {} if self.own_scores is not None else {m: self._selector(m) for m in active}
 
     def _selector(self, method: str) -> Selector:
         """The selector of `method`'s strategy (`langpref.reward.selection.selector_factories`)."""
@@ -127,13 +128,10 @@ class QueryChooser:
         learner: Callable[[], Any],
         past: list,
     ) -> Scored:
-        """`method`'s queries over `rows`, scored by the answer-model learner or by the kind's selector."""
-        if self.answer_model:
-            from langpref.reward.answer_model import ANSWER_KINDS
-
-            model = learner()
-            v, best = model.draw(ANSWER_MODEL_SAMPLES, gen)
-            return ANSWER_KINDS[method].candidates(model, v, best, rows, self.space.phi[rows])
+        """`method`'s queries over `rows`, scored by the learner itself (`LearnerType.scores`) or by the kind's
+        selector."""
+        if self.own_scores is not None:
+            return self.own_scores(learner(), method, rows, gen, ANSWER_MODEL_SAMPLES)
         assert selector is not None  # every active method has one (__init__)
         if selector.observes:  # a record of this participant's answers
             selector = self._selector(method)
