@@ -133,3 +133,13 @@ def test_evaluate_and_bank_check_say_what_chance_and_good_are(trained, tiny_data
     assert main(["bank", "check", "metaworld"]) == 0
     text = capsys.readouterr().out
     assert "chance: 1/6 = 0.17" in text and "good: 0.80 or more per meaning" in text, text
+
+
+def test_a_wait_says_what_it_does_at_a_terminal(capsys, monkeypatch):
+    """At a terminal the command says what it loads before the seconds pass; in a pipe or a log it says nothing."""
+    assert main(["embed", "--model", "no-such-model", "Faster."]) == 2
+    assert capsys.readouterr().err.startswith("error:")  # not a terminal: no status line
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(["embed", "--model", "no-such-model", "Faster."]) == 2
+    first, *_ = capsys.readouterr().err.splitlines()
+    assert first == "loading torch and the model no-such-model ..."

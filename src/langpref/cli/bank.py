@@ -103,7 +103,7 @@ def cmd_bank_check(args: argparse.Namespace) -> None:
         from langpref.language.models import check_available
 
         check_available(args.lang_model)  # an unknown name fails here, before the slow imports
-    status(f"loading {'the model ' + str(args.model) if args.model else 'the language model ' + args.lang_model}")
+    status(f"loading torch to read the bank with {'the model ' + str(args.model) if args.model else args.lang_model}")
     embed, encoder = _embedder(args, source.task)
     if queries is None:
         result = leave_one_out(

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from langpref.cli.common import DIR, JSON, figure, with_figure
-from langpref.cli.outputs import check_writable
+from langpref.cli.outputs import check_writable, status
 from langpref.cli_config import RERUN, beside, command, config, emit, from_args, opt, path, record
 from langpref.errors import LangprefError
 from langpref.extras import require
@@ -112,13 +112,15 @@ def cmd_import(args: argparse.Namespace) -> None:
 )
 def cmd_label(args: argparse.Namespace) -> None:
     from langpref.dataset.label import LabelConfig, label_dataset
-    from langpref.reward import load
 
     cfg = from_args(LabelConfig, args)
     if args.figure:
         require("plots", "label --figure")  # before the episodes are labelled, not after
     check_writable(cfg.out, "--out", folder=True)
     check_writable(args.figure, "--figure")
+    status(f"loading torch and the reward {cfg.reward} with its model")
+    from langpref.reward import load
+
     summary = label_dataset(cfg, load(cfg.reward), figure=args.figure)
     record(args, Path(summary["out"]) / "label.config.json", cfg)
     emit(

@@ -74,14 +74,16 @@ GOOD_PAIR_ACCURACY = 0.8
 def cmd_train(args: argparse.Namespace) -> None:
     from langpref.language.models import check_available
     from langpref.model.config import TrainConfig
-    from langpref.model.train import train
 
     cfg = from_args(TrainConfig, args)
-    check_available(cfg.model.lang_model)  # an unknown name fails here, in one line, before the data loads
+    check_available(cfg.model.lang_model)  # an unknown name fails here, in one line, before torch and the data load
     check_writable(cfg.out, "--out", folder=True)
     check_writable(args.tensorboard, "--tensorboard", folder=True)
+    status(f"loading torch, the dataset {cfg.data} and the language model {cfg.model.lang_model}")
     if args.tensorboard:
         tensorboard_writer()  # a missing tensorboard package fails before training, not after
+    from langpref.model.train import train
+
     result = train(cfg, progress=True)
     record(args, Path(result.out) / "train.config.json", cfg.to_dict())
     r = result.results
@@ -153,13 +155,13 @@ def cmd_train(args: argparse.Namespace) -> None:
     "phi_A) > 0.",
 )
 def cmd_evaluate(args: argparse.Namespace) -> None:
-    from langpref.language.pairs import phrasings_from_bank, phrasings_from_mapping
-    from langpref.model.evaluate import evaluate_split, plot_evaluation, summary_only
-
     if args.figure:
         require("plots", "evaluate --figure")  # before the model loads, not after
     check_writable(args.figure, "--figure")
-    status(f"loading the model {args.model} and the dataset {args.data}")
+    status(f"loading torch, the model {args.model} and the dataset {args.data}")
+    from langpref.language.pairs import phrasings_from_bank, phrasings_from_mapping
+    from langpref.model.evaluate import evaluate_split, plot_evaluation, summary_only
+
     model, dataset = load(args)
     if args.utterances:
         from langpref.language.bank import load_user_utterances
@@ -267,10 +269,10 @@ def chance_text(o: dict) -> str:
     'says so in `out_of_task`. Several texts: {"readings": [one reading per text]}, a refused one with `error`.',
 )
 def cmd_embed(args: argparse.Namespace) -> None:
+    status(f"loading torch and the model {args.model}")
     from langpref.language.relevance import FeedbackGate, NotFeedbackError
     from langpref.model.evaluate import embed_text
 
-    status(f"loading the model {args.model}")
     model, _ = load(args, with_data=False)
     readings = [embed_text(model, text) for text in args.text]  # an empty text fails here, before the gate is built
     gate = FeedbackGate(model.info.env)

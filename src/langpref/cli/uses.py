@@ -187,7 +187,7 @@ def cmd_improve(args: argparse.Namespace) -> None:
     "on all feedback so far and scored on the test split.",
 )
 def cmd_learn_reward(args: argparse.Namespace) -> None:
-    from langpref.cli.outputs import check_writable
+    from langpref.cli.outputs import check_writable, status
     from langpref.reward import LearnRewardConfig, learn_reward
 
     cfg = from_args(LearnRewardConfig, args)
@@ -198,6 +198,7 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
         return _learn_from_answers(args, cfg)
     if args.figure:
         require("plots", "learn-reward --figure")  # before the runs, not after them
+    status(f"loading torch, the dataset {args.data}" + ("" if args.perfect_latent else f" and the model {args.model}"))
     space = _space(args)
     episodes = None
     if not args.perfect_latent:  # the value-order metric reads the model's steps on the eval split's successes
@@ -252,6 +253,7 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
 
 def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
     """`learn-reward --answers FILE`: a reward per participant (or one, or pooled) from recorded answers."""
+    from langpref.cli.outputs import status
     from langpref.reward.recorded import rewards_from_answers
 
     if args.answers is None:
@@ -262,6 +264,7 @@ def _learn_from_answers(args: argparse.Namespace, cfg) -> None:
         raise LangprefError("--answers learns on a trained model's latent space: pass --model, not --perfect-latent")
     if args.figure:
         require("plots", "learn-reward --figure")  # before the model loads, not after
+    status(f"loading torch, the dataset {args.data} and the model {args.model}")
     result = rewards_from_answers(
         args.answers, args.data, args.model, cfg, args.participant, args.pooled, args.save_reward, lambda: _space(args)
     )
