@@ -11,6 +11,7 @@ from dataclasses import replace
 import pytest
 from test_kinds import TRIPLE
 
+import langpref.registry
 from langpref.feedback import KINDS, kind
 from langpref.feedback.kind import ENTRY_POINT_GROUP, get_kind, kind_names
 
@@ -33,8 +34,8 @@ def installed(monkeypatch):
         _EntryPoint("not-a-kind", lambda: 42),
         _EntryPoint("mixed", lambda: replace(TRIPLE, name="mixed")),
     ]
-    monkeypatch.setattr(kind, "entry_points", lambda group: eps if group == ENTRY_POINT_GROUP else [])
-    monkeypatch.setattr(kind, "_plugins_loaded", False)
+    monkeypatch.setattr(langpref.registry, "entry_points", lambda group: eps if group == ENTRY_POINT_GROUP else [])
+    monkeypatch.setattr(kind.REGISTRY, "loaded", False)
     yield
     KINDS.pop(TRIPLE.name, None)
 

@@ -51,8 +51,11 @@ PLUGIN = LearnerType(
 
 @pytest.fixture(autouse=True, scope="module")
 def registered():
+    from langpref.reward.learners import REGISTRY
+
     register_learner(PLUGIN)
     yield
+    REGISTRY.items.pop(PLUGIN.name)  # the other tests' `--learner` choices are the built-in ones
 
 
 def test_a_registered_learner_runs_through_learn_reward():

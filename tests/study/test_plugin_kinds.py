@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+import langpref.registry
 from langpref.errors import LangprefError
 from langpref.feedback import KINDS, FeedbackKind, PairBatch, StudyPage, kind
 from langpref.reward.batch import Scored
@@ -166,8 +167,8 @@ def installed(monkeypatch):
         _EntryPoint("pageless", lambda: replace(BEST, name="pageless", table="pageless", page=None)),
         _EntryPoint("picky", lambda: replace(VERDICT, name="picky", strategies=PICKY)),
     ]
-    monkeypatch.setattr(kind, "entry_points", lambda group: eps if group == kind.ENTRY_POINT_GROUP else [])
-    monkeypatch.setattr(kind, "_plugins_loaded", False)
+    monkeypatch.setattr(langpref.registry, "entry_points", lambda group: eps if group == kind.ENTRY_POINT_GROUP else [])
+    monkeypatch.setattr(kind.REGISTRY, "loaded", False)
     yield
     for name in ("best_of_three", "verdict", "pageless", "picky"):
         KINDS.pop(name, None)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+import langpref.registry
 import langpref.tasks as tasks
 from langpref.errors import LangprefError
 from langpref.tasks import get_simulator, get_task, register_task, task_names
@@ -83,9 +84,9 @@ def test_plugins_load_and_a_broken_one_is_skipped(monkeypatch, tmp_path):
         _EntryPoint("good", lambda: lambda: good),
         _EntryPoint("not-a-task", lambda: 42),
     ]
-    monkeypatch.setattr(tasks, "entry_points", lambda group: eps if group == "langpref.tasks" else [])
-    monkeypatch.setattr(tasks, "_plugins_loaded", False)
-    monkeypatch.setattr(tasks, "_registry", {})
+    monkeypatch.setattr(langpref.registry, "entry_points", lambda group: eps if group == "langpref.tasks" else [])
+    monkeypatch.setattr(tasks.REGISTRY, "loaded", False)
+    monkeypatch.setattr(tasks.REGISTRY, "items", {})
     with pytest.warns(UserWarning) as record:
         names = task_names()
     messages = " ".join(str(w.message) for w in record)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from langpref.errors import LangprefError
+from langpref.registry import Registry
 
 
 def load_ref(ref: str) -> Any:
@@ -60,24 +61,14 @@ class Experiment:
         return load_ref(self.run)
 
 
-EXPERIMENTS: dict[str, Experiment] = {}
+REGISTRY: Registry[Experiment] = Registry("experiment", Experiment, "langpref.experiments")
+"""The experiments (`langpref.registry`); an installed package adds one through the entry-point group
+`langpref.experiments`."""
+EXPERIMENTS: dict[str, Experiment] = REGISTRY.items
 """Every experiment by name, in the order `--help` lists them."""
-
-
-def register_experiment(experiment: Experiment) -> Experiment:
-    """Add `experiment` to `EXPERIMENTS`; a different one under a taken name is an error."""
-    known = EXPERIMENTS.get(experiment.name)
-    if known is not None and known != experiment:
-        raise LangprefError(f"an experiment named {experiment.name!r} is already registered")
-    EXPERIMENTS[experiment.name] = experiment
-    return experiment
-
-
-def get_experiment(name: str) -> Experiment:
-    try:
-        return EXPERIMENTS[name]
-    except KeyError:
-        raise LangprefError(f"unknown experiment {name!r}: choose one of {', '.join(EXPERIMENTS)}") from None
+register_experiment = REGISTRY.register
+experiment_names = REGISTRY.names
+get_experiment = REGISTRY.get
 
 
 _PHRASING = ("human.phrasing_split", "human.phrasings", "human.feature_scale", "human.direction")

@@ -28,15 +28,14 @@ package may also list its own in `strategies`. The reward loop and Study 2 ask
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.registry import Registry
 
 if TYPE_CHECKING:
     from langpref.feedback.bradley_terry import PairBatch
@@ -132,63 +131,36 @@ class FeedbackKind:
 
 RANDOM = "random"
 """The query selection every kind has: uniform over the pool (`random_query`)."""
-KINDS: dict[str, FeedbackKind] = {}
-"""The registered kinds by name (plugins once `kind_names()` or `get_kind` has loaded them)."""
 ENTRY_POINT_GROUP = "langpref.feedback"
 """The entry-point group through which installed packages add kinds."""
-_plugins_loaded = False
 MIXED = "mixed"
 """The `feedback` of a learner that asks either kind, chosen per query (`langpref.reward.mixed`); not a kind."""
 PAPER_KINDS = ("language", "comparison")
 """The paper's two kinds, in its order: those Study 2 and the demo compare by default."""
 
 
-def register_kind(kind: FeedbackKind) -> FeedbackKind:
-    """Add `kind` to `KINDS`; a second, different kind under a taken name is an error."""
-    known = KINDS.get(kind.name)
-    if known is not None and known != kind:
-        raise LangprefError(f"a feedback kind named {kind.name!r} is already registered")
-    KINDS[kind.name] = kind
-    return kind
+def _not_mixed(kind: FeedbackKind) -> None:
+    if kind.name == MIXED:
+        raise ValueError(f"it is named {MIXED!r}, which is not a kind but both of the paper's")
 
 
-def load_plugins() -> None:
-    """Register every kind declared under the `langpref.feedback` entry-point group (once per process). A plugin
-    that fails to load, gives no `FeedbackKind` or takes a taken name is skipped with a warning naming it."""
-    global _plugins_loaded
-    if _plugins_loaded:
-        return
-    _plugins_loaded = True
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-            kind = obj() if callable(obj) and not isinstance(obj, FeedbackKind) else obj
-            if not isinstance(kind, FeedbackKind):
-                raise TypeError(f"it gives a {type(kind).__name__}, not a langpref.feedback.FeedbackKind")
-            if kind.name == MIXED:
-                raise ValueError(f"it is named {MIXED!r}, which is not a kind but both of the paper's")
-            register_kind(kind)
-        except Exception as exc:  # a broken plugin must not break the other kinds: say which one and go on
-            warnings.warn(
-                f"langpref: skipped the feedback plugin {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}",
-                stacklevel=2,
-            )
-
-
-def kind_names() -> tuple[str, ...]:
-    """Every kind known in this process: the paper's two, then those registered in code or by plugins."""
-    load_plugins()
-    return tuple(KINDS)
-
-
-def get_kind(name: str) -> FeedbackKind:
-    """The registered kind called `name` (a plugin's too)."""
-    if not isinstance(name, str) or name not in KINDS:
-        load_plugins()
-    try:
-        return KINDS[name]
-    except (KeyError, TypeError):
-        raise LangprefError(f"unknown feedback {name!r}: choose one of {', '.join(KINDS)}") from None
+REGISTRY: Registry[FeedbackKind] = Registry(
+    "feedback kind",
+    FeedbackKind,
+    ENTRY_POINT_GROUP,
+    unknown="unknown feedback",
+    check=_not_mixed,
+    type_name="langpref.feedback.FeedbackKind",
+)
+"""The kinds (`langpref.registry`): a plugin that fails to load, gives no `FeedbackKind`, is named `mixed` or takes a
+taken name is skipped with a warning naming it."""
+KINDS: dict[str, FeedbackKind] = REGISTRY.items
+"""The registered kinds by name (plugins once `kind_names()` or `get_kind` has loaded them)."""
+register_kind = REGISTRY.register
+load_plugins = REGISTRY.load_plugins
+kind_names = REGISTRY.names
+"""Every kind known in this process: the paper's two, then those registered in code or by plugins."""
+get_kind = REGISTRY.get
 
 
 def paper_first(names: Sequence[str]) -> tuple[str, ...]:

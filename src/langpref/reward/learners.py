@@ -31,6 +31,7 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.kind import MIXED, FeedbackKind, asked_kinds, get_kind
 from langpref.feedback.space import LatentSpace
+from langpref.registry import Registry
 from langpref.reward import answer_model as am
 from langpref.reward import readings
 from langpref.reward.answer_model import AnswerModelConfig, AnswerModelInfoGain, AnswerModelLearner
@@ -210,44 +211,16 @@ def paper_selector(cfg: Any, space: LatentSpace, pool: np.ndarray):
     return make_selector(cfg.selection, kind, space, pool, cfg.reward, cfg.candidates, cfg.posterior_samples)
 
 
-_LEARNERS: dict[str, LearnerType] = {}
-
-
-def register_learner(learner: LearnerType) -> LearnerType:
-    """Make a learner known by its name (`--learner NAME`); a name already taken is an error."""
-    if learner.name in _LEARNERS and _LEARNERS[learner.name] is not learner:
-        raise LangprefError(f"a learner named {learner.name!r} is already registered")
-    _LEARNERS[learner.name] = learner
-    return learner
-
-
-def _load_plugins() -> None:
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group="langpref.learners"):
-        if ep.name not in _LEARNERS:
-            found = ep.load()
-            register_learner(found() if callable(found) and not isinstance(found, LearnerType) else found)
-
-
-def learner_names() -> tuple[str, ...]:
-    """Every registered learner, the built-in ones first."""
-    _load_plugins()
-    return tuple(_LEARNERS)
-
-
-def get_learner(name: str) -> LearnerType:
-    """The learner of `name`; a one-line error naming the known ones."""
-    if name not in _LEARNERS:
-        _load_plugins()
-    if name not in _LEARNERS:
-        raise LangprefError(f"unknown learner {name!r}: choose one of {', '.join(learner_names())}")
-    return _LEARNERS[name]
+REGISTRY: Registry[LearnerType] = Registry("learner", LearnerType, "langpref.learners")
+"""The learners (`langpref.registry`), `--learner NAME`; the built-in ones first."""
+register_learner = REGISTRY.register
+learner_names = REGISTRY.names
+get_learner = REGISTRY.get
 
 
 def learner_type_of(learner: Any) -> LearnerType:
     """The registered type a learner object was made by (by its class)."""
-    for t in _LEARNERS.values():
+    for t in REGISTRY.items.values():
         if isinstance(learner, t.cls):
             return t
     raise LangprefError(f"{type(learner).__name__} is not a learner of a registered type")

@@ -14,39 +14,31 @@ Simulators are imported only when an env is made, so looking a task up is cheap.
 from __future__ import annotations
 
 import importlib
-import warnings
 from dataclasses import replace
-from importlib.metadata import entry_points
 
 from langpref.errors import LangprefError
+from langpref.registry import Registry
 from langpref.tasks.base import Controller, ObsField, SimEnv, Simulator, Task
 
 ENTRY_POINT_GROUP = "langpref.tasks"
 _BUILTIN = {"metaworld": "langpref.tasks.metaworld", "robosuite": "langpref.tasks.robosuite"}
-_registry: dict[str, Task] = {}
-_plugins_loaded = False
 
 
-def _load_plugins() -> None:
-    """Register every task declared under the `langpref.tasks` entry-point group (once per process)."""
-    global _plugins_loaded
-    if _plugins_loaded:
-        return
-    _plugins_loaded = True
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-            task = obj() if callable(obj) and not isinstance(obj, Task) else obj
-            if not isinstance(task, Task):
-                raise TypeError(f"it gives a {type(task).__name__}, not a langpref.tasks.Task")
-            if task.name in _BUILTIN:
-                raise ValueError(f"it is named {task.name!r}, a built-in task's name")
-        except Exception as exc:  # a broken plugin must not break the other tasks: say which one and go on
-            warnings.warn(
-                f"langpref: skipped the task plugin {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}", stacklevel=2
-            )
-            continue
-        _registry.setdefault(task.name, replace(task, source="plugin"))
+def _not_builtin(task: Task) -> None:
+    if task.name in _BUILTIN:
+        raise ValueError(f"it is named {task.name!r}, a built-in task's name")
+
+
+def _add_plugin(task: Task) -> None:
+    REGISTRY.items.setdefault(task.name, replace(task, source="plugin"))
+
+
+REGISTRY: Registry[Task] = Registry(
+    "task", Task, ENTRY_POINT_GROUP, check=_not_builtin, add=_add_plugin, type_name="langpref.tasks.Task"
+)
+"""The plugin and recorded tasks (`langpref.registry`); the built-in ones are imported from `_BUILTIN` when asked
+for, so looking one up never imports a simulator it does not need. A plugin that fails to load, gives no `Task` or
+takes a built-in name is skipped with a warning naming it."""
 
 
 def register_task(task: Task) -> Task:
@@ -55,30 +47,30 @@ def register_task(task: Task) -> Task:
     when the same task file was imported again)."""
     if task.name in _BUILTIN:
         raise LangprefError(f"a task may not be named {task.name!r}: that is a built-in task")
-    old = _registry.get(task.name)
+    old = REGISTRY.items.get(task.name)
     if old is not None and old != task and old.source == "plugin":
         raise LangprefError(f"task {task.name!r} is already registered by a plugin; rename it in its task file")
-    _registry[task.name] = task
+    REGISTRY.items[task.name] = task
     return task
 
 
 def task_names() -> tuple[str, ...]:
     """Every task known in this process: built-ins first, then plugins and recorded tasks."""
-    _load_plugins()
-    return (*_BUILTIN, *(name for name in _registry if name not in _BUILTIN))
+    return (*_BUILTIN, *(name for name in REGISTRY.names() if name not in _BUILTIN))
 
 
 def get_task(name: str) -> Task:
+    """The task called `name`: a built-in one (its module imported now), a plugin's or a recorded one."""
     if name in _BUILTIN:
         return importlib.import_module(_BUILTIN[name]).TASK
-    if name not in _registry:
-        _load_plugins()
-    if name not in _registry:
+    if name not in REGISTRY.items:
+        REGISTRY.load_plugins()
+    if name not in REGISTRY.items:
         raise LangprefError(
             f"unknown task {name!r}: known tasks are {', '.join(task_names())}; a recorded task becomes known by "
             "opening its dataset or model (`langpref import` makes one), a plugin by installing its package"
         )
-    return _registry[name]
+    return REGISTRY.items[name]
 
 
 def get_simulator(name: str) -> Simulator:
