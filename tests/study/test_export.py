@@ -180,3 +180,25 @@ def test_bank_additions_overwrite_an_existing_file_only_with_force(empty_db, tmp
         argv = ["study", "export", "--db", str(empty_db), "--out", str(tmp_path / "p")]
         assert main([*argv, "--bank-additions", str(tmp_path / "p" / name), "--force"]) == 2
         assert "a file of the export" in capsys.readouterr().err
+
+
+def test_the_report_shows_each_figure_in_its_section_linked_and_captioned(simulated_db, tmp_path):
+    """Each figure sits in its section as a PNG beside report.html, linked at full size, with what it shows; with
+    the participants' rewards written, also what each one wants, drawn and in words."""
+    from html import escape
+
+    from langpref.study.analysis.figures import CAPTIONS
+    from langpref.study.export import export
+
+    out = export(simulated_db, tmp_path / "out")
+    html = (tmp_path / "out" / "report.html").read_text()
+    for name in out["figures"]:
+        stem = name.removesuffix(".png")
+        caption = escape(CAPTIONS[stem].split(":")[0])
+        assert f'<a href="{name}"><img src="{name}"' in html and caption in html, name
+        assert (tmp_path / "out" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert html.index("study2_ratings.png") > html.index("Ratings of the best trajectory")
+    assert "Other figures" not in html
+    # the study's model and dataset are where it ran: each participant's reward is written, and what it wants drawn
+    assert len(out["rewards"]) == 8 and "study2_rewards.png" in out["figures"]
+    assert "What each learned reward wants" in html and html.count("; the features explain") == 8

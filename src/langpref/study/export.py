@@ -6,7 +6,8 @@ report with PNG figures (Sec. 5.2, Fig. 7-9, Table 1 and Appendix E's time-per-q
     DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`langpref.study.learned`)
     DIR/answers.jsonl    every Study-2 answer, DIR/rewards/ every participant's reward (`langpref.study.rewards`)
     DIR/report.html      tables and figures, self-contained apart from the PNGs beside it
-    DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time
+    DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time, and
+                         study2_rewards (what each participant's reward wants) where the rewards were written
 
 The work is done in `langpref.study.analysis` (tables, stats, figures, report); this module writes it to disk.
 """
@@ -20,7 +21,7 @@ from typing import Any
 
 from langpref.errors import LangprefError
 from langpref.study import db as sdb
-from langpref.study.analysis.figures import FIGURES, figures
+from langpref.study.analysis.figures import FIGURES, figures, rewards_figure
 from langpref.study.analysis.report import report_html
 from langpref.study.analysis.stats import analyse
 from langpref.study.analysis.tables import free_texts, read_tables, resolve_exclusions, table_columns, write_csvs
@@ -67,7 +68,11 @@ def export(
         if bank_additions_file is not None:
             added = _write_bank_additions(tables, summary.get("env") or "", excluded, db_path, bank_additions_file)
         taken = write_study_rewards(tables, out, excluded, model)
-        report = report_html(summary, figs, free_texts(tables, excluded))
+        wanted = _wanted(taken.get("rewards", []))
+        drawn = rewards_figure(wanted, out)
+        if drawn:
+            figs["study2_rewards"] = drawn
+        report = report_html(summary, figs, free_texts(tables, excluded), wanted)
         (out / "report.html").write_text(report, encoding="utf-8", errors="replace")
     except OSError as exc:
         raise LangprefError(f"cannot write the export into {out} ({exc.strerror or exc}); pass another --out") from None
@@ -84,6 +89,17 @@ def export(
         **taken,
         **(added or {}),
     }
+
+
+def _wanted(rewards: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each written participant reward (`write_study_rewards`) with what it wants, read back from its saved file
+    (method, participant, wants); those saved without it (the study's dataset gone) are left out."""
+    out = []
+    for entry in rewards:
+        wants = json.loads(Path(entry["path"]).read_text(encoding="utf-8")).get("wants")
+        if wants:
+            out.append({"method": entry["method"], "participant": entry["participant"], "wants": wants})
+    return out
 
 
 def _write_bank_additions(tables: dict, env: str, excluded, db_path: str | Path, file: str | Path) -> dict[str, Any]:
@@ -114,7 +130,7 @@ def _check_bank_additions(path: Path, db_path: Path, out: Path, force: bool) -> 
     if path.is_dir():
         raise LangprefError(f"--bank-additions {path} is a directory; pass a JSON file to write")
     own = {"summary.json", "learned_rewards.json", "answers.jsonl", "report.html", "export.config.json"}
-    own |= {f"{n}.png" for n in FIGURES}
+    own |= {f"{n}.png" for n in (*FIGURES, "study2_rewards")}
     out_dir = out.resolve()
     where = path.resolve()
     inside = {out_dir / "tables", out_dir / "rewards"} & set(where.parents)

@@ -3,6 +3,9 @@
 study1_attributes  Study 1's attribute scores            study1_iterations  iterations to satisfaction
 study2_attributes  Study 2's attribute scores by method  study2_ratings     rating curves by method (Fig. 9)
 study2_time        seconds per query, per participant and on average (Appendix E)
+study2_rewards     what each participant's learned reward wants, per method (only where the rewards were written)
+
+`CAPTIONS` says in a sentence what each shows; the report puts it under the figure.
 """
 
 from __future__ import annotations
@@ -140,3 +143,54 @@ DRAW: dict[str, Callable[[Any, dict[str, Any]], Any]] = {
 }
 """Each figure's drawing function: (pyplot, summary) -> figure."""
 FIGURES = tuple(DRAW)
+
+CAPTIONS = {
+    "study1_attributes": "Study 1: mean score (1-5) of each attribute, the error bar one standard deviation.",
+    "study1_iterations": "Study 1: how many participants were satisfied after each round of improvement, and how "
+    "many never were.",
+    "study2_attributes": "Study 2: mean score (1-5) of each attribute, language beside comparison.",
+    "study2_ratings": "Study 2 (the paper's Fig. 9): the rating (1-5) of the trajectory each method's learned reward "
+    "ranks best, after each number of queries; the band is one standard deviation over participants. A curve that "
+    "rises sooner learned what people wanted from fewer answers.",
+    "study2_time": "Study 2 (Appendix E): seconds per query for each participant and method, and the mean.",
+    "study2_rewards": "What each participant's learned reward wants: its weight on each feature (per standard "
+    "deviation of the feature, red up, blue down) for each method, and in brackets the share of the reward the "
+    "features explain. Rows that agree across a method mean its participants asked for the same thing.",
+}
+"""Each figure's caption in the report: what it shows and how to read it."""
+
+
+def rewards_figure(rewards: list[dict[str, Any]], out: Path) -> str | None:
+    """`study2_rewards.png` into `out`: per Study-2 method a heatmap of each participant's learned reward's weight
+    on each feature (`wants` of each entry, with `method` and `participant`); its file name, or None without any."""
+    rows = [r for r in rewards if r.get("wants")]
+    if not rows:
+        return None
+    from langpref.extras import pyplot, save_figure
+
+    plt = pyplot("the study's figures")
+    methods = [m for m in METHODS if any(r["method"] == m for r in rows)] or sorted({r["method"] for r in rows})
+    features = list(rows[0]["wants"]["features"])
+    height = max(len([r for r in rows if r["method"] == m]) for m in methods)
+    fig, axes = plt.subplots(
+        1,
+        len(methods),
+        figsize=(1.8 + 1.3 * len(features) * len(methods), 1.6 + 0.35 * height),
+        squeeze=False,
+        layout="constrained",
+    )
+    for ax, method in zip(axes[0], methods):
+        mine = [r for r in rows if r["method"] == method]
+        weights = np.array([[r["wants"]["features"][f]["weight"] for f in features] for r in mine])
+        top = max(float(np.abs(weights).max()), 1e-9)
+        ax.imshow(weights, cmap="RdBu_r", vmin=-top, vmax=top, aspect="auto")
+        ax.set_xticks(range(len(features)), features, rotation=30, ha="right", fontsize=8)
+        ax.set_yticks(range(len(mine)), [f"{r['participant']} ({r['wants']['explained']:.0%})" for r in mine])
+        for i, row in enumerate(weights):
+            for j, v in enumerate(row):
+                ax.text(
+                    j, i, f"{v:+.2f}", ha="center", va="center", fontsize=7, color="w" if abs(v) > 0.6 * top else "k"
+                )
+        ax.set_title(METHOD_LABELS.get(method, method), fontsize=10)
+    fig.suptitle("Study 2: what each participant's learned reward wants (weight per feature sd)", fontsize=10)
+    return save_figure(fig, out / "study2_rewards.png").name

@@ -1,5 +1,6 @@
 """The study's summary (`stats.analyse`) as one HTML page, report.html: a section per part of the study, each its own
-function, the figures (`figures.figures`) beside it as PNGs and the free-text answers at the end."""
+function, each figure (`figures.figures`, a PNG beside the page) in its section, linked and captioned, and the free-text
+answers at the end."""
 
 from __future__ import annotations
 
@@ -7,29 +8,72 @@ import html
 import json
 from typing import Any
 
+from langpref.study.analysis.figures import CAPTIONS
 from langpref.study.learned import confirmations_html
 
 Summary = dict[str, Any]
 
 STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;padding:0 1em}table{border-collapse:collapse;
 margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}figure{display:inline-block;margin:.5em}
-img{max-width:460px}"""
+img{max-width:460px}figcaption{max-width:460px;font-size:.85em;color:#444}"""
 
 ASPECT_LABELS = (("Time efficiency", "Time efficient"), ("Convenience", "Convenient"), ("Adaptability", "Adaptable"))
 
 
-def report_html(summary: Summary, figs: dict[str, str], texts: list[tuple[str, str, str]]) -> str:
-    """The whole page: `figs` name -> PNG file beside it, `texts` (participant, question, answer) of free text."""
+def report_html(
+    summary: Summary,
+    figs: dict[str, str],
+    texts: list[tuple[str, str, str]],
+    rewards: list[dict[str, Any]] | None = None,
+) -> str:
+    """The whole page: `figs` name -> PNG file beside it, each shown (and linked, full size) in its section with its
+    caption; `texts` (participant, question, answer) of free text; `rewards` (method, participant, wants) of each
+    participant's learned reward, in words beside its figure."""
+
+    def fig(*names: str) -> str:
+        return "".join(_figure(n, figs[n]) for n in names if n in figs)
+
     return (
         _head(summary)
         + _study1(summary)
+        + fig("study1_attributes", "study1_iterations")
         + _study2_survey(summary)
+        + fig("study2_attributes")
         + _time_per_query(summary)
+        + fig("study2_time")
         + confirmations_html(summary["study2_confirmations"], _fmt)
         + "\n"
         + _ratings(summary)
-        + _figures_and_texts(figs, texts)
+        + fig("study2_ratings")
+        + _wants(rewards or [])
+        + fig("study2_rewards")
+        + _figures_and_texts({k: v for k, v in figs.items() if k not in CAPTIONS}, texts)
     )
+
+
+def _figure(name: str, file: str) -> str:
+    """One figure: the PNG beside the report, linked to itself at full size, with what it shows as its caption."""
+    src = html.escape(file)
+    return (
+        f'<figure><a href="{src}"><img src="{src}" alt="{html.escape(name)}"></a>'
+        f'<figcaption>{html.escape(CAPTIONS.get(name, name))} <a href="{src}">{src}</a></figcaption></figure>\n'
+    )
+
+
+def _wants(rewards: list[dict[str, Any]]) -> str:
+    """What each participant's learned reward wants, in words (`langpref.reward.wants.describe`), per method."""
+    if not rewards:
+        return ""
+    from langpref.reward.wants import describe
+
+    rows = "".join(
+        f"<tr><td>{html.escape(r['participant'])}</td><td>{html.escape(r['method'])}</td>"
+        f"<td>{html.escape(describe(r['wants']))}</td></tr>"
+        for r in rewards
+    )
+    return f"""<h3>What each learned reward wants</h3>
+<table><tr><th>participant</th><th>method</th><th>the reward (rewards/METHOD/reward-P.json)</th></tr>{rows}</table>
+"""
 
 
 def _fmt(x: Any, digits: int = 2) -> str:
@@ -131,11 +175,11 @@ paired t-test p = {_fmt(test["t_p_value"], 4)}, Wilcoxon p = {_fmt(test["wilcoxo
 
 def _figures_and_texts(figs: dict[str, str], texts: list[tuple[str, str, str]]) -> str:
     """The figures, the free-text answers (participants by the first 8 characters of their id) and the page's end."""
-    img = "".join(f'<figure><img src="{html.escape(f)}" alt="{html.escape(k)}"></figure>' for k, f in figs.items())
+    img = "".join(_figure(k, f) for k, f in figs.items())
     rows = "".join(
         f"<tr><td>{html.escape(p[:8])}</td><td>{html.escape(q)}</td><td>{html.escape(v)}</td></tr>" for p, q, v in texts
     )
-    return f"""<h2>Figures</h2>{img}
+    return f"""{"<h2>Other figures</h2>" + img if img else ""}
 <h2>Free-text answers</h2>
 <table><tr><th>participant</th><th>question</th><th>answer</th></tr>{rows}</table>
 </body></html>
