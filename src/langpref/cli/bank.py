@@ -10,7 +10,7 @@ from pathlib import Path
 
 from langpref.cli.common import JSON, NEGATION, figure, with_figure
 from langpref.cli.outputs import check_writable, status
-from langpref.cli_config import RERUN, command, emit, opt, path, record
+from langpref.cli_config import command, emit, opt, path
 from langpref.errors import LangprefError
 from langpref.extras import require
 
@@ -179,58 +179,8 @@ def _human(result) -> str:
     return "\n".join(lines)
 
 
-@command(
-    "bank augment",
-    "proposed extra phrasings per meaning, written for the lab to review (never into a bank)",
-    [
-        WHERE,
-        path("--out", required=True, help="JSON file to write (docs/design.md#utterance-files, keyed by task name)"),
-        opt("--per-meaning", type=int, default=24, help="most proposals per meaning (default 24)"),
-        opt("--force", action="store_true", help="overwrite --out if it exists (never the bank or task file)"),
-        SEED,
-        JSON,
-        RERUN,
-    ],
-    "Negations of the opposite direction (Don't be so slow.), intensifiers (Move much faster.) and indirect forms "
-    "(It should be faster.), built from templates over the words of the bank's train phrasings. The file is a "
-    "proposal: read it, delete what is wrong, and add what is right to the bank by hand.",
-)
-def cmd_bank_augment(args: argparse.Namespace) -> None:
-    from langpref.language.augment import propose
-    from langpref.language.banksource import open_bank
-
-    if args.per_meaning < 1:
-        raise LangprefError(f"--per-meaning must be >= 1, got {args.per_meaning}")
-    source = open_bank(args.where, seed=args.seed)
-    out = Path(args.out)
-    target = out.resolve()
-    if target in source.protected:
-        raise LangprefError(f"--out {out} is the bank or task file itself; augment never writes into a bank")
-    if out.is_dir():
-        raise LangprefError(f"--out {out} is a directory; give a JSON file name")
-    if out.exists() and not args.force:
-        raise LangprefError(f"--out {out} already exists; pass --force to overwrite it or choose another file")
-    existing = [t for split in source.splits.values() for by in split.values() for ts in by.values() for t in ts]
-    proposed = propose(source.split("train"), source.features, existing, per_meaning=args.per_meaning)
-    doc = {
-        "_comment": (
-            f"Proposed phrasings for task {source.task} (from {source.origin}) by `langpref bank augment`, for review: "
-            "NOT a bank and never merged by itself. Delete what is wrong or unnatural, then add the rest to the "
-            "bank's file by hand. Check it with `langpref bank check ... --utterances THIS_FILE`."
-        ),
-        source.task: proposed,
-    }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
-    tmp.write_text(json.dumps(doc, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
-    tmp.replace(out)
-    counts = {f"{f}/{d}": len(ts) for f, by in proposed.items() for d, ts in by.items()}
-    record(args, out.with_suffix(".config.json"))
-    emit(
-        {"out": str(out), "task": source.task, "proposed": counts},
-        args.json,
-        lambda o: f"wrote {sum(counts.values())} proposed phrasings for {o['task']} to {o['out']} (for review)",
-    )
+# `bank augment` lives in its own module (its proposers); imported here so that --help lists it in this place
+from langpref.cli import augment as _augment  # noqa: E402, F401
 
 
 def _texts(file: str) -> list[str]:
@@ -449,6 +399,15 @@ def _human_models(out: dict) -> str:
         opt("--temperature", type=float, default=None, help="contrastive temperature (default: PretrainConfig's)"),
         opt("--per-meaning", type=int, default=None, help="made sentences per concept and direction"),
         opt(
+            "--objective",
+            choices=["contrastive", "aligned"],
+            default=None,
+            help="contrastive over meanings (default), or aligned: signed concept axes, the co-finetuning loss "
+            "without trajectories (langpref.language.pretrain_aligned)",
+        ),
+        opt("--head-lr", type=float, default=None, help="learning rate of the aligned objective's head"),
+        opt("--threads", type=int, default=None, help="torch CPU threads (default: torch's own choice)"),
+        opt(
             "--val-concepts",
             default=None,
             metavar="C1,C2,...",
@@ -472,7 +431,13 @@ def cmd_lang_model_build(args: argparse.Namespace) -> None:
     from langpref.language.pretrain import PretrainConfig, build, pretrain, read_record
 
     given = {"seed": args.seed, "steps": args.steps, "lr": args.lr, "temperature": args.temperature}
-    given["per_meaning"] = args.per_meaning
+    given.update(per_meaning=args.per_meaning, objective=args.objective, head_lr=args.head_lr)
+    if args.threads is not None:
+        if args.threads < 1:
+            raise LangprefError(f"--threads must be >= 1, got {args.threads}")
+        import torch
+
+        torch.set_num_threads(args.threads)
     cfg = PretrainConfig(**{k: v for k, v in given.items() if v is not None})
     cfg.validate()
     if args.val_concepts:
