@@ -399,15 +399,6 @@ def _human_models(out: dict) -> str:
         opt("--temperature", type=float, default=None, help="contrastive temperature (default: PretrainConfig's)"),
         opt("--per-meaning", type=int, default=None, help="made sentences per concept and direction"),
         opt(
-            "--objective",
-            choices=["contrastive", "aligned"],
-            default=None,
-            help="contrastive over meanings (default), or aligned: signed concept axes, the co-finetuning loss "
-            "without trajectories (langpref.language.pretrain_aligned)",
-        ),
-        opt("--head-lr", type=float, default=None, help="learning rate of the aligned objective's head"),
-        opt("--threads", type=int, default=None, help="torch CPU threads (default: torch's own choice)"),
-        opt(
             "--val-concepts",
             default=None,
             metavar="C1,C2,...",
@@ -431,13 +422,7 @@ def cmd_lang_model_build(args: argparse.Namespace) -> None:
     from langpref.language.pretrain import PretrainConfig, build, pretrain, read_record
 
     given = {"seed": args.seed, "steps": args.steps, "lr": args.lr, "temperature": args.temperature}
-    given.update(per_meaning=args.per_meaning, objective=args.objective, head_lr=args.head_lr)
-    if args.threads is not None:
-        if args.threads < 1:
-            raise LangprefError(f"--threads must be >= 1, got {args.threads}")
-        import torch
-
-        torch.set_num_threads(args.threads)
+    given["per_meaning"] = args.per_meaning
     cfg = PretrainConfig(**{k: v for k, v in given.items() if v is not None})
     cfg.validate()
     if args.val_concepts:
