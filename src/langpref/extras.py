@@ -97,12 +97,15 @@ def pyplot(what: str) -> Any:
     return plt
 
 
-def save_figure(fig: Any, out: str | Path, dpi: int = 110) -> Path:
-    """Write a matplotlib figure to `out` (its folder made), trimmed to what is drawn, and close it; the path."""
+def save_figure(fig: Any, out: str | Path, dpi: int = 110, trim: bool = True) -> Path:
+    """Write a matplotlib figure to `out` (its folder made), trimmed to what is drawn, and close it; the path.
+    `trim=False`: laid out to the figure's own size instead (`tight_layout`), as the experiments' figures are."""
     import matplotlib.pyplot as plt
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi, bbox_inches="tight")
+    if not trim:
+        fig.tight_layout()
+    fig.savefig(out, dpi=dpi, bbox_inches="tight" if trim else None)
     plt.close(fig)
     return out

@@ -308,7 +308,7 @@ def generation_stats(runs: list[ImprovementRun]) -> dict:
 def plot_improvement(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
     """Fig. 4 analogue: mean +- std of the normalised true reward per iteration, one line per result, and the
     dashed optimum."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("improvement figure")
 
@@ -327,7 +327,4 @@ def plot_improvement(results: dict[str, dict], out: str | Path, title: str = "")
     ax.set_ylim(-0.05, top)  # a generated trajectory may score above 1, the best of the split
     ax.set_title(title, fontsize=10)
     ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi=120, trim=False)

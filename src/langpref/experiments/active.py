@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.common import SweepConfig, figure_link
+from langpref.experiments.common import Inputs, figure_link, space_experiment
 from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary
-from langpref.extras import pyplot
+from langpref.extras import pyplot, save_figure
 from langpref.feedback.kind import MIXED as BOTH
 from langpref.feedback.kind import PAPER_KINDS
 from langpref.reward.cost import elapsed, on_time_grid, time_average
@@ -143,41 +143,25 @@ def language_share(runs: dict, method: str, keys: list[str]) -> float | None:
     return float(np.mean([kind == LANGUAGE for ks in kinds for kind in ks]))
 
 
-def run_active_experiment(
-    env: str,
-    data=None,
-    model=None,
-    out=None,
-    *,
-    perfect: bool = False,
-    config=None,
-    humans: int | None = None,
-    seeds: int | None = None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-) -> dict[str, Any]:
+@space_experiment
+def run_active_experiment(run: Inputs, humans: int | None = None, seeds: int | None = None) -> dict[str, Any]:
     """Every method of `ACTIVE_METHODS` on `env` (`config`, a `LearnRewardConfig`, sets the rest: humans and seeds
     (default 10 x 3), queries, candidates, posterior samples, the human); writes active.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
 
-    base = config or LearnRewardConfig(humans=10, seeds=3)
+    base = run.config or LearnRewardConfig(humans=10, seeds=3)
     base = replace(base, humans=base.humans if humans is None else humans, seeds=base.seeds if seeds is None else seeds)
     methods = {
         name: replace(base, feedback=fb, query_selection=sel, learner=learner, confirm_margin=margin)
         for name, (fb, sel, learner, margin) in ACTIVE_METHODS.items()
     }
-    results, runs, space, data, model, out = run_methods(
-        "active", env, methods, data, model, out, perfect, force, progress, sweep
-    )
+    results, runs, space, run = run_methods("active", run, methods)
     keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
     timed = per_second(runs, methods, keys)
     auc, auc_s, contrasts = _contrasts(runs, methods, keys, timed)
     targets = {**paper_learner_targets(results, contrasts, base.queries), **answer_model_targets(results, contrasts)}
-    figure = plot_active(
-        results, timed, out / "active.png", f"Active queries, {env}" + (" (perfect latent)" if model is None else "")
-    )
+    title = f"Active queries, {run.env}" + (" (perfect latent)" if run.model is None else "")
+    figure = plot_active(results, timed, run.out / "active.png", title)
     fields = {
         "methods": results,
         "targets": targets,
@@ -190,7 +174,7 @@ def run_active_experiment(
         "per_run_auc": {m: auc[m][:, 0].tolist() for m in methods},
         "per_run_auc_per_second": {m: auc_s[m][:, 0].tolist() for m in methods},
     }
-    return save_summary("active", env, data, model, out, space, base, fields, _markdown, command)
+    return save_summary("active", run, space, base, fields, _markdown)
 
 
 def _contrasts(runs: dict[str, dict], methods: dict[str, Any], keys: list[str], timed: dict[str, Any]):
@@ -289,10 +273,7 @@ def plot_active(results: dict[str, dict], timed: dict[str, Any], out: str | Path
             ax.set_ylim(-0.05, 1.05)
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi=120, trim=False)
 
 
 def _markdown(summary: dict[str, Any]) -> str:

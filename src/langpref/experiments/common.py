@@ -8,6 +8,7 @@ import hashlib
 import json
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -135,6 +136,82 @@ def default_paths(
     name = env + ("-perfect" if perfect else "") + (f"-{variant}" if variant else "")
     out = Path(out) if out else Path("results") / kind / name
     return data, model, out
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """What an experiment of the latent space's uses runs on: the arguments of the shared run signature
+    (`langpref.experiments.registry`), written once here (`space_experiment`)."""
+
+    env: str
+    data: str | Path | None = None
+    model: str | Path | None = None
+    out: str | Path | None = None
+    perfect: bool = False
+    config: Any = None
+    """The record's config dataclass; None: the experiment's settings."""
+    force: bool = False
+    progress: bool = True
+    sweep: SweepConfig | None = None
+    command: str | None = None
+    """The command line recorded in the summary; None, from Python: the experiment's base command."""
+
+    def paths(self, kind: str, variant: str = "") -> tuple[Path, Path | None, Path]:
+        """Its data, model and output folder, the defaults where not given (`default_paths`)."""
+        return default_paths(kind, self.env, self.data, self.model, self.out, self.perfect, variant)
+
+
+def space_experiment(body: Callable[..., dict[str, Any]]) -> Callable[..., dict[str, Any]]:
+    """The run function of an experiment of the latent space's uses: the shared signature, calling
+    `body(Inputs(...), **options)` (options: an experiment's own keywords, e.g. the prior's `grid`)."""
+
+    def run(
+        env: str,
+        data: str | Path | None = None,
+        model: str | Path | None = None,
+        out: str | Path | None = None,
+        *,
+        perfect: bool = False,
+        config: Any = None,
+        force: bool = False,
+        progress: bool = True,
+        sweep: SweepConfig | None = None,
+        command: str | None = None,
+        **options: Any,
+    ) -> dict[str, Any]:
+        return body(Inputs(env, data, model, out, perfect, config, force, progress, sweep, command), **options)
+
+    for name in ("__name__", "__qualname__", "__doc__", "__module__"):
+        setattr(run, name, getattr(body, name))
+    return run
+
+
+def summary_head(env: str, data: Path, model: Path | None, space: Any, cfg: Any) -> dict[str, Any]:
+    """What the summary of a reward experiment starts with: its inputs, its space and its humans x seeds x queries."""
+    return {
+        "env": env,
+        "data": str(data),
+        "model": str(model) if model else None,
+        "perfect": model is None,
+        "space": space.description,
+        "humans": cfg.humans,
+        "seeds": cfg.seeds,
+        "queries": cfg.queries,
+    }
+
+
+def improve_head(run: Inputs, space: Any, cfg: Any) -> dict[str, Any]:
+    """What the summary of an improvement experiment starts with: its inputs (`run`, paths resolved), its space and
+    its seeds x iterations."""
+    return {
+        "env": run.env,
+        "data": str(run.data),
+        "model": str(run.model) if run.model else None,
+        "perfect": run.perfect,
+        "space": space.description,
+        "seeds": cfg.seeds,
+        "iterations": cfg.iterations,
+    }
 
 
 def base_command(kind: str, env: str, data: Path, model: Path | None, out: Path) -> str:

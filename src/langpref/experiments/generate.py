@@ -29,7 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.common import RunCache, SweepConfig, base_command, default_paths, figure_link, run_sweep
+from langpref.experiments.common import (
+    Inputs,
+    RunCache,
+    SweepConfig,
+    base_command,
+    figure_link,
+    improve_head,
+    run_sweep,
+    space_experiment,
+)
 
 CURVES = {
     "paper": ("paper", "test"),
@@ -68,7 +77,7 @@ def _job(state, job) -> tuple[str, dict]:
 
 def _plot_reward(picked: np.ndarray, recorded: np.ndarray, generated: np.ndarray, out: Path, title: str) -> Path:
     """Per run, the generated optimum against r_xi's pick of the test split and of every recorded trajectory."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the generated-optimum figure")
 
@@ -83,43 +92,29 @@ def _plot_reward(picked: np.ndarray, recorded: np.ndarray, generated: np.ndarray
     ax.set_ylabel("generated r_xi optimum")
     ax.set_title(title, fontsize=9)
     ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi=120, trim=False)
 
 
-def run_generate_experiment(
-    env: str,
-    data: str | Path | None = None,
-    model: str | Path | None = None,
-    out: str | Path | None = None,
-    *,
-    perfect: bool = False,
-    config=None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-) -> dict[str, Any]:
+@space_experiment
+def run_generate_experiment(run: Inputs) -> dict[str, Any]:
     """Both comparisons (module docstring) with `config` (an `ImproveConfig`: seeds, iterations, the human)."""
 
     from langpref.improve import ImproveConfig, ImprovementRun, generation_stats, summarise_improvement
     from langpref.reward import Curves, LearnRewardConfig
 
-    base = config or ImproveConfig()
-    sweep = sweep or SweepConfig()
-    data, model, out = default_paths("generate", env, data, model, out, perfect)
+    base = run.config or ImproveConfig()
+    env, perfect, sweep = run.env, run.perfect, run.sweep or SweepConfig()
+    data, model, out = run.paths("generate")
     args = (data, model, env, perfect, base.human.phrasings)
     space, generation = _worker(*args)
     cfgs = {name: replace(base, strategy=s, candidate_split=c) for name, (s, c) in CURVES.items()}
     rcfg = LearnRewardConfig(feedback="language", human=base.human, seed=base.seed, **REWARD_RUNS)
     identity = {"space": space.description, "propose": asdict(generation.cfg), "reward": asdict(rcfg)}
-    cache = RunCache(out / "runs.json", {**identity, **{n: asdict(c) for n, c in cfgs.items()}}, force)
+    cache = RunCache(out / "runs.json", {**identity, **{n: asdict(c) for n, c in cfgs.items()}}, run.force)
     todo = [(f"{n}/{s}", c, (c.seed, s)) for n, c in cfgs.items() for s in range(c.seeds)]
     todo += [(f"reward/{h}/{s}", rcfg, (rcfg.seed, h, s)) for h in range(rcfg.humans) for s in range(rcfg.seeds)]
     todo = [j for j in todo if j[0] not in cache]
-    run_sweep(_job, todo, (space, generation), args, cache, sweep, f"generate {env}", progress, setup=_worker)
+    run_sweep(_job, todo, (space, generation), args, cache, sweep, f"generate {env}", run.progress, setup=_worker)
     improve = {}
     for name, cfg in cfgs.items():
         runs = [ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]
@@ -129,18 +124,12 @@ def run_generate_experiment(
     made = np.array([c.optimized_true_reward for c in curves])
     recorded = np.array([c.recorded_true_reward for c in curves])
     summary = {
-        "env": env,
-        "data": str(data),
-        "model": str(model) if model else None,
-        "perfect": perfect,
-        "space": space.description,
-        "seeds": base.seeds,
-        "iterations": base.iterations,
+        **improve_head(replace(run, data=data, model=model), space, base),
         "improve": improve,
         "reward": _reward_summary(picked, made, recorded, rcfg.queries),
         "targets": _targets(improve, made, recorded),
         "propose": asdict(generation.cfg),
-        "command": command or base_command("generate", env, data, model, out),
+        "command": run.command or base_command("generate", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     return _write(summary, out, picked, recorded, made)

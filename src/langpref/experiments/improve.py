@@ -16,13 +16,15 @@ from pathlib import Path
 from typing import Any
 
 from langpref.experiments.common import (
+    Inputs,
     RunCache,
     SweepConfig,
     base_command,
-    default_paths,
     figure_link,
+    improve_head,
     phrasing_variant,
     run_sweep,
+    space_experiment,
     title_suffix,
 )
 
@@ -109,51 +111,34 @@ def _run_curves(
     }
 
 
-def run_improve_experiment(
-    env: str,
-    data: str | Path | None = None,
-    model: str | Path | None = None,
-    out: str | Path | None = None,
-    *,
-    perfect: bool = False,
-    config=None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-) -> dict[str, Any]:
+@space_experiment
+def run_improve_experiment(run: Inputs) -> dict[str, Any]:
     """Every curve of `CURVES` with the paper's settings (or `config`, an `ImproveConfig`); writes JSON, PNG and
     markdown."""
     from langpref.feedback.space import load_space
     from langpref.improve import ImproveConfig, plot_improvement
 
-    base = config or ImproveConfig()
-    phrasings = base.human.phrasings
-    data, model, out = default_paths("improve", env, data, model, out, perfect, "-".join(phrasing_variant(base.human)))
+    base = run.config or ImproveConfig()
+    phrasings, env, perfect = base.human.phrasings, run.env, run.perfect
+    data, model, out = run.paths("improve", "-".join(phrasing_variant(base.human)))
     space = load_space(
         data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=base.human.feature_scale
     )
     cfgs = {name: replace(base, **fields) for name, fields in CURVES.items()}
     worker_args = (data, model, env, perfect, phrasings, base.human.feature_scale)
-    results = _run_curves(cfgs, space, worker_args, out, force, sweep, f"improve {env}", progress)
+    results = _run_curves(cfgs, space, worker_args, out, run.force, run.sweep, f"improve {env}", run.progress)
     figure = plot_improvement(
         {f"{n} ({CURVE_LABELS[n]})": r for n, r in results.items()},
         out / "improve.png",
         f"Iterative improvement, {env}" + title_suffix(perfect, base.human),
     )
     summary = {
-        "env": env,
-        "data": str(data),
-        "model": str(model) if model else None,
-        "perfect": perfect,
-        "space": space.description,
-        "seeds": base.seeds,
-        "iterations": base.iterations,
+        **improve_head(replace(run, data=data, model=model), space, base),
         "candidate_split": base.candidate_split,
         "strategies": results,
         "figure": str(figure),
         "paper": PAPER_FIG4,
-        "command": command or base_command("improve", env, data, model, out),
+        "command": run.command or base_command("improve", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / "improve.json").write_text(json.dumps(summary, indent=2) + "\n")

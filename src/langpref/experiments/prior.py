@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from langpref.experiments.common import SweepConfig, figure_link, title_suffix
+from langpref.experiments.common import Inputs, figure_link, space_experiment, title_suffix
 from langpref.experiments.reward import mean_cross_entropy, run_methods, save_summary
 
 PRIOR_GRID = (0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
@@ -25,7 +25,7 @@ PRIOR_METHODS = {
 
 def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Path, title: str = "") -> Path:
     """Mean cross-entropy over queries 1..Q (val split) against the weight decay, one line per method."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the prior figure")
 
@@ -41,10 +41,7 @@ def plot_prior(results: dict[str, dict], grid: tuple[float, ...], out: str | Pat
     ax.set_ylabel("mean CE, queries 1..Q (val)")
     ax.legend(fontsize=8)
     ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi=120, trim=False)
 
 
 def prior_human(human):
@@ -57,20 +54,8 @@ def _prior_key(name: str, wd: float) -> str:
     return f"{name} wd={wd:g}"
 
 
-def run_prior_experiment(
-    env: str,
-    data=None,
-    model=None,
-    out=None,
-    *,
-    perfect: bool = False,
-    config=None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-    grid: tuple[float, ...] = PRIOR_GRID,
-) -> dict[str, Any]:
+@space_experiment
+def run_prior_experiment(run: Inputs, grid: tuple[float, ...] = PRIOR_GRID) -> dict[str, Any]:
     """Each method (language with both losses, comparisons, either language loss alone) at every weight decay of
     `grid`, scored on the val split with the humans of seed `PRIOR_SEED`, which the test experiments never meet, and
     whose language human speaks the bank's val phrasings (`prior_human`): nothing of the test split takes part in
@@ -78,7 +63,7 @@ def run_prior_experiment(
     prior.json/.png/.md."""
     from langpref.reward import DEFAULT_WEIGHT_DECAY, LearnRewardConfig
 
-    given = config or LearnRewardConfig()
+    given = run.config or LearnRewardConfig()
     base = replace(given, eval_split="val", seed=PRIOR_SEED, human=prior_human(given.human))
     reward_model = base.reward.model
     methods = {
@@ -86,14 +71,12 @@ def run_prior_experiment(
         for name, (fb, loss) in PRIOR_METHODS.items()
         for wd in grid
     }
-    results, _, space, data, model, out = run_methods(
-        "prior", env, methods, data, model, out, perfect, force, progress, sweep, named_for=given.human
-    )
+    results, _, space, run = run_methods("prior", run, methods, named_for=given.human)
     picks = {
         name: min(grid, key=lambda wd: mean_cross_entropy(results[_prior_key(name, wd)])) for name in PRIOR_METHODS
     }
-    title = f"L2 prior strength, {env}, {reward_model} reward" + title_suffix(model is None, base.human)
-    figure = plot_prior(results, grid, out / "prior.png", title)
+    title = f"L2 prior strength, {run.env}, {reward_model} reward" + title_suffix(run.model is None, base.human)
+    figure = plot_prior(results, grid, run.out / "prior.png", title)
     fields = {
         "seed": PRIOR_SEED,
         "eval_split": "val",
@@ -105,7 +88,7 @@ def run_prior_experiment(
         "methods": results,
         "figure": str(figure),
     }
-    return save_summary("prior", env, data, model, out, space, base, fields, _prior_markdown, command)
+    return save_summary("prior", run, space, base, fields, _prior_markdown)
 
 
 def _prior_markdown(summary: dict[str, Any]) -> str:

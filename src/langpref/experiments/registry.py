@@ -9,7 +9,8 @@ Experiments of the latent space's uses (`inputs="space"`) share one run signatur
     run(env, data, model, out, *, perfect, config, force, sweep, command) -> summary
 
 (`data`, `model` and `out` None for their defaults, `config` the record's config class, `sweep` a `SweepConfig`,
-`command` the command line recorded in the summary). Experiments that train their own models (`inputs="own"`) take
+`command` the command line recorded in the summary), written once: `langpref.experiments.common.space_experiment`
+makes it around a body that takes them as one `Inputs`. Experiments that train their own models (`inputs="own"`) take
 their own arguments; their commands live beside `langpref train` (`langpref.cli.latent`).
 """
 

@@ -23,13 +23,15 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.common import (
+    Inputs,
     RunCache,
     SweepConfig,
     base_command,
-    default_paths,
     figure_link,
     phrasing_variant,
     run_sweep,
+    space_experiment,
+    summary_head,
     title_suffix,
 )
 
@@ -43,7 +45,7 @@ PAPER_FIG6 = "Fig. 6 (no numbers printed): L_Explicit + L_Implicit beats each al
 
 def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
     """Fig. 5/6 analogue: (a) cross-entropy and (b) normalised true reward of the best test trajectory per query."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the reward-learning figure")
 
@@ -64,39 +66,26 @@ def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "
         ax.legend(fontsize=8)
     axes[1].set_ylim(-0.05, 1.05)
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi=120, trim=False)
 
 
 def run_methods(
-    kind: str,
-    env: str,
-    methods: dict[str, Any],
-    data,
-    model,
-    out,
-    perfect: bool,
-    force: bool,
-    progress: bool,
-    sweep: SweepConfig | None,
-    named_for=None,
-) -> tuple[dict[str, dict], dict[str, dict], Any, Path, Path | None, Path]:
-    """Run every (method, human, seed) not yet in the cache; the summary of each method and every run's curves
-    (keyed METHOD/HUMAN/SEED). The default output directory is named for the human `named_for` (default the
-    methods')."""
+    kind: str, run: Inputs, methods: dict[str, Any], named_for=None
+) -> tuple[dict[str, dict], dict[str, dict], Any, Inputs]:
+    """Run every (method, human, seed) not yet in the cache; the summary of each method, every run's curves (keyed
+    METHOD/HUMAN/SEED), the latent space and `run` with its paths resolved. The default output directory is named
+    for the human `named_for` (default the methods')."""
     from langpref.feedback.space import load_space
 
     reward_models = {cfg.reward.model for cfg in methods.values()} - {"linear"}
     human = next(iter(methods.values())).human
     phrasings = human.phrasings
-    variant = "-".join(sorted(reward_models) + phrasing_variant(named_for or human))
-    data, model, out = default_paths(kind, env, data, model, out, perfect, variant)
+    data, model, out = run.paths(kind, "-".join(sorted(reward_models) + phrasing_variant(named_for or human)))
+    env, perfect = run.env, run.perfect
     space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings, feature_scale=human.feature_scale)
     streams = {c.eval_split for c in methods.values()} - {"test"}  # refuses val caches from before their own humans
     key = {"space": space.description, **{m: asdict(c) for m, c in methods.items()}}
-    cache = RunCache(out / "runs.json", {**key, "humans_of": sorted(streams)} if streams else key, force=force)
+    cache = RunCache(out / "runs.json", {**key, "humans_of": sorted(streams)} if streams else key, force=run.force)
     for cfg in methods.values():
         cfg.validate()
     todo = [
@@ -112,15 +101,15 @@ def run_methods(
         space,
         (data, model, env, perfect, phrasings, human.feature_scale),
         cache,
-        sweep or SweepConfig(),
+        run.sweep or SweepConfig(),
         f"{kind} {env}",
-        progress,
+        run.progress,
     )
     results = {
         name: {**_summary(cache.runs, name, cfg.humans, cfg.seeds), "config": asdict(cfg)}
         for name, cfg in methods.items()
     }
-    return results, cache.runs, space, data, model, out
+    return results, cache.runs, space, replace(run, data=data, model=model, out=out)
 
 
 THRESHOLD = 0.95
@@ -298,23 +287,16 @@ def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def save_summary(
-    kind: str, env: str, data, model, out, space, base, fields: dict[str, Any], markdown, command: str | None
-) -> dict[str, Any]:
+def save_summary(kind: str, run: Inputs, space, base, fields: dict[str, Any], markdown) -> dict[str, Any]:
     """The summary of an experiment (what every kind records, then `fields`), written as KIND.json and, through
-    `markdown(summary)`, KIND.md. `command`: the command line that ran it (`langpref experiment` passes its own;
-    None, from Python: the experiment's base command, whose options the summary's configs hold)."""
+    `markdown(summary)`, KIND.md into `run.out` (resolved, `run_methods`). `run.command`: the command line that ran
+    it (`langpref experiment` passes its own; None, from Python: the experiment's base command, whose options the
+    summary's configs hold)."""
+    env, data, model, out = run.env, run.data, run.model, run.out
     summary = {
-        "env": env,
-        "data": str(data),
-        "model": str(model) if model else None,
-        "perfect": model is None,
-        "space": space.description,
-        "humans": base.humans,
-        "seeds": base.seeds,
-        "queries": base.queries,
+        **summary_head(env, data, model, space, base),
         **fields,
-        "command": command or base_command(kind, env, data, model, out),
+        "command": run.command or base_command(kind, env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     (out / f"{kind}.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -323,49 +305,24 @@ def save_summary(
 
 
 def _finish(
-    kind: str,
-    title: str,
-    paper: str,
-    env: str,
-    results,
-    space,
-    data,
-    model,
-    out,
-    base,
-    targets,
-    command: str | None,
-    **extra: Any,
+    kind: str, title: str, paper: str, run: Inputs, results, space, base, targets, **extra: Any
 ) -> dict[str, Any]:
-    figure = plot_reward_curves(
-        results, out / f"{kind}.png", f"{title}, {env}" + title_suffix(model is None, base.human)
-    )
+    """The figure and the summary of the reward experiment or the ablation."""
+    title_at = f"{title}, {run.env}" + title_suffix(run.model is None, base.human)
+    figure = plot_reward_curves(results, run.out / f"{kind}.png", title_at)
     fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}
-    return save_summary(kind, env, data, model, out, space, base, fields, lambda s: _markdown(title, s, paper), command)
+    return save_summary(kind, run, space, base, fields, lambda s: _markdown(title, s, paper))
 
 
-def run_reward_experiment(
-    env: str,
-    data=None,
-    model=None,
-    out=None,
-    *,
-    perfect: bool = False,
-    config=None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-) -> dict[str, Any]:
+@space_experiment
+def run_reward_experiment(run: Inputs) -> dict[str, Any]:
     """Language (L_Explicit + L_Implicit) vs comparisons with the paper's settings (or `config`, a
     `LearnRewardConfig` whose feedback is replaced); writes reward.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
 
-    base = config or LearnRewardConfig()
+    base = run.config or LearnRewardConfig()
     methods = {"language": replace(base, feedback="language"), "comparison": replace(base, feedback="comparison")}
-    results, runs, space, data, model, out = run_methods(
-        "reward", env, methods, data, model, out, perfect, force, progress, sweep
-    )
+    results, runs, space, run = run_methods("reward", run, methods)
     lang, comp = results["language"], results["comparison"]
     lq, cq = lang["queries_to_0.95"], comp["queries_to_0.95"]
     targets = {
@@ -381,42 +338,25 @@ def run_reward_experiment(
         "reward",
         "Reward learning: language vs comparisons",
         PAPER_FIG5,
-        env,
+        run,
         results,
         space,
-        data,
-        model,
-        out,
         base,
         targets,
-        command,
         ce_difference=paired_difference(ce["language"], ce["comparison"]),
         ce_language_lower=ce_lower_count(lang, comp),
     )
 
 
-def run_ablation_experiment(
-    env: str,
-    data=None,
-    model=None,
-    out=None,
-    *,
-    perfect: bool = False,
-    config=None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-) -> dict[str, Any]:
+@space_experiment
+def run_ablation_experiment(run: Inputs) -> dict[str, Any]:
     """Language feedback with L_Explicit + L_Implicit, L_Explicit alone and L_Implicit alone; writes
     ablation.json/.png/.md."""
     from langpref.reward import LearnRewardConfig
 
-    base = replace(config or LearnRewardConfig(), feedback="language")
+    base = replace(run.config or LearnRewardConfig(), feedback="language")
     methods = {loss: replace(base, reward=replace(base.reward, loss=loss)) for loss in ("both", "explicit", "implicit")}
-    results, _, space, data, model, out = run_methods(
-        "ablation", env, methods, data, model, out, perfect, force, progress, sweep
-    )
+    results, _, space, run = run_methods("ablation", run, methods)
     b, e, i = results["both"], results["explicit"], results["implicit"]
     targets = {
         "both has a higher AUC of true reward than explicit and implicit alone": b["auc_true_reward"]
@@ -424,17 +364,4 @@ def run_ablation_experiment(
         "both has a lower mean cross-entropy (AUC) than explicit and implicit alone": b["auc_cross_entropy"]
         < min(e["auc_cross_entropy"], i["auc_cross_entropy"]),
     }
-    return _finish(
-        "ablation",
-        "Ablation of the language reward loss",
-        PAPER_FIG6,
-        env,
-        results,
-        space,
-        data,
-        model,
-        out,
-        base,
-        targets,
-        command,
-    )
+    return _finish("ablation", "Ablation of the language reward loss", PAPER_FIG6, run, results, space, base, targets)

@@ -32,7 +32,7 @@ from typing import Any, Literal
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.experiments.common import SweepConfig, default_paths, run_sweep
+from langpref.experiments.common import Inputs, SweepConfig, run_sweep, space_experiment
 from langpref.experiments.rl_policy import LEARNED, SOURCES, Judge, PolicyJob, policy_job
 from langpref.feedback.humans import HumanConfig
 from langpref.reward.learner import RewardConfig
@@ -247,34 +247,23 @@ def _no_setup() -> None:
     return None
 
 
-def run_rl_experiment(
-    env: str,
-    data=None,
-    model=None,
-    out=None,
-    *,
-    perfect: bool = False,
-    config: RLConfig | None = None,
-    force: bool = False,
-    progress: bool = True,
-    sweep: SweepConfig | None = None,
-    command: str | None = None,
-) -> dict[str, Any]:
+@space_experiment
+def run_rl_experiment(run: Inputs) -> dict[str, Any]:
     """Every source x human x seed of `config` on `env` (see the module docstring); writes rl.json/.png/.md and
     returns the summary."""
     from langpref.experiments.rl_report import write_report
     from langpref.feedback.space import load_space
 
-    cfg = config or RLConfig()
+    cfg: RLConfig = run.config or RLConfig()
     cfg.validate()
-    data, model, out = default_paths("rl", env, data, model, out, perfect)
+    data, model, out = run.paths("rl")
     learned = any(s in LEARNED for s in cfg.sources)
     if learned:
         from langpref.reward.saved import check_saveable
 
         check_saveable(model)  # a learned reward needs a trajectory encoder: one line, before any work
-    space = load_space(data, model, env=env, perfect=perfect, phrasings=cfg.human.phrasings)
-    store = RunFiles(out / "runs", {**cfg.key(), "data": str(data), "model": str(model)}, force)
+    space = load_space(data, model, env=run.env, perfect=run.perfect, phrasings=cfg.human.phrasings)
+    store = RunFiles(out / "runs", {**cfg.key(), "data": str(data), "model": str(model)}, run.force)
     judge = judges(data, space, cfg)
     generation = None
     if cfg.cmaes and not all(_have_reward(store, out, name) for name in _reward_names(cfg)):  # only if needed
@@ -285,11 +274,11 @@ def run_rl_experiment(
         learn_rewards(space, cfg, Path(model), out, store, judge, generation)
     jobs = policy_jobs(space, cfg, store, judge, out)
     todo = [(job, cfg) for job in jobs if job.name not in store]
-    sweep = sweep or SweepConfig()
-    run_sweep(policy_job, todo, None, (), store, sweep, f"rl {cfg.algorithm}", progress, setup=_no_setup)
+    sweep = run.sweep or SweepConfig()
+    run_sweep(policy_job, todo, None, (), store, sweep, f"rl {cfg.algorithm}", run.progress, setup=_no_setup)
     runs = {job.name: store.get(job.name) for job in jobs}
     rewards = {name: store.get(name) for name in _reward_names(cfg)}
-    return write_report(env, data, model, out, space, cfg, runs, rewards, command)
+    return write_report(run.env, data, model, out, space, cfg, runs, rewards, run.command)
 
 
 def _reward_names(cfg: RLConfig) -> list[str]:

@@ -306,17 +306,10 @@ def _interval(d: dict[str, float | None]) -> str:
 
 def write_report(env: str, data, model, out: Path, space, cfg, runs, rewards, command: str | None) -> dict[str, Any]:
     """Summarise, draw and write rl.json, rl.png and rl.md into `out`; the summary."""
-    from langpref.experiments.common import base_command
+    from langpref.experiments.common import base_command, summary_head
 
     summary = {
-        "env": env,
-        "data": str(data),
-        "model": str(model) if model else None,
-        "perfect": model is None,
-        "space": space.description,
-        "humans": cfg.humans,
-        "seeds": cfg.seeds,
-        "queries": cfg.queries,
+        **summary_head(env, data, model, space, cfg),
         **summarise(runs, rewards, cfg),
         "per_human": per_human(runs, cfg, space.feature_names, _weights(space, cfg)),
         "config": {**asdict(cfg), "hidden": list(cfg.hidden), "sources": list(cfg.sources)},
