@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.common import Inputs, figure_link, space_experiment
-from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary
+from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary, section_head
 from langpref.extras import pyplot, save_figure
 from langpref.feedback.kind import MIXED as BOTH
 from langpref.feedback.kind import PAPER_KINDS
@@ -277,19 +277,14 @@ def plot_active(results: dict[str, dict], timed: dict[str, Any], out: str | Path
 
 
 def _markdown(summary: dict[str, Any]) -> str:
-    q = len(next(iter(summary["methods"].values()))["cross_entropy"]) - 1
-    at = sorted({x for x in (0, 1, 5, 10, q // 2, q) if x <= q})
-    lines = [
-        f"### Active queries, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
-        "",
-        f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-        f"{summary['seeds']} seeds, Q = {q}; metrics on the test split; methods without `am-` fit the paper's "
-        "learner and differ only in the queries, `am-` ones the answer-model learner). CE: cross-entropy to the "
-        "human's P_w; best: normalised true reward of the test trajectory r_xi ranks first; AUC: mean of the best "
-        "curve over query counts 0..Q.",
-        "",
-    ]
-    lines += curves_table(summary["methods"], at)
+    at, lines = section_head(
+        "Active queries",
+        summary,
+        "metrics on the test split; methods without `am-` fit the paper's learner and differ only in the queries, "
+        "`am-` ones the answer-model learner). CE: cross-entropy to the human's P_w; best: normalised true reward of "
+        "the test trajectory r_xi ranks first; AUC: mean of the best curve over query counts 0..Q.",
+    )
+    lines += ["", *curves_table(summary["methods"], at)]
     lines += ["", *_time_table(summary)]
     lines += [
         "",

@@ -29,16 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from langpref.experiments.common import (
-    Inputs,
-    RunCache,
-    SweepConfig,
-    base_command,
-    figure_link,
-    improve_head,
-    run_sweep,
-    space_experiment,
-)
+from langpref.experiments import common
+from langpref.experiments.common import Inputs, SweepConfig, space_experiment
 
 CURVES = {
     "paper": ("paper", "test"),
@@ -110,11 +102,12 @@ def run_generate_experiment(run: Inputs) -> dict[str, Any]:
     cfgs = {name: replace(base, strategy=s, candidate_split=c) for name, (s, c) in CURVES.items()}
     rcfg = LearnRewardConfig(feedback="language", human=base.human, seed=base.seed, **REWARD_RUNS)
     identity = {"space": space.description, "propose": asdict(generation.cfg), "reward": asdict(rcfg)}
-    cache = RunCache(out / "runs.json", {**identity, **{n: asdict(c) for n, c in cfgs.items()}}, run.force)
+    cache = common.RunCache(out / "runs.json", {**identity, **{n: asdict(c) for n, c in cfgs.items()}}, run.force)
     todo = [(f"{n}/{s}", c, (c.seed, s)) for n, c in cfgs.items() for s in range(c.seeds)]
     todo += [(f"reward/{h}/{s}", rcfg, (rcfg.seed, h, s)) for h in range(rcfg.humans) for s in range(rcfg.seeds)]
     todo = [j for j in todo if j[0] not in cache]
-    run_sweep(_job, todo, (space, generation), args, cache, sweep, f"generate {env}", run.progress, setup=_worker)
+    label = f"generate {env}"
+    common.run_sweep(_job, todo, (space, generation), args, cache, sweep, label, run.progress, setup=_worker)
     improve = {}
     for name, cfg in cfgs.items():
         runs = [ImprovementRun(**cache.runs[f"{name}/{s}"]) for s in range(cfg.seeds)]
@@ -124,12 +117,12 @@ def run_generate_experiment(run: Inputs) -> dict[str, Any]:
     made = np.array([c.optimized_true_reward for c in curves])
     recorded = np.array([c.recorded_true_reward for c in curves])
     summary = {
-        **improve_head(replace(run, data=data, model=model), space, base),
+        **common.improve_head(replace(run, data=data, model=model), space, base),
         "improve": improve,
         "reward": _reward_summary(picked, made, recorded, rcfg.queries),
         "targets": _targets(improve, made, recorded),
         "propose": asdict(generation.cfg),
-        "command": run.command or base_command("generate", env, data, model, out),
+        "command": run.command or common.base_command("generate", env, data, model, out),
         "date": datetime.date.today().isoformat(),
     }
     return _write(summary, out, picked, recorded, made)
@@ -212,8 +205,8 @@ def generate_markdown(s: dict[str, Any]) -> str:
         "",
         f"Targets: {json.dumps(s['targets'])}",
         "",
-        f"![generated {s['env']}]({figure_link(s['figure'])}) "
-        f"![generated optimum {s['env']}]({figure_link(s['reward_figure'])})",
+        f"![generated {s['env']}]({common.figure_link(s['figure'])}) "
+        f"![generated optimum {s['env']}]({common.figure_link(s['reward_figure'])})",
     ]
     return "\n".join(lines) + "\n"
 

@@ -256,21 +256,29 @@ def _per_human_table(results: dict[str, dict]) -> list[str]:
     return lines
 
 
-def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
+def section_head(title: str, summary: dict[str, Any], about: str) -> tuple[list[int], list[str]]:
+    """The query counts a results table shows (0, 1, 5, 10, Q/2, Q) and the first lines of a results section: its
+    heading, and the command, date, space and runs, then `about` (the metrics' legend) after the run counts."""
     q = len(next(iter(summary["methods"].values()))["cross_entropy"]) - 1
     at = sorted({x for x in (0, 1, 5, 10, q // 2, q) if x <= q})
-    lines = [
+    return at, [
         f"### {title}, {summary['env']}" + (" (perfect latent space, oracle)" if summary["perfect"] else ""),
         "",
         f"`{summary['command']}` ({summary['date']}; {summary['space']}; {summary['humans']} humans x "
-        f"{summary['seeds']} seeds, Q = {q}; metrics on the test split). CE: cross-entropy to the human's P_w "
-        "over all test pairs; best: normalised true reward of the test trajectory r_xi ranks first; AUC: the "
-        "mean of the best curve over query counts 0..Q; queries to 0.95: the first query count at which the mean "
-        "best curve reaches 0.95 (first touch), and the first from which it stays at or above 0.95 up to Q "
-        "(stays).",
-        "",
+        f"{summary['seeds']} seeds, Q = {q}; {about}",
     ]
-    lines += curves_table(summary["methods"], at)
+
+
+def _markdown(title: str, summary: dict[str, Any], paper: str) -> str:
+    at, lines = section_head(
+        title,
+        summary,
+        "metrics on the test split). CE: cross-entropy to the human's P_w over all test pairs; best: normalised "
+        "true reward of the test trajectory r_xi ranks first; AUC: the mean of the best curve over query counts "
+        "0..Q; queries to 0.95: the first query count at which the mean best curve reaches 0.95 (first touch), and "
+        "the first from which it stays at or above 0.95 up to Q (stays).",
+    )
+    lines += ["", *curves_table(summary["methods"], at)]
     lines += ["", "Targets: " + "; ".join(f"{k}: {'yes' if v else 'NO'}" for k, v in summary["targets"].items())]
     if "ce_language_lower" in summary:
         c = summary["ce_language_lower"]
