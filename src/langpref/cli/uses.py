@@ -198,12 +198,16 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
         return _learn_from_answers(args, cfg)
     if args.figure:
         require("plots", "learn-reward --figure")  # before the runs, not after them
-    status(f"loading torch, the dataset {args.data}" + ("" if args.perfect_latent else f" and the model {args.model}"))
+    status(
+        f"loading torch and the dataset {args.data}"
+        + ("" if args.perfect_latent else f", then reading it and the bank's phrasings through the model {args.model}")
+    )
     space = _space(args)
     episodes = None
     if not args.perfect_latent:  # the value-order metric reads the model's steps on the eval split's successes
         from langpref.reward.steps import success_prefixes
 
+        status(f"reading the {cfg.eval_split} split's successful episodes step by step through the model")
         episodes = success_prefixes(args.data, args.model, cfg.eval_split, cfg.human.feature_scale)
     result = learn_reward(
         space,
