@@ -4,7 +4,7 @@ data: Study 2 asks each in turn, and everything it needs of one is the kind's ow
 - its step: the step's `kind` and the method are the kind's name, its phase `pref_NAME`; a query shows `shows`
   trajectories;
 - its page (`FeedbackKind.page`, a `StudyPage`): the widget the answer is given with (`text` or `choice`), its label
-  for participants, the question above the videos and an introduction; the page (`static/study.js`) draws any kind
+  for participants, the question above the videos and an introduction; the page (`static/study-steps.js`) draws any kind
   from these, sent in the step's `widget`;
 - its answer: the body's field `answer_key`, checked by `parse` into the typed answer, which the learner takes as the
   kind's `pairs`; stored by `to_record` in the kind's `table` (`kind_row`).
