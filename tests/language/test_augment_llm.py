@@ -208,19 +208,15 @@ def test_the_local_proposer_names_what_to_install(tmp_path, monkeypatch, capsys)
     assert "pip install 'langpref[llm]'" in _one_line_error([*argv, "--llm", str(gguf)], capsys)
 
 
-def test_smollm2_proposes_phrasings_offline(tmp_path):
-    from langpref.language.augment_llm import TaskWords, generate
-    from langpref.language.banksource import BankSource
+def test_smollm2_answers_the_json_asked_for_offline():
+    from langpref.language.augment_llm import TaskWords, ask, prompt
     from langpref.language.llm import LocalChat, local_model_path
 
     try:
         gguf = local_model_path("smollm2")
     except LangprefError as exc:  # `make install` installs it; a bare core install does not
         pytest.skip(str(exc))
-    train = {"speed": {"increase": ["Move faster.", "Speed up."], "decrease": ["Move slower.", "Slow down."]}}
-    empty = {"speed": {"increase": [], "decrease": []}}
-    source = BankSource("t", ("speed",), {"train": train, "val": empty, "test": empty}, (), "test")
     words = TaskWords("A robot arm presses a button.", {"speed": "how fast the hand moves"})
-    found = generate(LocalChat(gguf, threads=2), source, words, n=3)
-    assert found.requests == 2 and found.bad_replies < 2
-    assert sum(found.asked.values()) >= 1 and found.seconds > 0
+    messages = prompt(words, "speed", "increase", ["Move faster.", "Speed up."], 2)
+    texts, junk, failed = ask(LocalChat(gguf, threads=2, context=1024), messages, 2, seed=0, tries=1)
+    assert not failed and 1 <= len(texts) + len(junk) <= 2  # the reply's schema holds it to at most 2
