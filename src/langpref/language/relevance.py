@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import json
 import re
-import threading
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.language.coalesce import REMEMBERED, Coalesced
 
 RELEVANCE_FLOOR = 0.35
 UNKNOWN_WORDS_FLOOR = 0.60
@@ -82,7 +82,9 @@ class FeedbackGate:
         self._encoder = SentenceEncoder(tokenizer, transformer).eval()
         self._vocab = set(tokenizer.get_vocab())
         self._torch = torch
-        self._lock = threading.Lock()
+        # one pass at a time (the fast tokenizer is not safe across threads), concurrent texts in one batch, texts
+        # said again read from memory
+        self._embed = Coalesced(self._embed_now, remember=REMEMBERED)
         self.env = env
         self._features: dict[str, str] = {}
         """phrasing -> its feature, where known (the scope check needs it)."""
@@ -99,8 +101,8 @@ class FeedbackGate:
         self.off_topic = json.loads(OFF_TOPIC.read_text(encoding="utf-8"))["texts"]
         self._off_topic = self._embed(self.off_topic)
 
-    def _embed(self, texts: list[str]) -> np.ndarray:
-        with self._lock, self._torch.no_grad():
+    def _embed_now(self, texts: list[str]) -> np.ndarray:
+        with self._torch.no_grad():
             pooled = self._encoder.pooled_texts(texts).double()
         return self._torch.nn.functional.normalize(pooled, dim=-1).numpy()
 

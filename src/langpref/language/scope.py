@@ -142,26 +142,26 @@ class ScopeCheck:
 @lru_cache(maxsize=1)
 def scope_embedder() -> tuple[Embed, str]:
     """(texts -> unit-normalised embeddings in `SCOPE_LANG_MODEL`'s space, a key naming that exact build)."""
-    import threading
-
     import torch
 
+    from langpref.language.coalesce import REMEMBERED, Coalesced
     from langpref.language.models import resolve
     from langpref.language.transformer import SentenceEncoder, load_transformer
 
     tokenizer, transformer = load_transformer(SCOPE_LANG_MODEL)
     encoder = SentenceEncoder(tokenizer, transformer).eval()
-    lock = threading.Lock()
 
     def embed(texts: list[str]) -> np.ndarray:
         out = []
-        with lock, torch.no_grad():
+        with torch.no_grad():
             for i in range(0, len(texts), 256):
                 pooled = encoder.pooled_texts(list(texts[i : i + 256])).double()
                 out.append(torch.nn.functional.normalize(pooled, dim=-1).numpy())
         return np.concatenate(out) if out else np.zeros((0, 1))
 
-    return embed, Path(resolve(SCOPE_LANG_MODEL)).name
+    # one pass at a time (the fast tokenizer is not safe across threads), concurrent texts in one batch, texts said
+    # again read from memory
+    return Coalesced(embed, remember=REMEMBERED), Path(resolve(SCOPE_LANG_MODEL)).name
 
 
 def cached_embeddings(texts: list[str], embed: Embed, model: str) -> np.ndarray:

@@ -205,16 +205,29 @@ class RewardLearner:
 
 
 _THREADS = threading.Lock()
+_sections = 0
+"""One-thread sections running now (`_one_thread`), guarded by `_THREADS`."""
+_restore = 1
+"""The thread count the last section to end gives back."""
 
 
 @contextmanager
 def _one_thread(torch):
-    """torch on one thread, one such section at a time: the thread count is process-wide, and concurrent fits (the
-    study server answers participants on several threads) must not interleave its save and restore."""
+    """torch on one thread while the section runs. The count is process-wide: the first of concurrent sections (the
+    study server fits participants on several threads) sets it to 1 and the last to end restores it, so sections
+    run side by side (they used to run one at a time, and 20 participants' fits queued behind each other) and never
+    restore a count while another one runs."""
+    global _sections, _restore
     with _THREADS:
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            yield
-        finally:
-            torch.set_num_threads(threads)
+        if _sections == 0:
+            _restore = torch.get_num_threads()
+            if _restore != 1:
+                torch.set_num_threads(1)
+        _sections += 1
+    try:
+        yield
+    finally:
+        with _THREADS:
+            _sections -= 1
+            if _sections == 0 and _restore != 1:
+                torch.set_num_threads(_restore)
