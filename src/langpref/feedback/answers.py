@@ -30,10 +30,8 @@ from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
-from langpref.feedback.comparison import ComparisonAnswer, ComparisonQuery
 from langpref.feedback.kind import get_kind, kind_names
-from langpref.feedback.language import MAX_FEEDBACK, LanguageAnswer, LanguageQuery
-from langpref.language.bank import DIRECTIONS, NO_CHANGE_FEEDBACK
+from langpref.language.bank import DIRECTIONS
 
 ANONYMOUS = "anonymous"
 OPTIONAL = ("meaning", "participant", "method", "number", "time")
@@ -70,13 +68,8 @@ def answer_record(
     time: str | None = None,
 ) -> dict[str, Any]:
     """One line of the file (as a dict) for a kind's typed answer."""
-    if isinstance(answer, LanguageAnswer):
-        body: dict[str, Any] = {"shown": int(answer.query.shown)}
-        body.update({"no_change": True} if answer.no_change else {"text": answer.text})
-    elif isinstance(answer, ComparisonAnswer):
-        body = {"shown": [int(answer.query.a), int(answer.query.b)], "choice": int(answer.choice)}
-    else:
-        body = dict(get_kind(kind).to_record(answer))
+    known = get_kind(kind)
+    body = dict((known.to_line or known.to_record)(answer))
     record = {"kind": kind, **body, "participant": participant}
     extra = {"method": method if method != kind else None, "number": number, "time": time}
     record.update({k: v for k, v in extra.items() if v is not None})
@@ -121,31 +114,6 @@ class _Resolver:
         raise LangprefError(f"{where}: a trajectory is a dataset index or an episode name, not {value!r}")
 
 
-def _language(obj: dict[str, Any], where: str, resolve: _Resolver) -> LanguageAnswer:
-    query = LanguageQuery(resolve(obj.get("shown"), where))
-    if obj.get("no_change") is True:
-        return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
-    text = obj.get("text")
-    if not isinstance(text, str) or not text.strip():
-        raise LangprefError(f"{where}: a language answer needs 'text' (what was said) or \"no_change\": true")
-    if len(text) > MAX_FEEDBACK:
-        raise LangprefError(f"{where}: 'text' is {len(text)} characters; at most {MAX_FEEDBACK}")
-    return LanguageAnswer(query, " ".join(text.split()))
-
-
-def _comparison(obj: dict[str, Any], where: str, resolve: _Resolver) -> ComparisonAnswer:
-    shown = obj.get("shown")
-    if not isinstance(shown, list) or len(shown) != 2:
-        raise LangprefError(f"{where}: a comparison's 'shown' is the pair shown, [first, second]")
-    a, b = resolve(shown[0], where), resolve(shown[1], where)
-    if a == b:
-        raise LangprefError(f"{where}: a comparison shows two different trajectories, got {a} twice")
-    choice = obj.get("choice")
-    if isinstance(choice, bool) or choice not in (0, 1):
-        raise LangprefError(f"{where}: 'choice' must be 0 (the first shown was preferred) or 1 (the second)")
-    return ComparisonAnswer(ComparisonQuery(a, b), int(choice))
-
-
 def _meaning(obj: dict[str, Any], where: str, features: Sequence[str]) -> tuple[str, str] | None:
     meaning = obj.get("meaning")
     if meaning is None:
@@ -167,10 +135,9 @@ def _parse_line(obj: Any, where: str, line: int, resolve: _Resolver, features: S
     kind = obj.get("kind")
     if kind not in kind_names():
         raise LangprefError(f"{where}: 'kind' must be one of {', '.join(kind_names())}, got {kind!r}")
-    if kind == "language":
-        answer = _language(obj, where, resolve)
-    elif kind == "comparison":
-        answer = _comparison(obj, where, resolve)
+    read_line = get_kind(kind).from_line
+    if read_line is not None:  # the kind reads its own line, trajectories named by index or episode name
+        answer = read_line(obj, where, resolve)
     else:
         try:
             answer = get_kind(kind).from_record(obj)

@@ -8,7 +8,7 @@ Likelihood. One Bradley-Terry pair of weight 1: the preferred trajectory's phi b
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -112,6 +112,25 @@ def from_record(row: Mapping[str, Any]) -> ComparisonAnswer:
     return ComparisonAnswer(ComparisonQuery(int(row["a"]), int(row["b"])), int(row["choice"]))
 
 
+def to_line(answer: ComparisonAnswer) -> dict[str, Any]:
+    """A comparison's fields in an answers file: `shown`, the pair in the order shown, and `choice`."""
+    return {"shown": [int(answer.query.a), int(answer.query.b)], "choice": int(answer.choice)}
+
+
+def from_line(obj: dict[str, Any], where: str, resolve: Callable[[Any, str], int]) -> ComparisonAnswer:
+    """A comparison of an answers file: `shown`, the pair shown (index or episode name each), and `choice`."""
+    shown = obj.get("shown")
+    if not isinstance(shown, list) or len(shown) != 2:
+        raise LangprefError(f"{where}: a comparison's 'shown' is the pair shown, [first, second]")
+    a, b = resolve(shown[0], where), resolve(shown[1], where)
+    if a == b:
+        raise LangprefError(f"{where}: a comparison shows two different trajectories, got {a} twice")
+    choice = obj.get("choice")
+    if isinstance(choice, bool) or choice not in (0, 1):
+        raise LangprefError(f"{where}: 'choice' must be 0 (the first shown was preferred) or 1 (the second)")
+    return ComparisonAnswer(ComparisonQuery(a, b), int(choice))
+
+
 COMPARISON = register_kind(
     FeedbackKind(
         name="comparison",
@@ -126,6 +145,8 @@ COMPARISON = register_kind(
         table="comparisons",
         to_record=to_record,
         from_record=from_record,
+        from_line=from_line,
+        to_line=to_line,
         mixed=True,
         page=StudyPage(
             widget="choice",

@@ -116,6 +116,11 @@ class FeedbackKind:
     selector can score the rows it is given (`Selector.score_rows`)."""
     page: StudyPage | None = None
     """How the study web app asks this kind (`langpref study serve --kinds`); None: the study cannot run it."""
+    from_line: Callable[[dict[str, Any], str, Callable[[Any, str], int]], Any] | None = None
+    """(a line of an answers file, where it is for errors, a resolver of a trajectory named by dataset index or
+    episode name) -> the answer (`langpref.feedback.answers`); None: the line is read by `from_record`."""
+    to_line: Callable[[Any], dict[str, Any]] | None = None
+    """answer -> its fields in a line of an answers file (the inverse of `from_line`); None: `to_record`'s."""
     seconds: float = 1.0
     """Modelled time a person takes per query, in units of one comparison's (`langpref.reward.cost`): what a mixed
     learner weighs information against, and the time axis of the learning curves."""

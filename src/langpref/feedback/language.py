@@ -20,7 +20,7 @@ for analysis only: no learning method reads them (a real participant's answers l
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -271,6 +271,24 @@ def from_record(row: Mapping[str, Any]) -> LanguageAnswer:
     return LanguageAnswer(LanguageQuery(int(row["shown"])), row["text"])
 
 
+def to_line(answer: LanguageAnswer) -> dict[str, Any]:
+    """A language answer's fields in an answers file: `shown`, and `text` or `"no_change": true`."""
+    return {"shown": int(answer.query.shown), **({"no_change": True} if answer.no_change else {"text": answer.text})}
+
+
+def from_line(obj: dict[str, Any], where: str, resolve: Callable[[Any, str], int]) -> LanguageAnswer:
+    """A language answer of an answers file: `shown` (index or episode name) and `text`, or `"no_change": true`."""
+    query = LanguageQuery(resolve(obj.get("shown"), where))
+    if obj.get("no_change") is True:
+        return LanguageAnswer(query, NO_CHANGE_FEEDBACK)
+    text = obj.get("text")
+    if not isinstance(text, str) or not text.strip():
+        raise LangprefError(f"{where}: a language answer needs 'text' (what was said) or \"no_change\": true")
+    if len(text) > MAX_FEEDBACK:
+        raise LangprefError(f"{where}: 'text' is {len(text)} characters; at most {MAX_FEEDBACK}")
+    return LanguageAnswer(query, " ".join(text.split()))
+
+
 LANGUAGE = register_kind(
     FeedbackKind(
         name="language",
@@ -285,6 +303,8 @@ LANGUAGE = register_kind(
         table="feedback",
         to_record=to_record,
         from_record=from_record,
+        from_line=from_line,
+        to_line=to_line,
         seconds=1.0 - PAPER_TIME_SAVING,
         says_no_change=True,
         mixed=True,
