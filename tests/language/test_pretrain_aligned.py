@@ -1,0 +1,62 @@
+"""The aligned objective of the language-alone stage (langpref.language.pretrain_aligned): signed concept axes, the
+co-finetuning loss without trajectories. Tiny: two concepts, a few steps."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import torch
+
+from langpref.language.corpus import Example, generate
+from langpref.language.pretrain import PretrainConfig, pretrain
+from langpref.language.pretrain_aligned import AlignedTarget, aligned_loss, concept_axes, synthetic_deltas
+
+
+def test_the_axes_are_orthonormal_and_fixed_by_the_seed():
+    index, axes = concept_axes(["speed", "height", "distance/cup", "speed"], seed=3)
+    assert sorted(index) == ["distance/cup", "height", "speed"]
+    assert torch.allclose(axes @ axes.T, torch.eye(3), atol=1e-5)
+    assert torch.equal(axes, concept_axes(["height", "speed", "distance/cup"], seed=3)[1])
+
+
+def test_a_sentence_is_shown_pairs_in_which_its_own_axis_moved_its_way():
+    _, axes = concept_axes(["a", "b", "c"], seed=0)
+    rows, signs = torch.tensor([0, 2]), torch.tensor([1.0, -1.0])
+    deltas = synthetic_deltas(rows, signs, axes, 50, torch.Generator().manual_seed(0))
+    along = deltas @ axes.T
+    assert (along[0, :, 0] >= 0).all() and (along[1, :, 2] <= 0).all()
+
+
+def test_only_a_few_other_axes_move_with_the_own_one():
+    _, axes = concept_axes([str(i) for i in range(10)], seed=0)
+    deltas = synthetic_deltas(torch.tensor([4]), torch.tensor([1.0]), axes, 30, torch.Generator().manual_seed(1), 2)
+    moved = ((deltas @ axes.T).abs() > 1e-5).sum(-1)
+    assert (moved == 3).all()
+
+
+def test_the_loss_prefers_psi_along_its_own_signed_axis():
+    _, axes = concept_axes(["a", "b"], seed=0)
+    deltas = synthetic_deltas(torch.tensor([0]), torch.tensor([-1.0]), axes, 200, torch.Generator().manual_seed(0))
+    right, wrong, other = -axes[0:1], axes[0:1], axes[1:2]
+    assert aligned_loss(right, deltas, 0.01) < aligned_loss(other, deltas, 0.01) < aligned_loss(wrong, deltas, 0.01)
+
+
+def test_a_tiny_aligned_build_learns_its_axes():
+    corpus = generate(0, 6, ["speed", "height"])
+    cfg = PretrainConfig(
+        steps=12, concepts_per_step=2, sentences_per_meaning=3, lr=1e-4, max_length=12, objective="aligned"
+    )
+    encoder, history = pretrain(corpus, cfg, progress=False)
+    losses = [h["loss"] for h in history]
+    assert sum(losses[-4:]) < sum(losses[:4])
+    assert encoder.training is False
+
+
+def test_the_aligned_target_keys_object_concepts_by_their_object():
+    batch = [
+        Example("Closer to the cup.", "distance", "decrease", "cup", "t"),
+        Example("Up.", "height", "increase", None, "t"),
+    ]
+    target = AlignedTarget(batch, hidden=4, seed=0)
+    assert sorted(target.index) == ["distance/cup", "height"]
+    assert asdict(PretrainConfig())["objective"] == "contrastive"
