@@ -390,14 +390,23 @@ def _human_models(out: dict) -> str:
 
 @command(
     "lang-model build",
-    "build the language model `comparative` (minilm trained on comparative feedback) into the cache, with progress",
+    "build a language model langpref makes (minilm trained on comparative feedback) into the cache, with progress",
     [
-        opt("name", choices=["comparative"], help="the model to build"),
+        opt("name", choices=["comparative", "comparative-aligned"], help="the model to build"),
         opt("--seed", type=int, default=0, help="seed of the corpus and the training (default 0, the cached one)"),
         opt("--steps", type=int, default=None, help="optimiser steps (default: PretrainConfig.steps)"),
         opt("--lr", type=float, default=None, help="learning rate (default: PretrainConfig.lr)"),
         opt("--temperature", type=float, default=None, help="contrastive temperature (default: PretrainConfig's)"),
         opt("--per-meaning", type=int, default=None, help="made sentences per concept and direction"),
+        opt(
+            "--objective",
+            choices=["contrastive", "aligned"],
+            default=None,
+            help="contrastive over meanings (default), or aligned: signed concept axes, the co-finetuning loss "
+            "without trajectories (langpref.language.pretrain_aligned)",
+        ),
+        opt("--head-lr", type=float, default=None, help="learning rate of the aligned objective's head"),
+        opt("--threads", type=int, default=None, help="torch CPU threads (default: torch's own choice)"),
         opt(
             "--val-concepts",
             default=None,
@@ -410,20 +419,28 @@ def _human_models(out: dict) -> str:
         JSON,
     ],
     "Makes the comparative-feedback corpus (a hand-written lexicon of concepts made into sentences from the seed, and "
-    "the built-in banks' train splits) and trains all-MiniLM-L6-v2 on it with a contrastive loss over meaning and "
-    "direction (langpref.language.pretrain). `langpref train --lang-model comparative` builds it by itself when it "
-    "is missing. With --val-concepts, a settings run: the named concepts are held out and read.",
+    "the built-in banks' train splits) and trains all-MiniLM-L6-v2 on it: `comparative` with a contrastive loss over "
+    "meaning and direction (langpref.language.pretrain), `comparative-aligned` with the co-finetuning loss against a "
+    "fixed signed axis per concept, no simulator (langpref.language.pretrain_aligned). `langpref train --lang-model "
+    "NAME` builds it by itself when it is missing. With --val-concepts, a settings run: the named concepts are held "
+    "out and read.",
 )
 def cmd_lang_model_build(args: argparse.Namespace) -> None:
     import dataclasses
     import time
 
     from langpref.language.models import comparative_dir
-    from langpref.language.pretrain import PretrainConfig, build, pretrain, read_record
+    from langpref.language.pretrain import build, preset, pretrain, read_record
 
     given = {"seed": args.seed, "steps": args.steps, "lr": args.lr, "temperature": args.temperature}
-    given["per_meaning"] = args.per_meaning
-    cfg = PretrainConfig(**{k: v for k, v in given.items() if v is not None})
+    given.update(per_meaning=args.per_meaning, objective=args.objective, head_lr=args.head_lr)
+    if args.threads is not None:
+        if args.threads < 1:
+            raise LangprefError(f"--threads must be >= 1, got {args.threads}")
+        import torch
+
+        torch.set_num_threads(args.threads)
+    cfg = dataclasses.replace(preset(args.name), **{k: v for k, v in given.items() if v is not None})
     cfg.validate()
     if args.val_concepts:
         from langpref.language.corpus import build_corpus, concept_split, load_lexicon
@@ -449,8 +466,8 @@ def cmd_lang_model_build(args: argparse.Namespace) -> None:
         (args.out / "val.json").write_text(json.dumps(out, indent=2) + "\n")
         emit(out, args.json, lambda o: "\n".join(f"step {h['step']}: {h}" for h in o["val"]))
         return
-    target = args.out or comparative_dir(cfg.seed)
-    if cfg != PretrainConfig(seed=cfg.seed) and args.out is None:
+    target = args.out or comparative_dir(cfg.seed, args.name)
+    if cfg != preset(args.name, cfg.seed) and args.out is None:
         raise LangprefError("settings other than the defaults build only with --out (the cache holds the defaults)")
     if (target / "model.safetensors").is_file() and not args.force:
         record = read_record(target) or {}
