@@ -87,6 +87,8 @@ class LearnerType:
     None: it never asks."""
     credible: Callable[[Any, np.ndarray], bool] | None = None
     """(learner, true weights w) -> whether w lies in its belief's credible region (a calibration check)."""
+    feature_weights: Callable[[Any, LatentSpace], dict[str, float]] | None = None
+    """(learner, space) -> its reward's weight per task feature, where it has them (the study export's)."""
 
 
 def meaning_psi(space: LatentSpace, split: str, meaning: Meaning) -> np.ndarray:
@@ -197,6 +199,11 @@ def _confirm_answer_model(
     return True, (int(learner.features[meaning // 2]), meaning % 2)
 
 
+def _answer_model_feature_weights(learner: AnswerModelLearner, space: LatentSpace) -> dict[str, float]:
+    """The posterior mean v per feature: its belief is over the bank's feature axes."""
+    return {space.feature_names[int(f)]: float(x) for f, x in zip(learner.features, learner.mean())}
+
+
 def paper_selector(cfg: Any, space: LatentSpace, pool: np.ndarray):
     """The paper's learner's active strategy of `cfg` (None for random: the loop draws uniformly): each kind's own
     (`langpref.reward.selection.make_selector`), or `mixed`'s information per second."""
@@ -253,5 +260,6 @@ register_learner(
         scores=_answer_model_scores,
         confirm=_confirm_answer_model,
         credible=lambda learner, w: learner.credible(np.asarray(w)[learner.features]),
+        feature_weights=_answer_model_feature_weights,
     )
 )

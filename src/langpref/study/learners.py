@@ -25,7 +25,7 @@ import numpy as np
 
 from langpref.feedback.space import LatentSpace
 from langpref.language.bank import DIRECTIONS
-from langpref.reward.answer_model import AnswerModelLearner, AnswerReader
+from langpref.reward.answer_model import AnswerReader
 from langpref.reward.selection import feature_axes
 
 
@@ -114,9 +114,8 @@ def learned_reward(learner: Any, space: LatentSpace, study: np.ndarray, name: st
 
     reward = np.asarray(learner.predict(space.phi[study]), dtype=np.float64)
     ranking = [int(i) for i in study[np.argsort(-reward, kind="stable")]]
-    kind, params, _ = learner_type_of(learner).saved(learner)
+    learner_type = learner_type_of(learner)
+    kind, params, _ = learner_type.saved(learner)
     xi = params["xi"] if kind == "linear" else []  # a reward that is not linear in phi has no latent weights
-    v = None
-    if isinstance(learner, AnswerModelLearner):  # its belief is over the bank's feature axes
-        v = {space.feature_names[int(f)]: float(x) for f, x in zip(learner.features, learner.mean())}
+    v = None if learner_type.feature_weights is None else learner_type.feature_weights(learner, space)
     return {"learner": name, "latent_weights": [float(x) for x in xi], "feature_weights": v, "ranking": ranking}
