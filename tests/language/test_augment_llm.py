@@ -26,8 +26,8 @@ Reply = Callable[[dict], tuple[int, str]]
 
 # what the fake model proposes for each meaning of Meta-World's bank, keyed by the prompt's "wants more/less X"
 PROPOSALS = {
-    "more speed": ["Hurry, please.", "Pick up the pace a bit.", "Bring the hand much lower.", "Get a move on, robot."],
-    "less speed": ["Take it easy.", "Ease off the pace a little.", "No rushing around."],
+    "more speed": ["Hurry, please.", "Pick up the pace a bit.", "Bring the hand much lower.", "Move a lot quicker, please."],
+    "less speed": ["Take it easy.", "Ease off the pace a little.", "No rushing around.", "Thank you so much!"],
     "more height": ["Lift the arm higher up.", "Hurry, please."],
     "less height": ["Bring the hand down lower.", "Bring the hand down lower."],
     "more distance to button": ["Stay further away from the button."],
@@ -115,7 +115,7 @@ def test_endpoint_proposals_are_read_back_and_never_written_into_the_bank(fake, 
         _sha(bank_file) == before and "review" in doc["_comment"] and set(doc) == {"_comment", "metaworld", "_dropped"}
     )
     kept = doc["metaworld"]
-    assert "Get a move on, robot." in kept["speed"]["increase"]
+    assert "Move a lot quicker, please." in kept["speed"]["increase"]
     assert "Come in nearer to the button." in kept["distance_to_button"]["decrease"]
     # the fake model's slip (a height request proposed for speed) is read back as height and dropped, with why
     dropped = {d["text"]: d["why"] for d in doc["_dropped"]["speed/increase"]}
@@ -125,6 +125,9 @@ def test_endpoint_proposals_are_read_back_and_never_written_into_the_bank(fake, 
     assert {"text": "Take it easy.", "why": "repeats a bank phrasing or the prompt's example"} in doc["_dropped"][
         "speed/decrease"
     ]
+    assert {"text": "Thank you so much!", "why": "not feedback on the robot's motion (the feedback gate)"} in doc[
+        "_dropped"
+    ]["speed/decrease"]
     assert {"text": "Bring the hand down lower.", "why": "repeats another proposal"} in doc["_dropped"][
         "height/decrease"
     ]

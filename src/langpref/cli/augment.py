@@ -139,7 +139,8 @@ def _chat(args: argparse.Namespace):
 
 
 def _from_model(args: argparse.Namespace, source) -> tuple[dict, dict]:
-    from langpref.language.augment_llm import generate, read_back, task_words
+    from langpref.language.augment_llm import generate, read_back, screen, task_words
+    from langpref.language.relevance import FeedbackGate
 
     if Path(args.out).exists() and not args.force:
         raise LangprefError(f"--out {args.out} already exists; pass --force to overwrite it or choose another file")
@@ -149,6 +150,9 @@ def _from_model(args: argparse.Namespace, source) -> tuple[dict, dict]:
     embed, encoder = _embedder(args, source.task)
     n = args.per_meaning or LLM_PER_MEANING
     found = generate(chat, source, task_words(source, args.where), n, seed=args.seed, progress=not args.json)
+    bank = [t for split in source.splits.values() for by in split.values() for ts in by.values() for t in ts]
+    gate = FeedbackGate(source.task, bank)
+    screen(found, lambda text: gate.score(text).ok)
     read_back(found, source.split("train"), source.features, embed, encoder)
     kept = {f"{f}/{d}": len(ts) for f, by in found.kept.items() for d, ts in by.items()}
     doc = {

@@ -3,7 +3,8 @@ no template or corpus covers: a lab's own feature, described in its task file, w
 examples.
 
 A small instruction model picks a feature and direction right far less often than it writes a fluent sentence, so it
-proposes and the task's own language side decides: every proposal is read back (`langpref.language.check.
+proposes and the task's own language side decides: a proposal that the feedback gate refuses (praise, small talk:
+`screen`) is dropped, and every other one is read back (`langpref.language.check.
 read_against`, the reading of `bank check --utterances`: nearest prototype of the bank's train phrasings, with the
 pretrained sentence encoder or a trained checkpoint's) and kept only when it is read as the meaning it was asked for.
 What is dropped is counted with why. Nothing here writes into a bank: the caller writes the kept proposals to a
@@ -19,7 +20,7 @@ import json
 import re
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -240,6 +241,18 @@ def _new(out: Proposals, name: str, texts: list[str], known: set[str]) -> list[s
     return new
 
 
+def screen(proposals: Proposals, is_feedback: Callable[[str], bool]) -> None:
+    """Drop the proposals that are not feedback on how the robot moves at all (praise, small talk, questions): the
+    read-back's nearest prototype would still read each as some meaning. `is_feedback` is the feedback gate's test
+    (`langpref.language.relevance.FeedbackGate`, as the study and `embed` use it)."""
+    for f, by in proposals.kept.items():
+        for d, texts in by.items():
+            for text in texts:
+                if not is_feedback(text):
+                    proposals.drop(meaning_name(f, d), text, "not feedback on the robot's motion (the feedback gate)")
+            by[d] = [t for t in texts if is_feedback(t)]
+
+
 def read_back(proposals: Proposals, train: Phrasings, features: Sequence[str], embed: Embed, encoder: str) -> None:
     """Keep only the proposals that `embed`'s reading of the bank (nearest train prototype) reads as their own
     meaning; the others move to `dropped` with the meaning they were read as."""
@@ -254,4 +267,15 @@ def read_back(proposals: Proposals, train: Phrasings, features: Sequence[str], e
             proposals.kept[f][d] = [t for t in proposals.kept[f][d] if t not in wrong]
 
 
-__all__ = ["BadJSON", "Proposals", "TaskWords", "ask", "generate", "parse_phrasings", "prompt", "read_back"]
+__all__ = [
+    "BadJSON",
+    "Proposals",
+    "TaskWords",
+    "ask",
+    "generate",
+    "parse_phrasings",
+    "prompt",
+    "read_back",
+    "reply_schema",
+    "screen",
+]
