@@ -46,16 +46,26 @@ def _bar_err(ax, x, stats_list, label=None, width=0.8, offset=0.0, color=None) -
     ax.bar(np.asarray(x) + offset, mean, width, yerr=err, capsize=3, label=label, color=color)
 
 
+def _labelled(fig, ax, title: str, ylabel: str, xlabel: str | None = None, ylim=None, legend: bool = False):
+    """`fig` once its single axes `ax` has its title, axis labels, y range and legend (where given)."""
+    if xlabel is not None:
+        ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if ylim is not None:
+        ax.set_ylim(*ylim)
+    if legend:
+        ax.legend(fontsize=8)
+    ax.set_title(title)
+    return fig
+
+
 def study1_attributes(plt, summary: dict[str, Any]):
     """Study 1's attribute scores (mean and std, 1-5)."""
     a1 = summary["study1_attributes"]
     fig, ax = plt.subplots(figsize=(5, 3.2))
     _bar_err(ax, range(len(a1)), list(a1.values()), color=STUDY1_COLOR)
     ax.set_xticks(range(len(a1)), ["Satisfaction", "Adaptation speed", "Experience"][: len(a1)])
-    ax.set_ylim(0, 5.5)
-    ax.set_ylabel("score (1-5)")
-    ax.set_title("Study 1: attribute scores")
-    return fig
+    return _labelled(fig, ax, "Study 1: attribute scores", "score (1-5)", ylim=(0, 5.5))
 
 
 def study1_iterations(plt, summary: dict[str, Any]):
@@ -65,10 +75,7 @@ def study1_iterations(plt, summary: dict[str, Any]):
     keys = list(it["histogram"]) + ["never"]
     ax.bar(range(len(keys)), list(it["histogram"].values()) + [it["not_satisfied"]], color=STUDY1_COLOR)
     ax.set_xticks(range(len(keys)), keys)
-    ax.set_xlabel("iterations to satisfaction")
-    ax.set_ylabel("participants")
-    ax.set_title("Study 1: iterations to satisfaction")
-    return fig
+    return _labelled(fig, ax, "Study 1: iterations to satisfaction", "participants", "iterations to satisfaction")
 
 
 def study2_attributes(plt, summary: dict[str, Any]):
@@ -81,11 +88,7 @@ def study2_attributes(plt, summary: dict[str, Any]):
             ax, x, [a2[s][m] for s in a2], label=METHOD_LABELS[m], width=0.38, offset=(k - 0.5) * 0.4, color=COLORS[m]
         )
     ax.set_xticks(x, ["Adaptation speed", "Experience", "Noticed learning", "Trust"][: len(a2)])
-    ax.set_ylim(0, 5.5)
-    ax.set_ylabel("score (1-5)")
-    ax.legend(fontsize=8)
-    ax.set_title("Study 2: attribute scores")
-    return fig
+    return _labelled(fig, ax, "Study 2: attribute scores", "score (1-5)", ylim=(0, 5.5), legend=True)
 
 
 def study2_ratings(plt, summary: dict[str, Any]):
@@ -99,12 +102,9 @@ def study2_ratings(plt, summary: dict[str, Any]):
         std = np.array([s["std"] if s["std"] is not None else 0.0 for s in stats_m])
         ax.plot(pts, mean, "o-", color=COLORS[m], label=METHOD_LABELS[m])
         ax.fill_between(pts, mean - std, mean + std, color=COLORS[m], alpha=0.2)
-    ax.set_xlabel("queries")
-    ax.set_ylabel("rating of the best trajectory (1-5)")
-    ax.set_ylim(0.5, 5.5)
-    ax.legend(fontsize=8)
-    ax.set_title("Study 2: ratings")
-    return fig
+    return _labelled(
+        fig, ax, "Study 2: ratings", "rating of the best trajectory (1-5)", "queries", ylim=(0.5, 5.5), legend=True
+    )
 
 
 def study2_time(plt, summary: dict[str, Any]):
