@@ -2,11 +2,18 @@
 
 20 simulated participants (synthetic humans, `langpref.study.simulate`) run whole sessions of the paper's protocol
 (10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve` in
-its own process on loopback, on this machine's cores. Measured on the client: the latency of every answer, by kind;
-the target is a p95 under 150 ms for a language answer (embedding, reward update, next query). Two runs:
+its own process on loopback, on this machine's cores. Measured on the client: the latency of every answer, by kind
+and over all answers, and the machine's load average during each run (other work on the machine slows the server as
+much as the participants do). Two runs:
 
 - `paced`: each participant pauses 0.5-1.5 s before an answer (people take several seconds to watch and type);
-- `burst`: no pause at all, every participant answering as fast as the server allows (a stress figure).
+- `burst` (unpaced): no pause at all, every participant answering as fast as the server allows. Target (issue 44):
+  p95 over all its answers under 300 ms; the run prints whether it met it (`--no-paced`: this run alone).
+
+The simulated participants type the bank's test phrasings (a few dozen texts, said again and again); the server reads
+every bank phrasing at start, so the burst figure is that of texts it knows. A text it has never seen costs one
+batched pass of each of three small encoders (the gate's, the scope check's, the model's), shared by the answers
+that arrive together (`langpref.language.coalesce`).
 
 Without --model it trains a model of the default architecture (MiniLM language encoder, D = 128; language model
 frozen, one epoch: the serving cost does not depend on how well it is trained) on a fresh Meta-World dataset. The
@@ -25,6 +32,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -104,6 +112,49 @@ def start_server(
     raise RuntimeError("the study server did not answer")
 
 
+TARGET_P95_MS = 300.0
+"""Issue 44: p95 of all answers of the unpaced (burst) run of 20 participants, on 2 cores."""
+
+
+class LoadWatch:
+    """The machine's 1-minute load average, sampled every second while a run goes on (`with LoadWatch() as w`)."""
+
+    def __init__(self, every_s: float = 1.0):
+        self.every_s = every_s
+        self.samples: list[float] = [os.getloadavg()[0]]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+
+    def _watch(self) -> None:
+        while not self._stop.wait(self.every_s):
+            self.samples.append(os.getloadavg()[0])
+
+    def __enter__(self) -> LoadWatch:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.samples.append(os.getloadavg()[0])
+
+    def summary(self) -> dict[str, float]:
+        x = self.samples
+        return {"start": x[0], "min": min(x), "mean": sum(x) / len(x), "max": max(x), "end": x[-1]}
+
+
+def verdict(r: dict[str, Any]) -> str:
+    """One line on an unpaced run: its answers' p50 / p95 / max, the load during it, and whether p95 met the target."""
+    lat, load = r["latency_all"], r["load"]
+    met = lat["p95_ms"] is not None and lat["p95_ms"] < TARGET_P95_MS
+    return (
+        f"unpaced run, {r['participants']} participants ({r['completed']} finished), {lat['n']} answers: "
+        f"p50 {lat['p50_ms']:.0f} ms, p95 {lat['p95_ms']:.0f} ms, max {lat['max_ms']:.0f} ms; load average "
+        f"{load['mean']:.1f} ({load['min']:.1f}-{load['max']:.1f}) on {os.cpu_count()} cores; "
+        f"p95 < {TARGET_P95_MS:.0f} ms: {'MET' if met else 'NOT MET'}"
+    )
+
+
 def run(
     model: Path,
     data: Path,
@@ -119,9 +170,10 @@ def run(
     extra = ("--query-selection", query_selection, "--learner", learner)
     proc, url = start_server(model, data, db, split, extra=extra)
     try:
-        return simulate(
-            url, SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0), data_dir=data, split=split
-        )
+        with LoadWatch() as load:
+            cfg = SimConfig(participants=participants, think_ms=think_ms, deadline_s=1800.0)
+            result = simulate(url, cfg, data_dir=data, split=split)
+        return {**result, "load": load.summary()}
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -161,8 +213,8 @@ def results_text(
             "(server in its own "
             f"process; {model_note}). "
             "Latency per answer as the "
-            "client sees it, p50 / p95 in ms. Target: p95 of a language answer (embedding + reward update + next "
-            "query) under 150 ms.\n"
+            f"client sees it, p50 / p95 in ms. Target (issue 44): p95 of all answers of the burst run under "
+            f"{TARGET_P95_MS:.0f} ms.\n"
         ),
         "| run | sessions completed | answers | wall | language | comparison | rating | satisfaction | survey |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -170,6 +222,7 @@ def results_text(
     ]
     if burst:
         lines.append(_row(f"burst (no pause: all {n} answer as fast as the server allows)", burst))
+        lines += ["", f"Burst run, all answers: {verdict(burst)}."]
     r = summary["study2_ratings"]
     test = r["auc_paired_test"]
 
@@ -204,6 +257,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--num-trajectories", type=int, default=80, help="of the dataset made without --data")
     p.add_argument("--no-burst", action="store_true", help="only the paced run")
     p.add_argument(
+        "--no-paced",
+        action="store_true",
+        help="only the burst (unpaced) run: its verdict printed, no export and no results block written",
+    )
+    p.add_argument(
         "--query-selection",
         default="random",
         help="Study 2's query selection, as `study serve --query-selection` (default %(default)s)",
@@ -225,31 +283,37 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Run the paced (and burst) load, export the paced run, and rewrite the `study-load` block of the results."""
+    """Run the paced and burst loads (or one of them), print the burst run's verdict, export the paced run, and
+    rewrite the `study-load` block of the results (not with --no-paced: the block needs the paced run's export)."""
     p = parser()
     args = p.parse_args(argv)
     if (args.model is None) != (args.data is None):
         p.error("pass both --model and --data, or neither")
+    if args.no_paced and args.no_burst:
+        p.error("--no-paced and --no-burst leave nothing to run")
     from langpref.model.checkpoint import read_config
     from langpref.study.export import export
 
+    paced = burst = exported = None
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         data, model = (args.data, args.model) if args.model else prepare(work, args.num_trajectories)
         val_acc = read_config(model).get("results", {}).get("best_val_accuracy")
-        sel, learner = args.query_selection, args.learner
-        paced = run(model, data, work / "paced.sqlite", args.split, args.participants, (500.0, 1500.0), sel, learner)
-        print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
-        burst = None
+        sel, learner, n = args.query_selection, args.learner, args.participants
+        if not args.no_paced:
+            paced = run(model, data, work / "paced.sqlite", args.split, n, (500.0, 1500.0), sel, learner)
+            print(json.dumps({"paced": {k: v for k, v in paced.items() if k != "per_participant"}}), flush=True)
         if not args.no_burst:
-            burst = run(model, data, work / "burst.sqlite", args.split, args.participants, (0.0, 0.0), sel, learner)
+            burst = run(model, data, work / "burst.sqlite", args.split, n, (0.0, 0.0), sel, learner)
             print(json.dumps({"burst": {k: v for k, v in burst.items() if k != "per_participant"}}), flush=True)
-        exported = export(work / "paced.sqlite", args.export_out)
-        summary = json.loads(Path(exported["summary"]).read_text())
-
-    block = "study-load" if args.learner == "paper" else f"study-load-{args.learner}"
-    write_section(block, results_text(args, val_acc, paced, burst, summary), args.results)
-    print(f"wrote {args.results}", flush=True)
+            print(verdict(burst), flush=True)
+        if paced is not None:
+            exported = export(work / "paced.sqlite", args.export_out)
+            summary = json.loads(Path(exported["summary"]).read_text())
+    if paced is not None:
+        block = "study-load" if args.learner == "paper" else f"study-load-{args.learner}"
+        write_section(block, results_text(args, val_acc, paced, burst, summary), args.results)
+        print(f"wrote {args.results}", flush=True)
     return {"paced": paced, "burst": burst, "export": exported}
 
 

@@ -63,3 +63,15 @@ def test_selection_timings_measure_every_strategy_at_a_tiny_size():
     table = selection_table(["metaworld"], "today", answers=3, candidates=12, trials=2)
     rows = [line for line in table.splitlines() if line.startswith("| metaworld |")]
     assert len(rows) == 6 and "`benchmarks.selection`" in table
+
+
+def test_the_unpaced_run_says_whether_its_p95_met_the_target():
+    """The study load benchmark's burst run prints p50 / p95 / max of all answers, the load, and the verdict."""
+    from benchmarks.study_load import TARGET_P95_MS, verdict
+
+    load = {"start": 1.0, "min": 1.0, "mean": 2.0, "max": 3.0, "end": 2.0}
+    run = {"participants": 20, "completed": 20, "load": load}
+    fast = {**run, "latency_all": {"n": 1000, "p50_ms": 40.0, "p95_ms": TARGET_P95_MS - 1, "max_ms": 900.0}}
+    slow = {**run, "latency_all": {"n": 1000, "p50_ms": 40.0, "p95_ms": TARGET_P95_MS, "max_ms": 900.0}}
+    assert verdict(fast).endswith(": MET") and "p95 299 ms" in verdict(fast) and "load average 2.0" in verdict(fast)
+    assert verdict(slow).endswith(": NOT MET")

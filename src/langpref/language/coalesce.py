@@ -119,6 +119,14 @@ class Coalesced:
                 c.done = True
             self._cond.notify_all()
 
+    def keep(self, texts: Sequence[str], rows: np.ndarray) -> None:
+        """Remember `rows` as the rows of `texts`, made elsewhere by the same encoder (a bank embedded at start)."""
+        if len(rows) != len(texts):
+            raise ValueError(f"{len(rows)} rows for {len(texts)} texts")
+        with self._cond:
+            if self.remember:
+                self._keep(list(texts), np.asarray(rows))
+
     def _keep(self, texts: list[str], rows: np.ndarray) -> None:
         """Remember the rows of `texts` (call with the condition held), the oldest forgotten beyond `remember`."""
         for text, row in zip(texts, rows):

@@ -126,7 +126,10 @@ class FeedbackGate:
         embed, key = scope_embedder()
         texts = sorted(self._features)
         features = [self._features[t] for t in texts]
-        return ScopeCheck.build(self.feature_names, texts, features, lambda t: cached_embeddings(t, embed, key))
+        check = ScopeCheck.build(self.feature_names, texts, features, lambda t: cached_embeddings(t, embed, key))
+        if isinstance(embed, Coalesced):  # a bank phrasing said in a study is then read from memory, as the gate's
+            embed.keep(texts, check.bank)
+        return check
 
     def scope(self, text: str):
         """Where `text` stands against what the task measures (`langpref.language.scope.Scope`), or None."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
@@ -32,6 +32,7 @@ from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
 from langpref.feedback.language import LanguageAnswer
 from langpref.improve import improvement_step
+from langpref.language.coalesce import REMEMBERED, Coalesced
 from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.reward.answer_model import CONFIRM_OPTIONS, AnswerModelConfig, AnswerModelLearner
@@ -53,30 +54,17 @@ NO_CHANGE_READING: dict[str, Any] = {"feature": None, "direction": None, "confid
 """How "that's good, no change" (a button, never read by the model) is shown back and stored."""
 
 
-class _TextCache:
-    """psi of texts, computed once each (bounded LRU), shared by the reward learner and `embed_text`."""
+class _TextCache(Coalesced):
+    """psi of texts (the model's language encoder), shared by the reward learner and `embed_text`: the last 4096
+    texts remembered, the new texts of answers that arrive together read in one pass (`langpref.language.coalesce`;
+    one text alone costs about as much as eight in a batch)."""
 
-    def __init__(self, model, size: int = 4096):
+    def __init__(self, model, size: int = REMEMBERED):
+        super().__init__(self._encode, remember=size)
         self.model = model
-        self.size = size
-        self._cache: OrderedDict[str, np.ndarray] = OrderedDict()
-        self._lock = threading.Lock()
 
-    def __call__(self, texts: Sequence[str]) -> np.ndarray:
-        out = []
-        for text in texts:
-            with self._lock:
-                psi = self._cache.get(text)
-                if psi is not None:
-                    self._cache.move_to_end(text)
-            if psi is None:
-                psi = self.model.encode_texts([text])[0].detach().cpu().numpy().astype(np.float64)
-                with self._lock:
-                    self._cache[text] = psi
-                    while len(self._cache) > self.size:
-                        self._cache.popitem(last=False)
-            out.append(psi)
-        return np.stack(out)
+    def _encode(self, texts: list[str]) -> np.ndarray:
+        return self.model.encode_texts(texts).detach().cpu().numpy().astype(np.float64)
 
 
 class _CachedModel:
@@ -122,6 +110,17 @@ class StudyEngine:
         self.gate = FeedbackGate(self.env)
         self.understand("Move faster.")  # fail at start, not with the first participant, if prototypes are missing
         _ = self.gate.scope_check  # built (and its corpus embedded) now, not on the first answer
+        self._read_bank(space)
+
+    def _read_bank(self, space) -> None:
+        """psi of every phrasing of the bank remembered now, in a few batched passes (those of the negative split
+        are the space's own): a participant who types one costs no pass of the model's encoder."""
+        known = set()
+        for table in space.phrases.values():
+            texts = [self.normalise(t) for t in table.texts]
+            self.cache.keep(texts, np.asarray(table.psi, dtype=np.float64))
+            known.update(texts)
+        self.cache(sorted({self.normalise(t) for t in self.gate.phrasings} - known))
 
     @classmethod
     def load(cls, model_dir: str | Path, data_dir: str | Path, cfg: StudyConfig) -> StudyEngine:

@@ -331,6 +331,16 @@ def percentile(values: list[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if values else None
 
 
+def summary(values: list[float]) -> dict[str, Any]:
+    """Count, median, 95th percentile and maximum of latencies in ms (None where there are none)."""
+    return {
+        "n": len(values),
+        "p50_ms": percentile(values, 50),
+        "p95_ms": percentile(values, 95),
+        "max_ms": max(values) if values else None,
+    }
+
+
 def simulate(
     base_url: str,
     cfg: SimConfig | None = None,
@@ -343,7 +353,8 @@ def simulate(
 
     With `data_dir` (the server's dataset) and `split` (its study split) they answer as synthetic humans, else at
     random. `db` is the server's database, read (never written) for the trajectories it generates with
-    `--improve-candidates generated`, whose dataset is `generated_dir` (default `DB.generated/`, as the server's)."""
+    `--improve-candidates generated`, whose dataset is `generated_dir` (default `DB.generated/`, as the server's).
+    Latency per answer kind (`latency`) and over every answer (`latency_all`)."""
     cfg = cfg or SimConfig()
     world = _World(data_dir, split, db, generated_dir) if data_dir is not None else None
     sims = [SimParticipant(base_url, cfg, i, world) for i in range(cfg.participants)]
@@ -356,15 +367,7 @@ def simulate(
         t.join(timeout=max(1.0, stop_at - time.time() + cfg.timeout_s))
     wall = time.perf_counter() - start
     kinds = sorted({k for s in sims for k in s.latency})
-    latency = {}
-    for k in kinds:
-        vals = [v for s in sims for v in s.latency.get(k, [])]
-        latency[k] = {
-            "n": len(vals),
-            "p50_ms": percentile(vals, 50),
-            "p95_ms": percentile(vals, 95),
-            "max_ms": max(vals),
-        }
+    latency = {k: summary([v for s in sims for v in s.latency.get(k, [])]) for k in kinds}
     return {
         "participants": cfg.participants,
         "completed": sum(1 for s in sims if not s.errors),
@@ -372,6 +375,7 @@ def simulate(
         "retries": sum(s.retries for s in sims),
         "wall_s": wall,
         "latency": latency,
+        "latency_all": summary([v for s in sims for vals in s.latency.values() for v in vals]),
         "errors": [e for s in sims for e in s.errors][:20],
         "per_participant": {s.participant_id: s.answers for s in sims if s.participant_id},
         "think_ms": list(cfg.think_ms),
