@@ -143,7 +143,7 @@ def _bank_check(dataset: Path) -> dict:
     from langpref.cli.bank import before_training_note, chance_line, opposite_only
     from langpref.cli.outputs import status
 
-    status("checking the bank with the pretrained language model minilm (about 10 s; --no-bank-check skips it)")
+    status("checking the bank with the pretrained language model minilm (10-30 s; --no-bank-check skips it)")
     from langpref.language.banksource import open_bank
     from langpref.language.check import leave_one_out
     from langpref.language.transformer import sentence_embedder

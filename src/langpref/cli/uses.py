@@ -141,6 +141,24 @@ def cmd_improve(args: argparse.Namespace) -> None:
     )
 
 
+def _space_and_episodes(args: argparse.Namespace, cfg: Any) -> tuple[Any, Any]:
+    """(the latent space of `--data` through `--model`, the eval split's successful episodes step by step for the
+    value-order metric, None with --perfect-latent), each announced at a terminal before its seconds pass."""
+    from langpref.cli.outputs import status
+
+    status(
+        f"loading torch and the dataset {args.data}"
+        + ("" if args.perfect_latent else f", then reading it and the bank's phrasings through the model {args.model}")
+    )
+    space = _space(args)
+    if args.perfect_latent:
+        return space, None
+    from langpref.reward.steps import success_prefixes
+
+    status(f"reading the {cfg.eval_split} split's successful episodes step by step through the model")
+    return space, success_prefixes(args.data, args.model, cfg.eval_split, cfg.human.feature_scale)
+
+
 @command(
     "learn-reward",
     "reward learning from synthetic language feedback or comparisons",
@@ -186,24 +204,6 @@ def cmd_improve(args: argparse.Namespace) -> None:
     "L_Implicit, Eq. 5-9) or a random train pair (comparison: Bradley-Terry). After every query, r_xi is refit "
     "on all feedback so far and scored on the test split.",
 )
-def _space_and_episodes(args: argparse.Namespace, cfg):
-    """(the latent space of `--data` through `--model`, the eval split's successful episodes step by step for the
-    value-order metric, None with --perfect-latent), each announced at a terminal before its seconds pass."""
-    from langpref.cli.outputs import status
-
-    status(
-        f"loading torch and the dataset {args.data}"
-        + ("" if args.perfect_latent else f", then reading it and the bank's phrasings through the model {args.model}")
-    )
-    space = _space(args)
-    if args.perfect_latent:
-        return space, None
-    from langpref.reward.steps import success_prefixes
-
-    status(f"reading the {cfg.eval_split} split's successful episodes step by step through the model")
-    return space, success_prefixes(args.data, args.model, cfg.eval_split, cfg.human.feature_scale)
-
-
 def cmd_learn_reward(args: argparse.Namespace) -> None:
     from langpref.cli.outputs import check_writable
     from langpref.reward import LearnRewardConfig, learn_reward
