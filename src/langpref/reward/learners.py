@@ -139,17 +139,12 @@ def _make_answer_model(space: LatentSpace, pool: np.ndarray, settings: Settings,
     return AnswerModelLearner(space, pool, settings.answer_model, settings.reward.negative_split, seed=seed)
 
 
-def _teach_answer_model(
-    learner: AnswerModelLearner,
-    space: LatentSpace,
-    kind: FeedbackKind,
-    answer: Any,
-    settings: Settings,
-    rng: np.random.Generator,
-    meaning: Meaning | None = None,
-) -> None:
-    index = None if meaning is None else learner.meaning_index(*meaning)
-    learner.observe(kind.name, answer, index)
+def _teach_answer_model(learner: AnswerModelLearner, *lesson: Any, meaning: Meaning | None = None) -> None:
+    """`LearnerType.teach` of the answer model: `lesson` is (space, kind, answer, settings, rng[, meaning]); it reads
+    the answer itself (settings and rng are the paper's learner's), a said meaning as its own meaning index."""
+    _, kind, answer, *rest = lesson
+    said = rest[2] if len(rest) > 2 else meaning
+    learner.observe(kind.name, answer, None if said is None else learner.meaning_index(*said))
 
 
 def _saved_answer_model(learner: AnswerModelLearner) -> tuple[str, dict[str, list], dict[str, Any]]:
