@@ -60,3 +60,17 @@ def test_the_aligned_target_keys_object_concepts_by_their_object():
     target = AlignedTarget(batch, hidden=4, seed=0)
     assert sorted(target.index) == ["distance/cup", "height"]
     assert asdict(PretrainConfig())["objective"] == "contrastive"
+
+
+def test_a_recorded_task_defaults_to_the_aligned_model_and_a_built_in_one_to_minilm(monkeypatch):
+    from dataclasses import replace
+
+    import langpref.tasks as tasks
+    from langpref.language.lab_default import lang_model_for
+
+    assert lang_model_for(None, "metaworld") == "minilm"
+    assert lang_model_for("mpnet", "metaworld") == "mpnet"
+    recorded = replace(tasks.get_task("metaworld"), source="recorded")
+    monkeypatch.setattr(tasks, "get_task", lambda name: recorded)
+    assert lang_model_for(None, "drawer-open") == "comparative-aligned"
+    assert lang_model_for("minilm", "drawer-open") == "minilm"
