@@ -3,7 +3,7 @@ co-finetuning loss without trajectories. Tiny: two concepts, a few steps."""
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import torch
 
@@ -74,3 +74,18 @@ def test_a_recorded_task_defaults_to_the_aligned_model_and_a_built_in_one_to_min
     monkeypatch.setattr(tasks, "get_task", lambda name: recorded)
     assert lang_model_for(None, "drawer-open") == "comparative-aligned"
     assert lang_model_for("minilm", "drawer-open") == "minilm"
+
+
+def test_the_aligned_build_is_deterministic_from_its_seed():
+    corpus = generate(0, 4, ["speed", "height"])
+
+    def weights(seed: int) -> torch.Tensor:
+        cfg = PretrainConfig(
+            steps=3, concepts_per_step=2, sentences_per_meaning=2, max_length=12, objective="aligned", seed=seed
+        )
+        cfg = replace(cfg, head_warmup_steps=5)
+        encoder, _ = pretrain(corpus, cfg, progress=False)
+        return torch.cat([p.detach().ravel()[:2000] for p in encoder.transformer.encoder.parameters()])
+
+    a, b, c = weights(0), weights(0), weights(1)
+    assert torch.equal(a, b) and not torch.equal(a, c)
