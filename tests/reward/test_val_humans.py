@@ -40,3 +40,19 @@ def test_learn_reward_on_val_uses_the_val_stream():
     assert not np.allclose(out["cross_entropy"], np.mean([c.cross_entropy for c in as_test], axis=0))
     test_out = learn_reward(space, replace(cfg, eval_split="test"), progress=False)
     assert test_out["config"]["eval_split"] == "test"
+
+
+def test_the_experiments_runs_on_val_use_the_val_stream_too():
+    """`experiment active` (and every experiment of experiments/reward.py) runs each (method, human, seed) through
+    one job: on val it meets the val stream's human, on test the test stream's, as learn-reward does."""
+    from dataclasses import asdict
+
+    from langpref.experiments.reward import _reward_job
+
+    space = toy_latent_space("metaworld", n=40, dim=8, seed=3)
+    for split in ("val", "test"):
+        cfg = LearnRewardConfig(feedback="comparison", queries=3, humans=1, seeds=1, eval_split=split)
+        stream = human_stream(0, split)
+        _, got = _reward_job(space, ("m/1/0", cfg, 1, 0))
+        want = run_reward_learning(space, human_weights(3, stream, 1), cfg, (*stream, 1, 0))
+        assert got == asdict(want)
