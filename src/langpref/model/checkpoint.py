@@ -51,19 +51,21 @@ def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: 
     `model_cfg.observations` says what the trajectory encoder sees (None, from before the option: state)."""
     tokenizer, transformer = load_transformer(lang_source or model_cfg.lang_model)
     observations, deltas = model_cfg.observations or "state", model_cfg.observation_deltas
+    magnitudes = model_cfg.delta_magnitudes
     traj: TrajectoryEncoder | ImageTrajectoryEncoder
     if not sees_images(observations):
         traj = TrajectoryEncoder(
-            step_input_dim(info.obs_dim, info.action_dim, deltas),
+            step_input_dim(info.obs_dim, info.action_dim, deltas, magnitudes),
             model_cfg.traj_hidden,
             model_cfg.latent_dim,
             mean,
             std,
             observation_deltas=deltas,
+            delta_magnitudes=magnitudes,
         )
     else:
         traj = ImageTrajectoryEncoder(
-            numeric_dim(observations, info.obs_dim, info.action_dim, deltas),
+            numeric_dim(observations, info.obs_dim, info.action_dim, deltas, magnitudes),
             model_cfg.traj_hidden,
             model_cfg.latent_dim,
             observations,
@@ -73,6 +75,7 @@ def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: 
             std,
             observation_deltas=deltas,
             frame_shift=model_cfg.frame_shift,
+            delta_magnitudes=magnitudes,
         )
     lang = LanguageEncoder(tokenizer, transformer, model_cfg.latent_dim, model_cfg.max_length)
     return LatentModel(traj, lang, info, model_cfg.lang_model, negation=model_cfg.negation)
@@ -282,6 +285,7 @@ def _description(path: Path, cfg: dict[str, Any]) -> tuple[ModelConfig, DataInfo
         mc = dict(cfg["model"])
         mc.pop("lang_hidden", None)
         mc.setdefault("observation_deltas", False)  # checkpoints from before the option: (observation, action)
+        mc.setdefault("delta_magnitudes", False)  # checkpoints from before the option: no |change| inputs
         mc.setdefault("observations", "state")  # checkpoints from before image observations
         mc["traj_hidden"] = tuple(mc["traj_hidden"])
         if "frame_channels" in mc:

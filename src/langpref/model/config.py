@@ -37,6 +37,11 @@ class ModelConfig:
     observation_deltas: bool = True
     """Give the trajectory encoder each step's change of observation besides the observation and action (speed
     lives in consecutive states); off = the authors' (observation, action)."""
+    delta_magnitudes: bool = False
+    """Also give the size of each step's change of observation, |s_t - s_{t-1}| per dimension: a speed is the time
+    mean of a magnitude, which the time mean of the signed changes (the net displacement) does not hold; with it a
+    small recording's trajectory side orders speed without first having to learn an absolute value
+    (docs/pending/results-trajectory.md). Off = the inputs of `observation_deltas` alone."""
     max_length: int = 32
     """Tokens kept per utterance (feedback sentences are short)."""
     observations: str | None = None

@@ -6,6 +6,10 @@ By default each step also carries the change of observation since the previous s
 property of consecutive states, which a per-step network cannot see in one state unless the observation carries it
 (normalised on its own, the small per-step change is no longer drowned by the positions' spread). On Meta-World's
 test trajectories with the train phrasings it raised the accuracy on speed from 0.79 to 0.95 (docs/results.md).
+With `delta_magnitudes` each step also carries the size of that change, |s_t - s_{t-1}| per dimension: a speed is
+the time mean of a magnitude, while the time mean of the signed changes is the net displacement over the episode's
+length, which says little about how fast the hand moved; a per-step MLP can learn the magnitude, but a small
+recording gives it few steps to (examples/reach/diagnose.py, docs/pending/results-trajectory.md).
 The last layer is linear, so the mean is taken before it: mean_t(W h_t + c) = W mean_t(h_t) + c, the same phi for
 a D/128-th of the work.
 
@@ -39,9 +43,11 @@ class TrajectoryEncoder(nn.Module):
         mean: np.ndarray | None = None,
         std: np.ndarray | None = None,
         observation_deltas: bool = False,
+        delta_magnitudes: bool = False,
     ):
         super().__init__()
         self.observation_deltas = observation_deltas
+        self.delta_magnitudes = delta_magnitudes
         layers: list[nn.Module] = []
         width = in_dim
         for h in hidden:
@@ -67,18 +73,22 @@ def time_mean(h: torch.Tensor, lengths: torch.Tensor | None) -> torch.Tensor:
     return (h * mask[..., None]).sum(dim=1) / lengths[:, None].to(h.dtype)
 
 
-def step_inputs(obs: np.ndarray, actions: np.ndarray, observation_deltas: bool) -> np.ndarray:
-    """Per-step encoder inputs (N, T, in_dim), float32: observation, [its change since the previous step (zero at
-    t = 0)], action. Built on whole trajectories, before any subsampling of time steps."""
+def step_inputs(
+    obs: np.ndarray, actions: np.ndarray, observation_deltas: bool, delta_magnitudes: bool = False
+) -> np.ndarray:
+    """Per-step encoder inputs (N, T, in_dim) (or (T, in_dim) of one trajectory), float32: observation, [its change
+    since the previous step (zero at t = 0)], [the change's absolute value], action. Built on whole trajectories,
+    before any subsampling of time steps."""
     parts = [obs]
-    if observation_deltas:
-        parts.append(np.diff(obs, axis=-2, prepend=obs[..., :1, :]))
+    if observation_deltas or delta_magnitudes:
+        delta = np.diff(obs, axis=-2, prepend=obs[..., :1, :])
+        parts += [delta] * observation_deltas + [np.abs(delta)] * delta_magnitudes
     parts.append(actions)
     return np.concatenate(parts, axis=-1).astype(np.float32)
 
 
-def step_input_dim(obs_dim: int, action_dim: int, observation_deltas: bool) -> int:
-    return obs_dim * (2 if observation_deltas else 1) + action_dim
+def step_input_dim(obs_dim: int, action_dim: int, observation_deltas: bool, delta_magnitudes: bool = False) -> int:
+    return obs_dim * (1 + int(observation_deltas) + int(delta_magnitudes)) + action_dim
 
 
 def normalisation_stats(steps: np.ndarray, lengths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -2,8 +2,8 @@
 
 A model sees one of three observation kinds (`ModelConfig.observations`, `langpref.model.config.OBSERVATIONS`):
 
-    state          each step's proprioception [its change since the previous step], action  (the default without
-                   frames; the encoder of the paper's authors' code)
+    state          each step's proprioception [its change since the previous step] [that change's size], action
+                   (the default without frames; the encoder of the paper's authors' code)
     images         each step's camera frame and action: what a robot without object state has
     images+state   both: the paper's states (images and proprioception), and the default when a dataset has frames
 
@@ -47,17 +47,21 @@ def resolve_observations(asked: str | None, has_frames: bool, where: str) -> str
     return asked
 
 
-def numeric_dim(observations: str, obs_dim: int, action_dim: int, observation_deltas: bool) -> int:
+def numeric_dim(
+    observations: str, obs_dim: int, action_dim: int, observation_deltas: bool, delta_magnitudes: bool = False
+) -> int:
     """Width of the numeric per-step input: see `numeric_inputs`."""
     if not sees_state(observations):
         return action_dim
-    return step_input_dim(obs_dim, action_dim, observation_deltas)
+    return step_input_dim(obs_dim, action_dim, observation_deltas, delta_magnitudes)
 
 
-def numeric_inputs(obs: np.ndarray, actions: np.ndarray, observations: str, observation_deltas: bool) -> np.ndarray:
+def numeric_inputs(
+    obs: np.ndarray, actions: np.ndarray, observations: str, observation_deltas: bool, delta_magnitudes: bool = False
+) -> np.ndarray:
     """Numeric per-step inputs (N, T, d) float32: `step_inputs` when the model sees the state, else the actions."""
     if sees_state(observations):
-        return step_inputs(obs, actions, observation_deltas)
+        return step_inputs(obs, actions, observation_deltas, delta_magnitudes)
     return np.asarray(actions, dtype=np.float32)
 
 
@@ -94,10 +98,12 @@ def trajectories_input(
     lengths: np.ndarray | None = None,
     frames: np.ndarray | list[np.ndarray] | None = None,
     frame_stride: int | None = None,
+    delta_magnitudes: bool = False,
 ) -> EncoderInput:
     """Encoder input of trajectories in memory: obs (N, T, obs_dim), actions (N, T, A), and for a model that sees
-    images their frames (N, K, h, w, 3), or one (K_i, h, w, 3) array per trajectory, one every `frame_stride` steps."""
-    steps = numeric_inputs(obs, actions, observations, observation_deltas)
+    images their frames (N, K, h, w, 3), or one (K_i, h, w, 3) array per trajectory, one every `frame_stride` steps.
+    `observation_deltas` and `delta_magnitudes` as `ModelConfig`'s."""
+    steps = numeric_inputs(obs, actions, observations, observation_deltas, delta_magnitudes)
     if not sees_images(observations):
         return EncoderInput(steps, lengths)
     if frames is None or frame_stride is None:
@@ -118,12 +124,15 @@ def trajectories_input(
     return EncoderInput(steps, lengths, stacked, frame_index(lens, horizon, frame_stride))
 
 
-def dataset_input(dataset, split: str | None, observations: str, observation_deltas: bool) -> EncoderInput:
+def dataset_input(
+    dataset, split: str | None, observations: str, observation_deltas: bool, delta_magnitudes: bool = False
+) -> EncoderInput:
     """Encoder input of one split of a dataset (every trajectory when `split` is None), in dataset order."""
     obs, act = dataset.arrays(split)
     lengths = dataset.lengths(split)
     if not sees_images(observations):
-        return trajectories_input(obs, act, observations, observation_deltas, lengths)
+        magnitudes = delta_magnitudes
+        return trajectories_input(obs, act, observations, observation_deltas, lengths, delta_magnitudes=magnitudes)
     spec = dataset.frame_spec
     if spec is None:
         raise LangprefError(
@@ -131,5 +140,12 @@ def dataset_input(dataset, split: str | None, observations: str, observation_del
             "use a dataset made with `langpref generate --images` or `langpref import --images`"
         )
     return trajectories_input(
-        obs, act, observations, observation_deltas, lengths, dataset.frames(split), frame_stride=spec.stride
+        obs,
+        act,
+        observations,
+        observation_deltas,
+        lengths,
+        dataset.frames(split),
+        frame_stride=spec.stride,
+        delta_magnitudes=delta_magnitudes,
     )

@@ -181,14 +181,24 @@ class LatentModel(nn.Module):
                     f"{want.get('height')} x {want.get('width')}"
                 )
         inp = trajectories_input(
-            obs, actions, self.observations, self.traj.observation_deltas, lengths, frames, frame_stride=stride
+            obs,
+            actions,
+            self.observations,
+            self.traj.observation_deltas,
+            lengths,
+            frames,
+            frame_stride=stride,
+            delta_magnitudes=self.traj.delta_magnitudes,
         )
         return self.encode_input(inp, batch_size)
 
     def encode_dataset(self, dataset, split: str | None = None) -> torch.Tensor:
         """phi of the trajectories of one split (all of them when `split` is None), in dataset order."""
         self.check_dataset(dataset)
-        return self.encode_input(dataset_input(dataset, split, self.observations, self.traj.observation_deltas))
+        traj = self.traj
+        return self.encode_input(
+            dataset_input(dataset, split, self.observations, traj.observation_deltas, traj.delta_magnitudes)
+        )
 
     def encode_rollouts(self, trajs: Sequence[Any], env: Any = None) -> torch.Tensor:
         """phi (N, D) of `Trajectory` objects in memory (new rollouts, as `langpref improve` makes). A model that

@@ -50,7 +50,9 @@ class TrainSplit:
                 f"split {name!r} of {dataset.root} has {len(idx)} trajectories; training needs at "
                 "least 2 in train and val"
             )
-        inp = dataset_input(dataset, name, model_cfg.observations, model_cfg.observation_deltas)
+        inp = dataset_input(
+            dataset, name, model_cfg.observations, model_cfg.observation_deltas, model_cfg.delta_magnitudes
+        )
         self.steps = torch.from_numpy(inp.steps).to(device)
         self.lengths = inp.lengths  # None: every trajectory has `horizon` steps
         self.frames = None if inp.frames is None else torch.from_numpy(inp.frames).to(device)

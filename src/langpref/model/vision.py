@@ -94,10 +94,12 @@ class ImageTrajectoryEncoder(nn.Module):
         std: np.ndarray | None = None,
         observation_deltas: bool = False,
         frame_shift: int = 0,
+        delta_magnitudes: bool = False,
     ):
         super().__init__()
         self.observations = observations
         self.observation_deltas = observation_deltas
+        self.delta_magnitudes = delta_magnitudes
         self.frames = FrameEncoder(frame_channels, frame_features, frame_shift)
         layers: list[nn.Module] = []
         width = numeric_dim + frame_features

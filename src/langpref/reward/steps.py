@@ -30,6 +30,8 @@ class StepEncoder:
     action_dim: int
     sha256: str
     """Checksum of the checkpoint's weights file, so a reward can tell when the encoder it was learned on changed."""
+    delta_magnitudes: bool = False
+    """The encoder also reads |s_t - s_{t-1}| (`ModelConfig.delta_magnitudes`)."""
 
     @classmethod
     def from_checkpoint(cls, model: str | Path) -> StepEncoder:
@@ -62,6 +64,7 @@ class StepEncoder:
             obs_dim=int(cfg["data"]["obs_dim"]),
             action_dim=int(cfg["data"]["action_dim"]),
             sha256=str(cfg["files"][WEIGHTS]["sha256"]),
+            delta_magnitudes=bool(cfg["model"].get("delta_magnitudes", False)),
         )
 
     @property
@@ -71,7 +74,7 @@ class StepEncoder:
 
     def embeddings(self, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """e_t of every step (T, D) of one trajectory, observations (T, obs_dim) and actions (T, A): the encoder's
-        MLP on (s_t, [s_t - s_{t-1}, zero at t = 1], a_t), normalised as in training."""
+        MLP on (s_t, [s_t - s_{t-1}, zero at t = 1], [its absolute value], a_t), normalised as in training."""
         obs = np.asarray(observations, dtype=np.float32)
         act = np.asarray(actions, dtype=np.float32)
         if obs.ndim != 2 or act.ndim != 2 or len(obs) != len(act) or len(obs) == 0:
@@ -84,7 +87,8 @@ class StepEncoder:
                 f"the reward reads observations of {self.obs_dim} and actions of {self.action_dim} numbers; got "
                 f"{obs.shape[1]} and {act.shape[1]}"
             )
-        parts = [obs, np.diff(obs, axis=0, prepend=obs[:1])] if self.observation_deltas else [obs]
+        delta = np.diff(obs, axis=0, prepend=obs[:1])
+        parts = [obs] + [delta] * self.observation_deltas + [np.abs(delta)] * self.delta_magnitudes
         x = np.concatenate([*parts, act], axis=1).astype(np.float32).astype(np.float64)
         h = (x - self.mean) / self.std
         for w, b in self.body:
