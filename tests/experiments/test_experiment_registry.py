@@ -63,8 +63,8 @@ def test_flag_choices_come_from_the_literal_fields():
     from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, FEATURE_SCALES
     from langpref.feedback.space import PHRASING_SPLITS
     from langpref.improve import IMPROVE_STRATEGIES, OBJECTIVES
-    from langpref.reward.answer_model import LEARNERS
     from langpref.reward.learner import LOSSES, MODELS, NEGATIVES
+    from langpref.reward.learners import learner_names
     from tests.factories import parsers
 
     p = parsers()
@@ -74,7 +74,7 @@ def test_flag_choices_come_from_the_literal_fields():
     assert lr["--direction"].choices == DIRECTION_RULES and lr["--feature-rule"].choices == FEATURE_RULES
     assert lr["--phrasing-split"].choices == PHRASING_SPLITS == ("train", "val", "test", "all")
     assert lr["--reward-model"].choices == MODELS and lr["--loss"].choices == LOSSES
-    assert lr["--negatives"].choices == NEGATIVES and lr["--learner"].choices == LEARNERS
+    assert lr["--negatives"].choices == NEGATIVES and lr["--learner"].choices == learner_names()
     assert lr["--query-split"].choices == lr["--eval-split"].choices == ("train", "val", "test")
     assert imp["--strategy"].choices == IMPROVE_STRATEGIES and imp["--objective"].choices == OBJECTIVES
     assert imp["--candidates"].choices == ("train", "val", "test", "generated", "recorded")

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, get_args
+from typing import Any
 
 import numpy as np
 
@@ -66,9 +66,6 @@ from langpref.reward.selection import (
     mutual_information,
 )
 
-Learner = Literal["paper", "answer-model"]
-"""`--learner`: Eq. 9's Bradley-Terry pairs (the paper's, `langpref.reward.learner`) or this module's."""
-LEARNERS: tuple[str, ...] = get_args(Learner)
 READING_TEMPERATURES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 """The grid T_read is fitted on."""
 
