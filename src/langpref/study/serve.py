@@ -145,6 +145,8 @@ def bind(host: str, port: int) -> socket.socket:
 def _uvicorn_server(app, log_level: str = "warning"):
     import uvicorn
 
+    from langpref.study.transport import OneSendH11Protocol
+
     class StudyServer(uvicorn.Server):
         def handle_exit(self, sig, frame) -> None:  # SIGTERM, SIGINT: the requests waiting for a video answer now
             app.state.study.stopping.set()
@@ -155,6 +157,7 @@ def _uvicorn_server(app, log_level: str = "warning"):
     return StudyServer(
         uvicorn.Config(
             app,
+            http=OneSendH11Protocol,  # a response's headers and body in one send
             log_level=log_level,
             access_log=False,
             lifespan="off",
