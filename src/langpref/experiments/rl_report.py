@@ -183,7 +183,7 @@ def per_human(runs: dict[str, dict], cfg, feature_names, weights) -> list[dict[s
 def plot_rl(summary: dict[str, Any], out: Path, title: str) -> Path:
     """Two panels over environment steps: the policies' true reward (0..1 on the test split's scale) and success
     rate, mean with a +-std band per source; the learned rewards' CMA-ES optima as dashed lines."""
-    from langpref.extras import pyplot
+    from langpref.extras import pyplot, save_figure
 
     plt = pyplot("the rl figure")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -205,10 +205,7 @@ def plot_rl(summary: dict[str, Any], out: Path, title: str) -> Path:
         )
     axes[0].legend(fontsize=7)
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi=120, trim=False)
 
 
 def markdown(summary: dict[str, Any]) -> str:
