@@ -28,6 +28,7 @@ from langpref.dataset.recording import (
     VIDEO_SUFFIXES,
     ImageCells,
     RecordedEpisode,
+    is_lerobot,
     orphan_videos,
     plain_episode_files,
     read_plain_episode,
@@ -79,10 +80,6 @@ class ImportConfig:
     bank check`), print its one-line summary and warn on weak meanings (a few seconds)."""
     frames: FrameOptions = field(default_factory=FrameOptions)
     """Camera frames (--images, --frame-size, --frame-stride), decoded from every episode's video or images."""
-
-
-def is_lerobot(src: Path) -> bool:
-    return (Path(src) / "meta" / "info.json").is_file()
 
 
 def split_counts(n: int, shares: tuple[float, float, float]) -> dict[str, int]:

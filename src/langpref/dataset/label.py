@@ -34,8 +34,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from langpref.dataset.recording import VIDEO_SUFFIXES, plain_episode_files, read_plain_episode
+from langpref.dataset.recording import VIDEO_SUFFIXES, is_lerobot, plain_episode_files, read_plain_episode
 from langpref.errors import LangprefError
+from langpref.extras import needs
 
 SHARE = "langpref.reward_share"
 PROGRESS = "langpref.reward_progress"
@@ -78,8 +79,6 @@ def label_dataset(
     and return its summary: `episodes`, `frames`, `seconds` (wall time), `out`, `format` (`lerobot` or `plain`),
     `columns` and the episodes' learned rewards (`episode_reward`: mean, min, max). With `figure`, also draw the
     episodes' v_t curves into that PNG (`plot_progress`) and name it in the summary's `figure`."""
-    from langpref.dataset.label_lerobot import is_lerobot, label_lerobot
-
     start = time.perf_counter()
     src, out = Path(cfg.dataset), Path(cfg.out)
     _check_paths(src, out, cfg.force)
@@ -91,6 +90,8 @@ def label_dataset(
     tmp.mkdir(parents=True)
     try:
         if is_lerobot(src):
+            with needs("lerobot", "labelling a LeRobotDataset"):
+                from langpref.dataset.label_lerobot import label_lerobot
             kind, totals = "lerobot", label_lerobot(src, tmp, reward, cfg.state_key, cfg.action_key, progress)
         else:
             kind, totals = "plain", label_plain(src, tmp, reward, progress)

@@ -58,11 +58,6 @@ FEATURE = {"dtype": "float32", "shape": [1], "names": None}
 """A label column as a feature of meta/info.json: one float32 per frame, as lerobot declares `next.reward`."""
 
 
-def is_lerobot(src: Path) -> bool:
-    """Whether `src` looks like a LeRobotDataset (it has meta/info.json)."""
-    return (Path(src) / INFO_PATH).is_file()
-
-
 def label_lerobot(
     src: Path, out: Path, reward: Any, state_key: str, action_key: str, progress: bool = True
 ) -> dict[str, Any]:

@@ -27,10 +27,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from langpref.dataset.recording import ImageCells, RecordedEpisode, VideoClip
+from langpref.dataset.recording import LEROBOT_INFO, ImageCells, RecordedEpisode, VideoClip
 from langpref.errors import LangprefError
 
-INFO_PATH = Path("meta/info.json")
+INFO_PATH = LEROBOT_INFO
 EPISODES_DIR = Path("meta/episodes")
 SUCCESS_KEY = "next.success"
 # Columns lerobot adds to every dataset; not robot signals a user would pick as state or action.

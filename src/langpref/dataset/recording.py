@@ -50,6 +50,8 @@ class RecordedEpisode:
 
 
 VIDEO_SUFFIXES = (".mp4", ".webm")
+LEROBOT_INFO = Path("meta/info.json")
+"""The file that marks a folder as a LeRobotDataset (v3)."""
 
 
 def _npz_arrays(path: Path) -> dict[str, np.ndarray]:
@@ -95,6 +97,12 @@ def read_plain_episode(path: Path) -> RecordedEpisode:
         success=None if success is None else bool(success.reshape(())),
         video=VideoClip(videos[0]) if videos else None,
     )
+
+
+def is_lerobot(src: Path) -> bool:
+    """Whether `src` looks like a LeRobotDataset (it has meta/info.json), else it is read as a plain recording. Here,
+    not beside the LeRobot reader, so that telling the layouts apart needs no pyarrow."""
+    return (Path(src) / LEROBOT_INFO).is_file()
 
 
 def plain_episode_files(src: Path) -> list[Path]:
