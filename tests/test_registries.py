@@ -11,6 +11,8 @@ import langpref.registry
 from langpref.errors import LangprefError
 from langpref.registry import Registry
 
+_LEARN = "langpref.reward:LearnRewardConfig"
+
 
 class _EntryPoint:
     def __init__(self, name: str, load):
@@ -51,3 +53,41 @@ def test_a_plugin_experiment_joins_and_a_broken_one_is_skipped(monkeypatch):
         experiments.register_experiment(replace(extra, help="another"))
     with pytest.raises(LangprefError, match="unknown experiment 'nope': choose one of alignment, "):
         experiments.get_experiment("nope")
+
+
+def echo_experiment(env, data, model, out, *, perfect, config, force, sweep, command):
+    """A plugin experiment's run (the shared signature of the latent space's uses): writes its section, returns what
+    it was given."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "echo.md").write_text(f"echo on {env}: {config.queries} queries\n")
+    return {"figure": str(out / "echo.png"), "env": env, "queries": config.queries, "perfect": perfect}
+
+
+def test_a_plugin_experiment_is_an_experiment_command(monkeypatch, tmp_path, capsys):
+    import json
+
+    from langpref import cli, cli_config
+    from langpref.experiments import registry as experiments
+
+    echo = experiments.Experiment(
+        "echo", "a plugin's experiment", "tests.test_registries:echo_experiment", _LEARN, flags=("queries",)
+    )
+    own = replace(experiments.get_experiment("seeds"), name="seeds-again", help="a plugin's own experiment")
+    eps = [_EntryPoint("echo", lambda: echo), _EntryPoint("own", lambda: own)]
+    monkeypatch.setattr(langpref.registry, "entry_points", lambda group: eps if group == "langpref.experiments" else [])
+    monkeypatch.setattr(experiments.REGISTRY, "loaded", False)
+    monkeypatch.setattr(experiments.REGISTRY, "items", dict(experiments.REGISTRY.items))
+    monkeypatch.setattr(cli_config, "COMMANDS", dict(cli_config.COMMANDS))
+    cli.build_parser(["train"])
+    assert not experiments.REGISTRY.loaded  # a command other than an experiment imports no plugin
+    for argv in (["experiment", "--help"], ["experiment", "seeds-again", "--help"]):
+        with pytest.raises(SystemExit):
+            cli.main(argv)
+    shown = capsys.readouterr().out
+    assert "a plugin's experiment" in shown and "a plugin's own experiment" in shown and "--seeds" in shown
+    out = tmp_path / "echo"
+    argv = ["experiment", "echo", "--env", "metaworld", "--perfect-latent", "--out", str(out), "--queries", "3"]
+    assert cli.main([*argv, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary == {"figure": str(out / "echo.png"), "env": "metaworld", "queries": 3, "perfect": True}
+    assert json.loads((out / "echo.config.json").read_text())["config"]["config"]["queries"] == 3

@@ -38,6 +38,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """Every command with its help; a command's options only when `argv` names it (all of them without `argv`)."""
     from langpref import __version__
 
+    _plugin_experiments(argv)
     parser = cc.make_parser(
         "langpref",
         "Teach robots with comparative language feedback: datasets, a shared latent "
@@ -51,9 +52,17 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _plugin_experiments(argv: list[str] | None) -> None:
+    """The commands of installed packages' experiments, when `argv` asks for an experiment (or for every command):
+    only then are the plugins imported."""
+    if argv is None or argv[:1] == ["experiment"]:
+        uses.add_experiment_commands(plugins=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
+        _plugin_experiments(argv)  # before `--config` looks the command up
         argv = cc.expand_rerun(argv, build_parser)  # `--config PATH`: the record's command line, overridden
         args = build_parser(argv).parse_args(argv)
         args.argv = argv

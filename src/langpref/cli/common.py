@@ -66,13 +66,16 @@ def load(args: argparse.Namespace, with_data: bool = True):
     return load_model(args.model, device=device, dataset=dataset, negation=negation), dataset
 
 
-def run_config_experiment(args: argparse.Namespace, name: str, table: Callable[[dict], str]) -> None:
-    """`langpref experiment NAME` for an experiment whose only input is its config dataclass: run it, record the
-    config beside its output (NAME.config.json, so `--config` reruns it) and print `table` of its summary."""
-    from langpref.experiments.registry import EXPERIMENTS
+def run_config_experiment(args: argparse.Namespace, name: str, table: Callable[[dict], str] | None = None) -> None:
+    """`langpref experiment NAME` for an experiment whose only input is its config dataclass (its `out` the output
+    folder, its `resolved()`, where it has one, filling in defaults): run it, record the config beside its output
+    (NAME.config.json, so `--config` reruns it) and print `table` of its summary (without one, the summary)."""
+    from langpref.experiments.registry import get_experiment
 
-    experiment = EXPERIMENTS[name]
-    cfg = from_args(experiment.config_class(), args).resolved()
+    experiment = get_experiment(name)
+    cfg = from_args(experiment.config_class(), args)
+    cfg = cfg.resolved() if hasattr(cfg, "resolved") else cfg
     summary = experiment.runner()(cfg)
     record(args, Path(str(cfg.out)) / f"{name}.config.json", cfg)
-    emit(summary, args.json, lambda s: table(s) + f"\n(wrote {cfg.out}/{name}.md and .json)")
+    text = None if table is None else (lambda s: table(s) + f"\n(wrote {cfg.out}/{name}.md and .json)")
+    emit(summary, args.json, text)

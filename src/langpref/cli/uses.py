@@ -11,7 +11,7 @@ from langpref import cli_config as cc
 from langpref.cli.common import JSON, TASK, run_config_experiment
 from langpref.cli_config import RERUN, beside, command, command_of, config, emit, from_args, opt, path, record
 from langpref.errors import LangprefError
-from langpref.experiments.registry import EXPERIMENTS, Experiment, get_experiment
+from langpref.experiments.registry import EXPERIMENTS, REGISTRY, Experiment, get_experiment
 from langpref.extras import require
 
 
@@ -346,15 +346,36 @@ def _experiment_options(experiment: Experiment) -> list[cc.Options]:
     ]
 
 
-for _experiment in EXPERIMENTS.values():
-    if _experiment.inputs == "space":
-        command(
-            f"experiment {_experiment.name}",
-            _experiment.help,
-            _experiment_options(_experiment),
-            _experiment.help + ". Writes NAME.json, NAME.png and NAME.md (a section for docs/results.md); an "
-            "interrupted run resumes without redoing finished seeds.",
-        )(cmd_experiment_uses)
+def cmd_experiment_own(args: argparse.Namespace) -> None:
+    """`langpref experiment NAME` for a plugin's experiment that takes only its config (`inputs="own"`)."""
+    run_config_experiment(args, args.experiment)
+
+
+def add_experiment_commands(plugins: bool = False) -> None:
+    """`langpref experiment NAME` for every experiment not yet a command: of the latent space's uses, with the
+    shared flags; a plugin's of `inputs="own"` with its config's flags alone (`run(config)`, the built-in ones have
+    their own commands beside `langpref train`). `plugins`: also the experiments of installed packages (the
+    `langpref.experiments` entry-point group), loaded only for a command line that asks for an experiment so that
+    no other command imports them."""
+    if plugins:
+        REGISTRY.load_plugins()
+    for experiment in list(REGISTRY.items.values()):
+        name = f"experiment {experiment.name}"
+        if name in cc.COMMANDS:
+            continue
+        if experiment.inputs == "space":
+            command(
+                name,
+                experiment.help,
+                _experiment_options(experiment),
+                experiment.help + ". Writes NAME.json, NAME.png and NAME.md (a section for docs/results.md); an "
+                "interrupted run resumes without redoing finished seeds.",
+            )(cmd_experiment_uses)
+        elif plugins and experiment.config is not None:
+            command(name, experiment.help, [config(experiment.config), JSON, RERUN])(cmd_experiment_own)
+
+
+add_experiment_commands()
 
 
 @command(

@@ -11,7 +11,9 @@ Experiments of the latent space's uses (`inputs="space"`) share one run signatur
 (`data`, `model` and `out` None for their defaults, `config` the record's config class, `sweep` a `SweepConfig`,
 `command` the command line recorded in the summary), written once: `langpref.experiments.common.space_experiment`
 makes it around a body that takes them as one `Inputs`. Experiments that train their own models (`inputs="own"`) take
-their own arguments; their commands live beside `langpref train` (`langpref.cli.latent`).
+their own arguments; their commands live beside `langpref train` (`langpref.cli.latent`). An installed package's
+experiment (entry-point group `langpref.experiments`) becomes `langpref experiment NAME` too: of the uses, with the
+shared flags; `inputs="own"`, with its config's flags alone, run as `run(config)` (the config's `out` its folder).
 """
 
 from __future__ import annotations
