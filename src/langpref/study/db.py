@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -284,16 +285,33 @@ def connect(path: str | Path) -> sqlite3.Connection:
     return conn
 
 
+_WRITERS: dict[str, threading.RLock] = {}
+"""One lock per database file: the writers of this process take turns on it rather than in SQLite."""
+_WRITERS_GUARD = threading.Lock()
+
+
+def _writer_lock(conn: sqlite3.Connection) -> threading.RLock:
+    """The lock of `conn`'s database file (an in-memory database: its own)."""
+    path = conn.execute("PRAGMA database_list").fetchone()[2] or f"memory:{id(conn)}"
+    with _WRITERS_GUARD:
+        return _WRITERS.setdefault(path, threading.RLock())
+
+
 @contextmanager
 def transaction(conn: sqlite3.Connection) -> Iterator[sqlite3.Connection]:
-    """BEGIN IMMEDIATE ... COMMIT, rolled back on any exception."""
-    conn.execute("BEGIN IMMEDIATE")
-    try:
-        yield conn
-    except BaseException:
-        conn.execute("ROLLBACK")
-        raise
-    conn.execute("COMMIT")
+    """BEGIN IMMEDIATE ... COMMIT, rolled back on any exception. The threads of one process write one at a time on a
+    lock of their own: a writer SQLite finds busy sleeps 1, 2, 5, 10, 15 ms ... before it asks again, and with 20
+    participants answering at once those sleeps were most of an answer's time in the database (12-15 ms at the mean
+    for 0.4 ms of work); a thread waiting on the lock goes on the moment it is free. Other processes (an export, a
+    second server) still meet SQLite's own lock and its busy timeout."""
+    with _writer_lock(conn):
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield conn
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        conn.execute("COMMIT")
 
 
 def schema_version(conn: sqlite3.Connection) -> int:
