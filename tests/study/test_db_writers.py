@@ -5,6 +5,7 @@ threads writing at once still never find the database locked."""
 from __future__ import annotations
 
 import threading
+import time
 
 from langpref.study import db as sdb
 
@@ -22,7 +23,7 @@ def test_writers_of_one_process_take_turns_without_sqlites_busy_wait(tmp_path):
             for i in range(25):
                 with sdb.transaction(conn):
                     conn.execute("INSERT INTO t VALUES (?, ?)", (k, i))
-                    conn.execute("SELECT count(*) FROM t").fetchone()
+                    time.sleep(0.001)  # the write lock held while another thread runs
         except Exception as exc:  # noqa: BLE001 (collected and asserted below)
             errors.append(str(exc))
         finally:
