@@ -284,6 +284,7 @@ BANKS = (
     ROOT / "src" / "langpref" / "tasks" / "robosuite" / "utterances.json",
     ROOT / "examples" / "plugin" / "src" / "langpref_reach" / "utterances.json",
     ROOT / "examples" / "own_robot" / "utterances.json",
+    ROOT / "examples" / "reach" / "utterances.json",
 )
 # A data file under src/ (the gate's off-topic texts, any later one) must not copy a held-out text even loosely: at 0.8
 # the helper also takes a changed word in a longer text ("what is the capital of Spain" / "... of Australia"), and a
