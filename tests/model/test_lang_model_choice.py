@@ -134,7 +134,7 @@ def test_the_measures_on_a_stand_in_encoder():
     from langpref.language.banksource import open_bank
     from langpref.language.measure import bank_accuracy, latency_ms, package_bytes
 
-    assert package_bytes(models.REGISTRY["minilm"]) > 50 * 2**20  # the weights are in the package
+    assert package_bytes(models.get_lang_model("minilm")) > 50 * 2**20  # the weights are in the package
 
     def embed(texts):  # reads "faster"/"slower"-like words only: a crude but deterministic reader
         return np.array([[("fast" in t or "quick" in t) + 0.1, ("slow" in t) + 0.1, 0.1] for t in texts])

@@ -312,7 +312,7 @@ def cmd_lang_models(args: argparse.Namespace) -> None:
     import datetime
     import time
 
-    from langpref.language.models import REGISTRY
+    from langpref.language.models import get_lang_model, lang_model_names
 
     if args.repeats < 1:
         raise LangprefError(f"--repeats must be >= 1, got {args.repeats}")
@@ -334,7 +334,8 @@ def cmd_lang_models(args: argparse.Namespace) -> None:
             "load_average_before": [round(x, 2) for x in os.getloadavg()],
             "banks": [s.origin for s in sources],
         }
-    for name, spec in REGISTRY.items():
+    for name in lang_model_names():
+        spec = get_lang_model(name)
         row = {
             "title": spec.title,
             "installed": spec.installed(),

