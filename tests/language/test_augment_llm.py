@@ -10,6 +10,7 @@ import hashlib
 import json
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
@@ -26,7 +27,12 @@ Reply = Callable[[dict], tuple[int, str]]
 
 # what the fake model proposes for each meaning of Meta-World's bank, keyed by the prompt's "wants more/less X"
 PROPOSALS = {
-    "more speed": ["Hurry, please.", "Pick up the pace a bit.", "Bring the hand much lower.", "Move a lot quicker, please."],
+    "more speed": [
+        "Hurry, please.",
+        "Pick up the pace a bit.",
+        "Bring the hand much lower.",
+        "Move a lot quicker, please.",
+    ],
     "less speed": ["Take it easy.", "Ease off the pace a little.", "No rushing around.", "Thank you so much!"],
     "more height": ["Lift the arm higher up.", "Hurry, please."],
     "less height": ["Bring the hand down lower.", "Bring the hand down lower."],
@@ -44,6 +50,11 @@ def good(body: dict) -> tuple[int, str]:
     return 200, json.dumps({"phrasings": PROPOSALS[_meaning(body)]})
 
 
+def slow(body: dict) -> tuple[int, str]:
+    time.sleep(1.5)
+    return good(body)
+
+
 class FakeOpenAI:
     """An OpenAI-compatible chat-completions server on 127.0.0.1 answering with `reply`; keeps every request."""
 
@@ -59,11 +70,14 @@ class FakeOpenAI:
                 status, content = fake.reply(body) if self.path == "/v1/chat/completions" else (404, "no such path")
                 answer = {"choices": [{"index": 0, "message": {"role": "assistant", "content": content}}]}
                 data = (json.dumps(answer) if status == 200 else content).encode()
-                self.send_response(status)
-                self.send_header("Content-Type", "application/json")
-                self.send_header("Content-Length", str(len(data)))
-                self.end_headers()
-                self.wfile.write(data)
+                try:
+                    self.send_response(status)
+                    self.send_header("Content-Type", "application/json")
+                    self.send_header("Content-Length", str(len(data)))
+                    self.end_headers()
+                    self.wfile.write(data)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass  # the client gave up waiting (the --timeout test)
 
             def log_message(self, *args: object) -> None:
                 pass
@@ -179,6 +193,8 @@ def test_bad_json_unreachable_and_refusing_endpoints_are_one_line_each(fake, tmp
     closed.close()
     assert "unreachable" in _one_line_error([*argv, "--base-url", closed.url, "--llm", "m"], capsys)
     assert "--base-url" in _one_line_error([*argv, "--llm", "m"], capsys)
+    fake.reply = slow
+    assert "within 0.5 s" in _one_line_error([*argv, "--base-url", fake.url, "--llm", "m", "--timeout", "0.5"], capsys)
     assert not (tmp_path / "p.json").exists()
 
 

@@ -241,6 +241,10 @@ class EndpointChat:
             raise LangprefError(f"{self.name} answered HTTP {exc.code} to {url}: {detail or exc.reason}") from None
         except (urllib.error.URLError, TimeoutError, ConnectionError, OSError) as exc:
             reason = getattr(exc, "reason", exc)
+            if isinstance(reason, TimeoutError):  # reached, but slower than --timeout (a CPU-bound server)
+                raise LangprefError(
+                    f"{self.name} did not answer {url} within {self.timeout:g} s; raise --timeout"
+                ) from None
             raise LangprefError(f"{self.name} is unreachable at {url}: {reason}") from None
         try:
             return json.loads(raw)
