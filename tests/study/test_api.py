@@ -157,6 +157,7 @@ def test_pages_and_info(client):
         r = client.get(path)
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
         assert "script-src 'self'" in r.headers["content-security-policy"]
+        assert r.text.startswith("<!doctype html>\n") and "{{" not in r.text and "<title>" in r.text  # the shared head
     assert "Sawyer" in client.get("/").text
     assert client.get("/static/study.js").status_code == 200
     info = client.get("/api/info").json()

@@ -18,6 +18,9 @@ HERE = Path(__file__).parent
 STATIC = HERE / "static"
 PAGES = (("/", "index.html"), ("/study", "study.html"), ("/admin", "admin.html"))
 """Route -> template in `templates/`."""
+HEAD = HERE / "templates" / "_head.html"
+"""The start of every page up to its own title and scripts, which the templates' `{{HEAD}}` stands for: the same
+doctype, viewport and style sheet, written once."""
 NUMBERS = {1: "one method", 2: "two methods", 3: "three methods", 4: "four methods"}
 """How the guidelines say how many methods Study 2 has."""
 
@@ -52,7 +55,8 @@ def page_router(state: StudyApp) -> APIRouter:
 
 
 def render_page(state: StudyApp, name: str) -> str:
-    """The template `name` with the task's text and the protocol's numbers filled in (HTML-escaped)."""
+    """The template `name` after the shared head, with the task's text and the protocol's numbers filled in
+    (HTML-escaped)."""
     task = task_text(state.engine.env)
     c = state.cfg
     values = {
@@ -65,7 +69,7 @@ def render_page(state: StudyApp, name: str) -> str:
         "METHOD_COUNT": NUMBERS.get(len(c.kinds), f"{len(c.kinds)} methods"),
         "DURATION": duration_text(c),
     }
-    text = (HERE / "templates" / name).read_text()
+    text = (HERE / "templates" / name).read_text().replace("{{HEAD}}", HEAD.read_text().rstrip("\n"), 1)
     for key, value in values.items():
         text = text.replace("{{" + key + "}}", html.escape(value))
     return text.replace("{{METHOD_LIST}}", method_list(c.kinds))
