@@ -29,7 +29,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -430,12 +430,9 @@ class GeneratedStore:
         save_trajectory(self.root, traj)
         self.features.append(traj.features)
         n = len(self.features)
-        meta = DatasetMeta(
-            self.env,
+        meta = DatasetMeta.of_task(
+            task,
             self.horizon,
-            [asdict(f) for f in task.obs_layout],
-            task.action_dim,
-            list(task.features),
             {GENERATED: list(range(n))},
             n,
             config={

@@ -21,7 +21,7 @@ import json
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -234,16 +234,7 @@ def _finished(cfg: GenerateConfig, index: int) -> tuple[np.ndarray, bool] | None
     """Features and success of a trajectory an interrupted run already wrote, if it reads back whole."""
     if not trajectory_path(cfg.out, index).exists():
         return None
-    task = get_task(cfg.env)
-    meta = DatasetMeta(
-        cfg.env,
-        cfg.horizon,
-        [asdict(f) for f in task.obs_layout],
-        task.action_dim,
-        list(task.features),
-        {},
-        cfg.num_trajectories,
-    )
+    meta = DatasetMeta.of_task(get_task(cfg.env), cfg.horizon, {}, cfg.num_trajectories)
     try:
         traj = load_trajectory(cfg.out, index, meta)
         if cfg.frame_spec is not None:
@@ -298,14 +289,11 @@ def generate(cfg: GenerateConfig) -> dict[str, Any]:
     start = time.time()
     _roll_out(cfg, jobs, features, success)
     wall = time.time() - start
-    meta = DatasetMeta(
-        env=cfg.env,
-        horizon=cfg.horizon,
-        obs_layout=[asdict(f) for f in task.obs_layout],
-        action_dim=task.action_dim,
-        feature_names=list(task.features),
-        splits=assign_splits(cfg.env, n, cfg.seed),
-        num_trajectories=n,
+    meta = DatasetMeta.of_task(
+        task,
+        cfg.horizon,
+        assign_splits(cfg.env, n, cfg.seed),
+        n,
         config={
             **cfg.identity(),
             "generator": "latin-hypercube waypoint controllers",

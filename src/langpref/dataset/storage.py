@@ -87,6 +87,16 @@ class DatasetMeta:
     frames: dict[str, Any] | None = None
     """The camera frames under `frames/` (`FrameSpec`: width, height, stride, source), None when it has none."""
 
+    @classmethod
+    def of_task(
+        cls, task: Any, horizon: int, splits: dict[str, list[int]], num_trajectories: int, **more: Any
+    ) -> DatasetMeta:
+        """The meta of a dataset made in `task`'s simulator: the task's name, observation layout, action size and
+        features, written once for every maker of such datasets (`more`: config, frames)."""
+        layout = [asdict(f) for f in task.obs_layout]
+        features = list(task.features)
+        return cls(task.name, horizon, layout, task.action_dim, features, splits, num_trajectories, **more)
+
     @property
     def obs_dim(self) -> int:
         return int(self.obs_layout[-1]["stop"])
