@@ -323,6 +323,19 @@ class Proposer:
 # ---- what a command needs: the dataset's parameters and embeddings, the encoder -----------------------------------
 
 
+def cannot_generate(dataset) -> str | None:
+    """Why no new trajectory can be generated for `dataset`, or None: its task is recorded (no simulator to roll
+    out in), or its episodes differ in length (a search needs one horizon). Reads only the dataset's metadata, so a
+    command checks it before any model loads; each caller words its own error around it."""
+    from langpref.tasks import get_task
+
+    if get_task(dataset.env).simulator is None:
+        return f"task {dataset.env!r} has no simulator (a recorded task)"
+    if dataset.meta.lengths is not None:
+        return f"dataset {dataset.root} has episodes of different lengths"
+    return None
+
+
 @dataclass
 class Generation:
     """Everything needed to make proposers for a dataset and latent space: controller units of every dataset row,
@@ -342,17 +355,9 @@ class Generation:
     def open(cls, dataset, space, model=None, cfg: ProposeConfig | None = None) -> Generation:
         """From a simulated dataset, its latent space, the model that made the space (None: the oracle space) and
         the search settings."""
-        from langpref.tasks import get_task
-
-        if get_task(dataset.env).simulator is None:
-            raise LangprefError(
-                f"task {dataset.env!r} has no simulator: new trajectories can only be generated for "
-                "simulated tasks (metaworld, robosuite, plugins)"
-            )
-        if dataset.meta.lengths is not None:
-            raise LangprefError(
-                f"dataset {dataset.root} has episodes of different lengths; generation needs one horizon"
-            )
+        why = cannot_generate(dataset)
+        if why is not None:
+            raise LangprefError(f"{why}: new trajectories are generated for simulated tasks of one horizon")
         feats = np.asarray(dataset.features, dtype=np.float64)
         scale = AffineScale.fit(feats, space.theta)  # the humans' theta, whatever its scale (standardised, paper)
         embed = (

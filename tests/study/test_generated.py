@@ -110,6 +110,22 @@ def test_improve_candidates_are_checked_in_one_line():
     assert "\n" not in str(err.value)
 
 
+def test_a_dataset_that_cannot_have_generated_candidates_is_refused_in_one_line(monkeypatch):
+    from types import SimpleNamespace
+
+    from langpref.propose import cannot_generate
+    from langpref.study.generated import check_generation
+
+    even = SimpleNamespace(env="metaworld", root="data/even", meta=SimpleNamespace(lengths=None))
+    uneven = SimpleNamespace(env="metaworld", root="data/uneven", meta=SimpleNamespace(lengths=[3, 4]))
+    assert cannot_generate(even) is None
+    assert cannot_generate(uneven) == "dataset data/uneven has episodes of different lengths"
+    monkeypatch.setattr("langpref.dataset.storage.load_dataset", lambda path: uneven)
+    with pytest.raises(LangprefError, match="different lengths; drop the option") as err:
+        check_generation("data/uneven")
+    assert "\n" not in str(err.value)
+
+
 def test_simulated_participants_answer_generated_trajectories_by_their_features(engine, h, tmp_path, capsys):
     """`langpref study simulate --db DB` beside a server with generated candidates: a synthetic human never satisfied
     (all rounds) and near-greedy in Eq. 10 names, about each generated trajectory, the feature and direction Eq. 10

@@ -78,3 +78,15 @@ def test_video_names_take_ascii_digits_and_nothing_after(study_state, client):
     for bad in (name + "\n", name.replace(digits, wide), name.replace(digits, arabic), " " + name, name + "x"):
         assert study_state.videos.index_of(bad) is None, ascii(bad)
     assert client.get(f"/videos/{name}%0A").status_code == 404
+
+
+def test_a_failed_job_is_one_line_and_a_broken_worker_pool_is_dropped():
+    from types import SimpleNamespace
+
+    from langpref.study.videos import job_failure
+
+    live, broken = SimpleNamespace(_broken=False), SimpleNamespace(_broken="a worker died")
+    assert job_failure(ValueError("bad row"), live) == ("ValueError: bad row", live)
+    why, pool = job_failure(RuntimeError("x" * 1000), broken)
+    assert pool is None and len(why) == 300 and why.startswith("RuntimeError: xxx")
+    assert job_failure(OSError("gone"), None) == ("OSError: gone", None)

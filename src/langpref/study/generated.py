@@ -68,17 +68,13 @@ def check_generation(data_dir: str | Path) -> None:
     """One line when the dataset cannot have generated candidates: a recorded task (no simulator), episodes of
     different lengths. Reads only the dataset's metadata (before any model is loaded)."""
     from langpref.dataset.storage import load_dataset
-    from langpref.tasks import get_task
+    from langpref.propose import cannot_generate
 
-    ds = load_dataset(data_dir)
-    if get_task(ds.env).simulator is None:
+    why = cannot_generate(load_dataset(data_dir))
+    if why is not None:
         raise LangprefError(
-            f"--improve-candidates generated makes trajectories in a simulator, and task {ds.env!r} is recorded "
-            "(no simulator); drop the option (the study set is used)"
-        )
-    if ds.meta.lengths is not None:
-        raise LangprefError(
-            f"--improve-candidates generated needs trajectories of one length; {data_dir} has episodes of several"
+            f"--improve-candidates generated makes trajectories of one horizon in a simulator, and {why}; drop the "
+            "option (the study set is used)"
         )
 
 
@@ -369,11 +365,11 @@ class Generator:
             try:
                 self._make(job)
             except Exception as exc:  # noqa: BLE001 (reported per trajectory; asking for its video retries it)
+                from langpref.study.videos import job_failure
+
                 with self._cond:
-                    self._failed[job.id] = f"{type(exc).__name__}: {exc}"[:300]
+                    self._failed[job.id], self._pool = job_failure(exc, self._pool)
                     self._retry[job.id] = job
-                    if self._pool is not None and getattr(self._pool, "_broken", False):
-                        self._pool = None
             finally:
                 with self._cond:
                     self._running = None

@@ -255,9 +255,7 @@ class VideoCache:
                     self._pool.submit(make_video, source, row, out, c.width, c.height, c.fps, c.stride, gen).result()
                     self._errors.pop(index, None)
                 except Exception as exc:  # noqa: BLE001 (reported per video, the server keeps running)
-                    self._errors[index] = f"{type(exc).__name__}: {exc}"[:300]
-                    if self._pool is not None and getattr(self._pool, "_broken", False):
-                        self._pool = None
+                    self._errors[index], self._pool = job_failure(exc, self._pool)
                 finally:
                     with self._cond:
                         self._rendering = None
@@ -334,6 +332,13 @@ class VideoCache:
             self._cond.notify_all()
         stop_worker(self._pool, self._thread, timeout)
         self._pool = None
+
+
+def job_failure(exc: BaseException, pool: ProcessPoolExecutor | None) -> tuple[str, ProcessPoolExecutor | None]:
+    """A failed job's one-line reason (300 characters at most), and the worker pool to go on with: None when the
+    failure broke it (its worker died), so that the next job starts a fresh one instead of failing too."""
+    broken = pool is not None and getattr(pool, "_broken", False)
+    return f"{type(exc).__name__}: {exc}"[:300], None if broken else pool
 
 
 def stop_worker(pool: Any, thread: threading.Thread | None, timeout: float) -> None:
