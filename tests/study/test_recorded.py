@@ -271,7 +271,7 @@ def test_generated_candidates_need_a_simulator_one_line_before_the_model_loads(r
         model=str(tmp_path / "no-model-here"),  # never read: the task is checked first
         data=str(recorded_data),
     )
-    with pytest.raises(LangprefError, match="'tiny-colours' is recorded") as err:
+    with pytest.raises(LangprefError, match="task 'tiny-colours' has no simulator") as err:
         build_state(cfg, progress=False)
     assert "\n" not in str(err.value)
     assert not (tmp_path / "gen.sqlite").exists()

@@ -27,9 +27,14 @@ def lang_model_for(requested: str | None, env: str) -> str:
     otherwise."""
     if requested and requested != AUTO:
         return requested
+    from langpref.errors import LangprefError
     from langpref.tasks import get_task
 
-    return AUTO_LANG_MODEL if get_task(env).source == "recorded" else PAPER_LANG_MODEL
+    try:
+        source = get_task(env).source
+    except LangprefError:  # built-in and plugin tasks are always known: an unknown one is a recording not opened yet
+        source = "recorded"
+    return AUTO_LANG_MODEL if source == "recorded" else PAPER_LANG_MODEL
 
 
 def lang_model_for_data(requested: str | None, data: str | Path) -> str:

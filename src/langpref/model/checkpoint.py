@@ -23,6 +23,7 @@ import hashlib
 import json
 import os
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ import torch
 
 from langpref import __version__
 from langpref.errors import LangprefError
+from langpref.language.lab_default import AUTO, lang_model_for
 from langpref.language.transformer import load_transformer
 from langpref.model.config import ModelConfig
 from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, save_transformer, step_input_dim
@@ -49,6 +51,8 @@ CONFIG = "config.json"
 def build_model(model_cfg: ModelConfig, info: DataInfo, mean, std, lang_source: str | None = None) -> LatentModel:
     """A fresh model (random trajectory encoder and head, pretrained transformer from `lang_source` or the name).
     `model_cfg.observations` says what the trajectory encoder sees (None, from before the option: state)."""
+    if model_cfg.lang_model == AUTO:  # a config made without `train`'s resolution (`TrainConfig.resolved`)
+        model_cfg = replace(model_cfg, lang_model=lang_model_for(None, info.env))
     tokenizer, transformer = load_transformer(lang_source or model_cfg.lang_model)
     observations, deltas = model_cfg.observations or "state", model_cfg.observation_deltas
     magnitudes = model_cfg.delta_magnitudes
