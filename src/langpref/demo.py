@@ -158,5 +158,5 @@ def _goodbye(out: Path, made: dict, start: float) -> None:
         "   langpref experiment active --env metaworld --model models/metaworld  # both learners, active queries\n"
         "   make reproduce                                               # every experiment, both envs (hours)\n"
         "   langpref study serve --model models/metaworld --data data/metaworld   # a user study in the browser\n"
-        "   langpref import REC --task task.toml --out data/mine         # your own robot: README, 'Your own robot'"
+        "   langpref import REC --task task.toml --out data/mine         # your own robot: docs/own-robot.md"
     )

@@ -62,7 +62,7 @@ def cmd_generate(args: argparse.Namespace) -> None:
     "name, description, features, features_from, utterances). A plain folder holds NAME.npz episodes "
     "(observations (T, obs_dim), actions (T, A), optional features and success) with an optional "
     "NAME.mp4/.webm video each; a LeRobotDataset (v3) is read with pyarrow and PyAV. Episodes may differ in "
-    "length. See README, 'Your own robot'.",
+    "length. See docs/own-robot.md.",
 )
 def cmd_import(args: argparse.Namespace) -> None:
     from langpref.dataset.importer import ImportConfig, import_recording
@@ -107,7 +107,7 @@ def cmd_import(args: argparse.Namespace) -> None:
     "--save-reward`): langpref.reward_share (the frame's share; an episode's frames sum to its learned reward), "
     "langpref.reward_progress (the learned reward of the episode so far) and langpref.episode_reward (the "
     "episode's learned reward). Original columns keep their bytes, videos are hard-linked, and a LeRobotDataset's "
-    "meta/info.json, meta/stats.json and per-episode statistics list the new columns. See README, 'Labelling a "
+    "meta/info.json, meta/stats.json and per-episode statistics list the new columns. See docs/policy.md, 'Labelling a "
     "dataset with the learned reward'.",
 )
 def cmd_label(args: argparse.Namespace) -> None:

@@ -217,7 +217,7 @@ def network_warning(host: str) -> str | None:
     return (
         f"warning: --host {host} serves plain HTTP to the network: participants' tokens and answers travel "
         "unencrypted. On a shared network put a TLS reverse proxy in front and keep the server on 127.0.0.1 "
-        "(README: 'Running a user study'; example configurations in langpref/study/deploy/)"
+        "(docs/study.md; example configurations in langpref/study/deploy/)"
     )
 
 
