@@ -374,6 +374,20 @@ def test_no_data_file_under_src_copies_a_held_out_text():
     assert not clashes, "data under src/ copies held-out texts:\n" + "\n".join(clashes)
 
 
+def test_no_code_under_src_quotes_a_held_out_text():
+    """No quoted text in the code under src/ (docstrings and examples included) is, after normalisation, a held-out
+    text of two or more words: an example in the code is read by whoever tunes the code."""
+    held = {_key(t): name for name, texts in _held_out_texts().items() for t in texts if len(t.split()) >= 2}
+    quoted = re.compile(r"""["\u201c]([^"\u201c\u201d\n]{4,120})["\u201d]""")
+    clashes = [
+        f"{path.relative_to(ROOT)}: {text!r} is in {held[_key(text)]}"
+        for path in sorted((ROOT / "src").rglob("*.py")) + sorted((ROOT / "src").rglob("*.js"))
+        for text in quoted.findall(path.read_text(encoding="utf-8"))
+        if _key(text) in held
+    ]
+    assert not clashes, "code under src/ quotes held-out texts:\n" + "\n".join(clashes)
+
+
 def test_no_held_out_text_is_in_any_banks_train_split():
     """No held-out text, of any task, is (after normalisation) a train phrasing of any bank."""
     held = _held_out_texts()

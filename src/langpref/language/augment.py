@@ -1,7 +1,7 @@
 """`langpref bank augment`: proposed extra phrasings for each meaning (feature, direction) of a bank, for a lab to
 read, edit and add by hand. Nothing here writes into a bank.
 
-The misreads of a small bank are mostly the direction of negated and indirect phrasings ("no rush", "don't crawl",
+The misreads of a small bank are mostly the direction of negated and indirect phrasings ("no rush", "don't dawdle",
 "you're too high up"), which a bank of plain imperatives ("Move slower.") never shows. So the proposals are built from
 templates over the feature's own words as the bank's train phrasings use them:
 

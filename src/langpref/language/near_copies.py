@@ -8,9 +8,9 @@ faster.") measures recall of the bank instead. Reports give the accuracy with an
 Near-copy: after lower-casing and keeping only words (letters, digits, apostrophes), difflib's similarity ratio to
 some train phrasing of the same feature and direction is at least `NEAR_COPY_RATIO`. The threshold was fixed on the
 older held-out set and the negated set (never a reporting-only one): at 0.9 it takes typos and one-word swaps in short
-phrasings ("not so far away from the cube" / "not so far from the cube") and leaves rewordings apart; 0.8 also
-takes a changed word in a long phrasing ("ease off the speed" / "ease off the pace"). `evaluate --near-copy-ratio`
-sets it.
+phrasings ("not so far away from the drawer" / "not so far from the drawer") and leaves rewordings apart; 0.8 also
+takes a changed word in a long phrasing ("ease off the gas pedal" / "ease off the gas lever").
+`evaluate --near-copy-ratio` sets it.
 """
 
 from __future__ import annotations

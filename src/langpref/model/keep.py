@@ -2,7 +2,7 @@
 
 A lab's bank holds ten or twenty phrasings per meaning. Co-finetuning the whole transformer on them (the paper's
 stage 2) fits those phrasings and forgets part of what the pretrained model knew about the rest of the language, so
-phrasings written apart from the bank ("no rush", "don't crawl") are read worse than before training. Three ways to
+phrasings written apart from the bank ("no rush", "don't dawdle") are read worse than before training. Three ways to
 keep that knowledge, each a `TrainConfig` field and chosen on val (docs/results.md):
 
 - `finetune_layers`: only the top k transformer blocks learn in stage 2 (the lower ones keep their pretrained

@@ -124,7 +124,6 @@ def train(
     On CPU the same seed gives the same model bit for bit, in one process or two, on the same number of threads
     (`cfg.threads`, recorded in the results as `torch_threads`) and the same kind of CPU.
     """
-    cfg = cfg.resolved()
     cfg.validate()
     with _deterministic_on_cpu(cfg.device, cfg.threads):
         return _train(cfg, train_phrasings, val_phrasings, progress, stage1_out)
