@@ -1,5 +1,6 @@
 """Runs scored on val meet other synthetic humans (and run seeds) than the test runs of the same --seed (issue 42,
-item 3): a choice made on val never sees a test human."""
+item 3): a choice made on val never sees a test human, and a human speaking val phrasings is read by a reader fitted
+on none of them."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ from dataclasses import replace
 import numpy as np
 
 from langpref.feedback import toy_latent_space
-from langpref.feedback.humans import sample_weights
+from langpref.feedback.humans import HumanConfig, sample_weights
 from langpref.reward import LearnRewardConfig, human_weights, learn_reward, run_reward_learning
+from langpref.reward.answer_model import AnswerReader
+from langpref.reward.learners import get_learner
 from langpref.reward.loop import human_stream
 
 
@@ -56,3 +59,38 @@ def test_the_experiments_runs_on_val_use_the_val_stream_too():
         _, got = _reward_job(space, ("m/1/0", cfg, 1, 0))
         want = run_reward_learning(space, human_weights(3, stream, 1), cfg, (*stream, 1, 0))
         assert got == asdict(want)
+
+
+def _with_val(space, seed):
+    """The toy space plus a val split of the bank whose psi are noise (seeded): a reader fitted on them shows it."""
+    test = space.phrases["test"]
+    val = replace(test, psi=np.random.default_rng(seed).standard_normal(test.psi.shape))
+    return replace(space, phrases={**space.phrases, "val": val})
+
+
+def test_a_human_speaking_val_is_read_by_a_reader_fitted_on_none_of_it():
+    """The answer model's reader fits T_read and its confusion on the bank's val phrasings, unless the human speaks
+    them: then on the train split, each phrasing left out of its own prototype. Changing val's psi moves the reader
+    of a test-speaking human and leaves the val-speaking human's reader as it was."""
+    toy = toy_latent_space("metaworld", n=40, dim=8, seed=3)
+    one, other = _with_val(toy, 0), _with_val(toy, 1)
+    features = np.arange(len(toy.feature_names))
+
+    def reader(s, spoken):
+        return AnswerReader(s, features, "train", None, spoken)
+
+    for spoken in ("val", "all"):
+        a, b = reader(one, spoken), reader(other, spoken)
+        assert a.temperature == b.temperature and np.array_equal(a.confusion, b.confusion)
+    assert not np.array_equal(reader(one, "test").confusion, reader(other, "test").confusion)
+
+
+def test_learn_reward_tells_the_learner_which_phrasings_its_human_speaks():
+    space = _with_val(toy_latent_space("metaworld", n=40, dim=8, seed=3), 0)
+    features = np.arange(len(space.feature_names))
+    readers = {}
+    for split in ("val", "test"):
+        cfg = LearnRewardConfig(learner="answer-model", human=HumanConfig(phrasing_split=split))
+        readers[split] = get_learner("answer-model").make(space, space.split("train"), cfg, 0).reader
+        assert np.array_equal(readers[split].confusion, AnswerReader(space, features, "train", None, split).confusion)
+    assert not np.array_equal(readers["val"].confusion, readers["test"].confusion)

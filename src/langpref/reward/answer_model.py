@@ -26,7 +26,8 @@ the belief's optimum, so hearing it says tau is nearly the best, and hearing a f
 
 P(m | l) is the model's soft reading of the sentence: softmax over meanings of cos(psi_l, prototype_m) / T_read,
 prototypes the mean psi of each meaning's phrasings in the robot's bank split, T_read fitted to the bank's own val
-phrasings (their meanings are the bank's labels, never a synthetic human's). P(f | v, tau) is the paper's Eq. 10
+phrasings (their meanings are the bank's labels, never a synthetic human's; when the human speaks val phrasings, the
+prototypes' split read leave-one-out instead, `AnswerReader`). P(f | v, tau) is the paper's Eq. 10
 in the latent space: it depends on tau, so showing a trajectory that is already far along feature f makes "more f"
 strong evidence and "more g" evidence that g matters more. `slip` and `lapse` make the model robust to people it does
 not describe (a human who says the direction toward the best trajectory, or something vague).
@@ -54,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.space import LatentSpace
+from langpref.feedback.space import ALL_SPLITS, LatentSpace, PhraseTable
 from langpref.language.bank import DIRECTIONS
 from langpref.reward.batch import Scored, join
 from langpref.reward.readings import reading_of
@@ -85,7 +86,8 @@ class AnswerModelConfig:
     """Probability that an answer says nothing about the reward (uniform over meanings: vague, misheard)."""
     reading_temperature: float | None = None
     """T_read of P(meaning | sentence) = softmax(cos(psi_l, prototype_m) / T_read); None: fitted on the bank's val
-    phrasings (the train split's when the bank has no val split)."""
+    phrasings, or on the prototypes' split left-one-out where the person speaks val or the bank has none
+    (`AnswerReader`)."""
     comparison_rationality: float = 1.0
     """beta of a comparison's Bradley-Terry likelihood in the same belief."""
     no_change_logit: float = 0.0
@@ -121,63 +123,85 @@ def _log_softmax(x: np.ndarray, axis: int = -1) -> np.ndarray:
 
 class AnswerReader:
     """P(meaning | sentence): the model's soft reading of a sentence over the 2F meanings of the answer model
-    (meaning 2k + d: feature `features[k]`, d = 0 increase)."""
+    (meaning 2k + d: feature `features[k]`, d = 0 increase), its prototypes the mean psi of each meaning's phrasings
+    in the bank split `split`.
 
-    def __init__(self, space: LatentSpace, features: np.ndarray, split: str, temperature: float | None):
-        table = space.table(split)
-        protos = []
-        for f in features:
-            inc, dec = table.rows(int(f), 0), table.rows(int(f), 1)
-            p_inc = _unit(table.psi[inc].mean(axis=0)) if len(inc) else None
-            p_dec = _unit(table.psi[dec].mean(axis=0)) if len(dec) else None
-            protos += [p_inc if p_inc is not None else -p_dec, p_dec if p_dec is not None else -p_inc]
-        self.prototypes = np.stack(protos)
-        self.space = space
-        self.temperature = self.fit_temperature(space, features) if temperature is None else float(temperature)
-        self.confusion = self.fit_confusion(space, features)
+    How sentences are read (T_read and the confusion) is fitted on phrasings whose meaning the bank knows and that
+    the person being read does not speak: the bank's val split; when the person speaks it (`spoken`: a synthetic
+    human's `val` or `all`) or the bank has none, the prototypes' own split, each phrasing left out of its own
+    meaning's prototype, so that no sentence is read against a prototype it helped make."""
+
+    def __init__(
+        self, space: LatentSpace, features: np.ndarray, split: str, temperature: float | None, spoken: str | None = None
+    ):
+        self.features = np.asarray(features)
+        self.table = space.table(split)
+        self.prototypes = _prototypes(self.table, self.features)
+        cos, target = self.held_out(space, split, spoken)
+        self.temperature = _best_temperature(cos, target) if temperature is None else float(temperature)
+        self.confusion = _confusion(cos, target, len(self.prototypes))
 
     def log_probabilities(self, psi: np.ndarray) -> np.ndarray:
         """(..., 2F) log P(m | l) of embeddings psi (..., D)."""
         return _log_softmax((_unit(psi) @ self.prototypes.T) / self.temperature)
 
-    @staticmethod
-    def held_out(space: LatentSpace, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(psi (n, D), meaning (n,)) of the bank's val phrasings (the train split's when there are none) of the
-        answer model's features: phrasings whose meaning the bank knows, to fit how sentences are read."""
+    def held_out(self, space: LatentSpace, split: str, spoken: str | None) -> tuple[np.ndarray, np.ndarray]:
+        """(cos (n, 2F) of each fitting phrasing to every prototype, its meaning (n,)): the bank's val phrasings,
+        or the prototypes' own split read leave-one-out (class docstring)."""
         try:
             table = space.table("val")
         except (KeyError, LangprefError):
-            table = space.table("train")
-        position = {int(f): k for k, f in enumerate(features)}
-        keep = np.array([int(f) in position for f in table.feature], dtype=bool)
-        target = np.array(
-            [2 * position[int(f)] + int(d) for f, d in zip(table.feature[keep], table.direction[keep])], dtype=np.int64
-        )
-        return table.psi[keep], target
+            table = None
+        own = table is None or spoken in ("val", ALL_SPLITS)
+        table = self.table if own else table
+        position = {int(f): k for k, f in enumerate(self.features)}
+        alone = {f for f, n in zip(*np.unique(table.feature, return_counts=True)) if own and n < 2}
+        rows = [i for i, f in enumerate(table.feature) if int(f) in position and f not in alone]
+        target = np.array([2 * position[int(table.feature[i])] + int(table.direction[i]) for i in rows], np.int64)
+        if not own:
+            return _unit(table.psi[rows]) @ self.prototypes.T, target
+        cos = np.stack([_unit(table.psi[i]) @ _prototypes(table, self.features, drop=i).T for i in rows])
+        return cos.reshape(len(rows), len(self.prototypes)), target
 
-    def fit_confusion(self, space: LatentSpace, features: np.ndarray) -> np.ndarray:
-        """(2F + 1, 2F + 1) P(read as r | meant m): how often the held-out phrasings of each meaning are read
-        (argmax) as each meaning, with one pseudo-count on the diagonal and a tenth on every cell; "no change" is
-        never misread. Active selection scores the information in what is *read*, so a meaning often misread is worth
-        less to ask about."""
-        psi, target = self.held_out(space, features)
-        m = len(self.prototypes)
-        counts = np.eye(m) + 0.1
-        if len(target):
-            np.add.at(counts, (target, self.log_probabilities(psi).argmax(axis=1)), 1.0)
-        out = np.eye(m + 1)  # "no change" is a button: never misread, never read into
-        out[:m, :m] = counts / counts.sum(axis=1, keepdims=True)
-        return out
 
-    def fit_temperature(self, space: LatentSpace, features: np.ndarray) -> float:
-        """The T_read of `READING_TEMPERATURES` under which the bank's val phrasings are likeliest as their own
-        meanings (the train split's when there are no val phrasings)."""
-        psi, target = self.held_out(space, features)
-        if not len(target):
-            return 0.1
-        cos = _unit(psi) @ self.prototypes.T
-        scores = [_log_softmax(cos / t)[np.arange(len(target)), target].mean() for t in READING_TEMPERATURES]
-        return float(READING_TEMPERATURES[int(np.argmax(scores))])
+def _prototypes(table: PhraseTable, features: np.ndarray, drop: int | None = None) -> np.ndarray:
+    """(2F, D) the unit mean psi of each meaning's phrasings of `table` (row `drop` left out); a meaning without
+    phrasings is the opposite of its feature's other direction."""
+    keep = np.ones(len(table.feature), dtype=bool)
+    if drop is not None:
+        keep[drop] = False
+    protos = []
+    for f in features:
+        inc, dec = (table.rows(int(f), d) for d in (0, 1))
+        inc, dec = inc[keep[inc]], dec[keep[dec]]
+        p_inc = _unit(table.psi[inc].mean(axis=0)) if len(inc) else None
+        p_dec = _unit(table.psi[dec].mean(axis=0)) if len(dec) else None
+        if p_inc is None and p_dec is None:
+            raise LangprefError(f"feature {int(f)} has no phrasings to read answers against")
+        protos += [p_inc if p_inc is not None else -p_dec, p_dec if p_dec is not None else -p_inc]
+    return np.stack(protos)
+
+
+def _confusion(cos: np.ndarray, target: np.ndarray, m: int) -> np.ndarray:
+    """(2F + 1, 2F + 1) P(read as r | meant m): how often the held-out phrasings of each meaning are read (argmax)
+    as each meaning, with one pseudo-count on the diagonal and a tenth on every cell; "no change" is never misread.
+    Active selection scores the information in what is *read*, so a meaning often misread is worth less to ask
+    about."""
+    counts = np.eye(m) + 0.1
+    if len(target):
+        np.add.at(counts, (target, cos.argmax(axis=1)), 1.0)
+    out = np.eye(m + 1)  # "no change" is a button: never misread, never read into
+    out[:m, :m] = counts / counts.sum(axis=1, keepdims=True)
+    return out
+
+
+def _best_temperature(cos: np.ndarray, target: np.ndarray) -> float:
+    """The T_read of `READING_TEMPERATURES` under which the held-out phrasings are likeliest as their own
+    meanings."""
+    if not len(target):
+        return 0.1
+    scores = [_log_softmax(cos / t)[np.arange(len(target)), target].mean() for t in READING_TEMPERATURES]
+    return float(READING_TEMPERATURES[int(np.argmax(scores))])
 
 
 CONFIRM_OPTIONS = 3
@@ -212,6 +236,7 @@ class AnswerModelLearner:
         cfg: AnswerModelConfig | None = None,
         bank_split: str = "train",
         seed: int = 0,
+        spoken: str | None = None,
     ):
         self.cfg = cfg or AnswerModelConfig()
         self.cfg.validate()
@@ -224,7 +249,7 @@ class AnswerModelLearner:
         self.axes = axes
         self.z = (proj - self.mu) / self.sd
         self.z_pool = self.z[self.pool]
-        self.reader = AnswerReader(space, self.features, bank_split, self.cfg.reading_temperature)
+        self.reader = AnswerReader(space, self.features, bank_split, self.cfg.reading_temperature, spoken)
         self.rng = np.random.default_rng(seed)
         self.v = self.cfg.prior_scale * self.rng.standard_normal((self.cfg.particles, len(self.features)))
         self.log_weights = np.zeros(self.cfg.particles)
@@ -362,7 +387,7 @@ class AnswerModelLearner:
 
     def language_gains(self, v: np.ndarray, best: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """I(v; reading | tau) in nats for each of `rows`, from draws (v, best): the information in the meaning the
-        model will read, through the reader's confusion of meanings (`AnswerReader.fit_confusion`)."""
+        model will read, through the reader's confusion of meanings (`AnswerReader.confusion`)."""
         return mutual_information(self.meaning_probabilities(v, best, rows) @ self.reader.confusion)
 
     def comparison_gains(self, v: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -46,6 +46,9 @@ class Settings(Protocol):
 
     reward: RewardConfig
     answer_model: AnswerModelConfig
+    spoken_phrasings: str | None
+    """The phrase table of the space the person speaks from (a synthetic human's), None for real people: a learner
+    fits nothing on the sentences it will be told."""
 
 
 @dataclass
@@ -54,6 +57,7 @@ class LearnerSettings:
 
     reward: RewardConfig
     answer_model: AnswerModelConfig
+    spoken_phrasings: str | None = None
 
 
 @dataclass(frozen=True)
@@ -136,7 +140,9 @@ def _saved_paper(learner: RewardLearner) -> tuple[str, dict[str, list], dict[str
 
 
 def _make_answer_model(space: LatentSpace, pool: np.ndarray, settings: Settings, seed: int) -> AnswerModelLearner:
-    return AnswerModelLearner(space, pool, settings.answer_model, settings.reward.negative_split, seed=seed)
+    return AnswerModelLearner(
+        space, pool, settings.answer_model, settings.reward.negative_split, seed, settings.spoken_phrasings
+    )
 
 
 def _teach_answer_model(learner: AnswerModelLearner, *lesson: Any, meaning: Meaning | None = None) -> None:

@@ -122,6 +122,11 @@ class LearnRewardConfig:
         return 1 if self.query_batch is None else int(self.query_batch)
 
     @property
+    def spoken_phrasings(self) -> str:
+        """The phrase table the synthetic language human speaks from (`HumanConfig.phrase_source`)."""
+        return self.human.phrase_source
+
+    @property
     def costs(self) -> dict[str, float]:
         """Modelled seconds per query by kind (`langpref.reward.cost.query_costs`)."""
         return query_costs({"language": self.language_seconds, "comparison": self.comparison_seconds})
