@@ -48,7 +48,7 @@ def test_bank_check_draws_which_meaning_is_read_as_which(tmp_path, capsys, monke
     bank["height"]["decrease"] = list(bank["height"]["increase"])
     bank["speed"]["decrease"] = ["move slower"]  # too few to check: n/a
     task = _task_file(tmp_path, {s: bank for s in ("train", "val", "test")})
-    monkeypatch.setattr(bank_cli, "_embedder", lambda args, task: (bag_of_words, "bag of words"))
+    monkeypatch.setattr(bank_cli, "bank_embedder", lambda args, task: (bag_of_words, "bag of words"))
     png = tmp_path / "bank.png"
     code, out, err = _run(capsys, "bank", "check", str(task), "--figure", str(png), "--json")
     assert code == 0, err

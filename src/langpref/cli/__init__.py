@@ -1,5 +1,6 @@
 """`langpref ...`: one thin function per command that parses arguments and calls the library (the commands live in
-`data`, `latent`, `bank`, `uses` and `study`, by the stage of the pipeline they serve).
+`data`, `latent`, `bank`, `augment`, `relevance`, `lang_models`, `uses` and `study`, by the stage of the pipeline
+they serve).
 
 A command's options come from its config dataclass (`config(...)`, see `langpref.cli_config`: one flag per field,
 the field's docstring as its help); only inputs that are not config fields (paths, `--json`) are declared here. Each
@@ -28,7 +29,7 @@ os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
 
 # the command modules register their commands when imported, in the order `--help` lists them
 # isort: off
-from langpref.cli import data, latent, bank, uses, study  # noqa: E402, F401
+from langpref.cli import data, latent, bank, augment, relevance, lang_models, uses, study  # noqa: E402, F401
 
 # isort: on
 from langpref.cli.common import GROUPS  # noqa: E402

@@ -10,8 +10,7 @@ import json
 import os
 from pathlib import Path
 
-from langpref.cli.bank import SEED, WHERE, _embedder
-from langpref.cli.common import JSON, NEGATION
+from langpref.cli.common import BANK_SEED, BANK_WHERE, JSON, NEGATION, bank_embedder
 from langpref.cli_config import RERUN, command, emit, opt, path, record
 from langpref.errors import LangprefError
 
@@ -24,7 +23,7 @@ LLM_PER_MEANING = 8
     "bank augment",
     "proposed extra phrasings per meaning, written for the lab to review (never into a bank)",
     [
-        WHERE,
+        BANK_WHERE,
         path("--out", required=True, help="JSON file to write (docs/design.md#utterance-files, keyed by task name)"),
         opt(
             "--per-meaning",
@@ -64,7 +63,7 @@ LLM_PER_MEANING = 8
             help="pretrained sentence encoder that reads proposals back without --model (default minilm)",
         ),
         NEGATION,
-        SEED,
+        BANK_SEED,
         JSON,
         RERUN,
     ],
@@ -151,7 +150,7 @@ def _from_model(args: argparse.Namespace, source) -> tuple[dict, dict]:
     chat, who = _chat(args)  # an endpoint's settings and a local model's files fail here, before any reading model
     args.lang_model_given = args.lang_model is not None
     args.lang_model = args.lang_model or "minilm"
-    embed, encoder = _embedder(args, source.task)
+    embed, encoder = bank_embedder(args, source.task)
     n = args.per_meaning or LLM_PER_MEANING
     found = generate(chat, source, task_words(source, args.where), n, seed=args.seed, progress=not args.json)
     bank = [t for split in source.splits.values() for by in split.values() for ts in by.values() for t in ts]

@@ -1,12 +1,15 @@
-"""What the command modules share: the common options, the split and backend names, loading a model."""
+"""What the command modules share: the common options, the split and backend names, loading a model, and what the
+`bank ...` commands read a bank with."""
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from langpref.cli_config import emit, from_args, opt, path, record
+from langpref.errors import LangprefError
 
 TASK_HELP = "task name: metaworld, robosuite, a plugin's task, or a recorded task (then give its dataset's --data)"
 DEVICES = ("auto", "cpu", "cuda")
@@ -41,6 +44,16 @@ NEGATION = opt(
     "(--no-negation); default: the checkpoint's setting (ModelConfig.negation)",
 )
 """`--negation/--no-negation` of every command that loads a model to read text with it (`load`)."""
+BANK_WHERE = opt(
+    "where",
+    metavar="DATASET_OR_TASK",
+    help="a task name (metaworld, robosuite, a plugin's), a dataset directory, or a task file (.toml) before import",
+)
+"""The bank a `bank ...` command reads (`langpref.language.banksource.open_bank`)."""
+BANK_SEED = opt(
+    "--seed", type=int, default=0, help="seed of an unsplit bank's split, as `langpref import --seed` (default 0)"
+)
+"""`--seed` of a `bank ...` command: the split of a bank that ships unsplit."""
 
 
 def figure(what: str):
@@ -79,3 +92,22 @@ def run_config_experiment(args: argparse.Namespace, name: str, table: Callable[[
     record(args, Path(str(cfg.out)) / f"{name}.config.json", cfg)
     text = None if table is None else (lambda s: table(s) + f"\n(wrote {cfg.out}/{name}.md and .json)")
     emit(summary, args.json, text)
+
+
+def bank_embedder(args: argparse.Namespace, task: str) -> tuple[Callable[[list[str]], Any], str]:
+    """(texts -> embeddings, what reads them) of `bank check` and `bank augment`: a checkpoint's language encoder
+    (psi) with --model, else the pretrained sentence encoder --lang-model. A checkpoint of another task is refused,
+    since its psi never learned this bank's words."""
+    if args.model is None:
+        from langpref.language.models import canonical_name
+        from langpref.language.transformer import sentence_embedder
+
+        return sentence_embedder(args.lang_model), f"pretrained {canonical_name(args.lang_model)}"
+    from langpref.model.checkpoint import load_model
+
+    model = load_model(
+        args.model, lang_model=args.lang_model if args.lang_model_given else None, negation=args.negation
+    )
+    if model.info.env != task:
+        raise LangprefError(f"model {args.model} was trained on task {model.info.env!r}, the bank is task {task!r}")
+    return (lambda texts: model.encode_texts(list(texts)).double().cpu().numpy()), f"model {args.model}"
