@@ -12,7 +12,8 @@ import pytest
 
 from benchmarks.lerobot_check import write_random_reward
 from langpref.cli import main
-from langpref.dataset.label import COLUMNS, EPISODE, PROGRESS, RECORD, SHARE, LabelConfig, label_dataset
+from langpref.dataset.label import RECORD, LabelConfig, label_dataset
+from langpref.dataset.label_columns import COLUMNS, EPISODE, PROGRESS, SHARE
 from langpref.dataset.recording import plain_episode_files, read_plain_episode
 from langpref.errors import LangprefError
 from langpref.reward.api import load

@@ -14,7 +14,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from benchmarks.lerobot_check import write_random_reward
-from langpref.dataset.label import COLUMNS, EPISODE, PROGRESS, SHARE, LabelConfig, label_dataset
+from langpref.dataset.label import LabelConfig, label_dataset
+from langpref.dataset.label_columns import COLUMNS, EPISODE, PROGRESS, SHARE
 from langpref.dataset.lerobot import read_lerobot
 from langpref.errors import LangprefError
 from langpref.reward.api import load

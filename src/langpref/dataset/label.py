@@ -15,38 +15,28 @@ Nothing of the original changes: every original column (or npz array) keeps its 
 into place only when complete, so a failure leaves neither a half-written OUT nor a lost one. What was labelled with
 which reward is written to `meta/langpref_label.json` (LeRobotDataset) or `langpref_label.json` (plain folder).
 
-The LeRobotDataset part is `langpref.dataset.label_lerobot`; this module has the plain folder and the command.
+The columns and what both formats' writers share are `langpref.dataset.label_columns`; the writers are
+`langpref.dataset.label_plain` and `langpref.dataset.label_lerobot`; this module has the command and its figure.
 """
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import shutil
 import time
-import zipfile
-from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
-from langpref.dataset.recording import VIDEO_SUFFIXES, is_lerobot, plain_episode_files, read_plain_episode
+from langpref.dataset.label_columns import COLUMNS
+from langpref.dataset.label_plain import label_plain
+from langpref.dataset.recording import is_lerobot
 from langpref.errors import LangprefError
 from langpref.extras import needs
 
-SHARE = "langpref.reward_share"
-PROGRESS = "langpref.reward_progress"
-EPISODE = "langpref.episode_reward"
-COLUMNS = {
-    SHARE: "r_t, this frame's share of the episode's learned reward; an episode's frames sum to its r_xi(tau)",
-    PROGRESS: "v_t, the learned reward r_xi of the episode up to and including this frame; the last is r_xi(tau)",
-    EPISODE: "r_xi(tau), the learned reward of the whole episode, on each of its frames",
-}
-"""The columns `label` adds, each float32 with one value per frame, and what each holds."""
 RECORD = "langpref_label.json"
 """What was labelled with which reward: at the top of a plain folder, in meta/ of a LeRobotDataset."""
 
@@ -132,38 +122,6 @@ def _check_paths(src: Path, out: Path, force: bool) -> None:
         raise LangprefError(f"--out {out} and the dataset {src} overlap; choose a folder outside the dataset")
 
 
-def episode_columns(reward: Any, observations: np.ndarray, actions: np.ndarray) -> dict[str, np.ndarray]:
-    """The label columns of one episode (T,) each, float32, from the saved `reward`."""
-    share = reward.compute_reward(observations, actions)
-    so_far = reward.progress(observations, actions)
-    total = np.full(len(share), float(so_far[-1]))
-    return {SHARE: share.astype(np.float32), PROGRESS: so_far.astype(np.float32), EPISODE: total.astype(np.float32)}
-
-
-def check_sizes(reward: Any, obs_dim: int, action_dim: int, where: str) -> None:
-    """A one-line error when the dataset's observations or actions are not the size the reward was learned on."""
-    if (obs_dim, action_dim) != (reward.obs_dim, reward.action_dim):
-        raise LangprefError(
-            f"the reward {reward.path} was learned on task {reward.task!r} with observations of {reward.obs_dim} "
-            f"and actions of {reward.action_dim} numbers; {where} has {obs_dim} and {action_dim}: label with a "
-            "reward learned on this robot's data"
-        )
-
-
-def link_or_copy(src: Path, dst: Path) -> None:
-    """`dst` as a hard link to `src` (no bytes copied), or a copy where the file system cannot link."""
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copy2(src, dst)
-
-
-def bar(items: Iterable, desc: str, total: int, progress: bool) -> Iterable:
-    """A progress bar on stderr over `items` (one per episode)."""
-    return tqdm(items, desc=desc, total=total, unit="episode", disable=not progress, dynamic_ncols=True)
-
-
 MOST_CURVES = 200
 """`plot_progress` draws at most this many episodes' curves in grey (spread over the range of their rewards)."""
 
@@ -197,56 +155,6 @@ def plot_progress(curves: dict[str, np.ndarray], out: str | Path, task: str = ""
     right.legend(fontsize=8)
     fig.suptitle(f"langpref label: the learned reward{f' of task {task}' if task else ''} on {len(names)} episodes")
     return save_figure(fig, out)
-
-
-# ---- plain recording folder ----------------------------------------------------------------------------------------
-
-
-def label_plain(src: Path, out: Path, reward: Any, progress: bool = True) -> dict[str, Any]:
-    """Label every NAME.npz of the plain recording `src` into `out` (the original file with the label arrays
-    appended, so its own arrays keep their bytes); videos linked, other files and folders copied. Returns
-    {frames, episode_rewards, curves (episode name -> its v_t)}."""
-    files = plain_episode_files(src)
-    frames, rewards, curves = 0, [], {}
-    for path in bar(files, f"label {src.name}", len(files), progress):
-        episode = read_plain_episode(path)
-        check_sizes(reward, episode.observations.shape[1], episode.actions.shape[1], str(path))
-        columns = episode_columns(reward, episode.observations, episode.actions)
-        _append_arrays(path, out / path.name, columns)
-        frames += len(episode.observations)
-        rewards.append(float(columns[EPISODE][0]))
-        curves[path.stem] = columns[PROGRESS]
-    labelled = {p.name for p in files}
-    for entry in sorted(src.iterdir()):
-        if entry.name in labelled:
-            continue
-        if entry.is_dir():
-            shutil.copytree(entry, out / entry.name)
-        elif entry.suffix in VIDEO_SUFFIXES:
-            link_or_copy(entry, out / entry.name)
-        else:
-            shutil.copy2(entry, out / entry.name)
-    return {"frames": frames, "episode_rewards": rewards, "curves": curves}
-
-
-def _append_arrays(src: Path, dst: Path, arrays: dict[str, np.ndarray]) -> None:
-    """`dst`: the .npz `src` byte for byte, with `arrays` added as members KEY.npy (compressed as `src`'s first
-    member is); a one-line error if `src` already holds one of them (a labelled copy: label the original)."""
-    shutil.copy2(src, dst)
-    try:
-        with zipfile.ZipFile(dst, "a") as npz:
-            names = set(npz.namelist())
-            taken = [key for key in arrays if f"{key}.npy" in names]
-            if taken:
-                raise LangprefError(f"{src} already has {taken[0]!r} (it was labelled before): label the original")
-            infos = npz.infolist()
-            compression = infos[0].compress_type if infos else zipfile.ZIP_STORED
-            for key, value in arrays.items():
-                buffer = io.BytesIO()
-                np.lib.format.write_array(buffer, np.ascontiguousarray(value), allow_pickle=False)
-                npz.writestr(f"{key}.npy", buffer.getvalue(), compress_type=compression)
-    except zipfile.BadZipFile as exc:
-        raise LangprefError(f"{src}: not a readable .npz episode ({exc})") from None
 
 
 def _write_record(path: Path, src: Path, reward: Any, kind: str) -> None:

@@ -2,9 +2,9 @@
 
 What changes, against the layout `langpref.dataset.lerobot` describes:
 
-    data/chunk-*/file-*.parquet      the label columns (`langpref.dataset.label.COLUMNS`) appended after the original
-                                     ones, row group by row group as the original is cut, with the same compression;
-                                     the schema's Hugging Face metadata lists them (float32 `Value`s)
+    data/chunk-*/file-*.parquet      the label columns (`langpref.dataset.label_columns.COLUMNS`) appended after the
+                                     original ones, row group by row group as the original is cut, with the same
+                                     compression; the schema's Hugging Face metadata lists them (float32 `Value`s)
     meta/info.json                   each label column as a feature {"dtype": "float32", "shape": [1], "names": null}
     meta/stats.json                  each label column's min, max, mean, std, count and q01/q10/q50/q90/q99 over all
                                      frames (exact quantiles; lerobot estimates them from histograms)
@@ -34,7 +34,16 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from langpref.dataset.label import COLUMNS, EPISODE, PROGRESS, SHARE, bar, check_sizes, episode_columns, link_or_copy
+from langpref.dataset.label_columns import (
+    COLUMNS,
+    EPISODE,
+    PROGRESS,
+    SHARE,
+    bar,
+    check_sizes,
+    episode_columns,
+    link_or_copy,
+)
 from langpref.dataset.lerobot import (
     EPISODES_DIR,
     INFO_PATH,
