@@ -60,8 +60,8 @@ def test_a_taken_name_and_an_unknown_name_are_one_line_errors():
 
 def test_flag_choices_come_from_the_literal_fields():
     from langpref.backends import BACKENDS
-    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES, FEATURE_SCALES
-    from langpref.feedback.space import PHRASING_SPLITS
+    from langpref.feedback.humans import DIRECTION_RULES, FEATURE_RULES
+    from langpref.feedback.space import FEATURE_SCALES, PHRASING_SPLITS
     from langpref.improve import IMPROVE_STRATEGIES, OBJECTIVES
     from langpref.reward.learner import LOSSES, MODELS, NEGATIVES
     from langpref.reward.learners import learner_names

@@ -24,7 +24,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.space import PhrasingSplit, file_table_name
+from langpref.feedback.space import FEATURE_SCALES, FeatureScaleName, PhrasingSplit, file_table_name
 
 Seed = int | np.random.Generator
 
@@ -57,13 +57,10 @@ def normalised_reward(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return (np.asarray(values, dtype=np.float64) - lo) / max(hi - lo, 1e-12)
 
 
-FeatureScaleName = Literal["standardised", "paper"]
-"""What theta(tau) the synthetic humans' reward weighs (see the module docstring)."""
 DirectionRule = Literal["reward", "toward-best"]
 """How the language human picks the direction of the feature it names (see `HumanConfig.direction`)."""
 FeatureRule = Literal["eq10", "largest-change"]
 """How the language human picks the feature it names (see `HumanConfig.feature_rule`)."""
-FEATURE_SCALES: tuple[str, ...] = get_args(FeatureScaleName)
 DIRECTION_RULES: tuple[str, ...] = get_args(DirectionRule)
 FEATURE_RULES: tuple[str, ...] = get_args(FeatureRule)
 

@@ -30,6 +30,10 @@ ALL_SPLITS = "all"
 PhrasingSplit = Literal["train", "val", "test", "all"]
 """What a synthetic human's `phrasing_split` may name: a bank split or `all` of them."""
 PHRASING_SPLITS: tuple[str, ...] = get_args(PhrasingSplit)
+FeatureScaleName = Literal["standardised", "paper"]
+"""What theta(tau) the synthetic humans' reward weighs (`HumanConfig.feature_scale`; `with_feature_scale` makes it):
+the train-standardised per-step means the space is built with, or the paper's raw features summed over steps."""
+FEATURE_SCALES: tuple[str, ...] = get_args(FeatureScaleName)
 
 Encoder = Callable[[Sequence[str]], np.ndarray]
 
@@ -213,10 +217,8 @@ def paper_theta(dataset) -> np.ndarray:
 
 
 def with_feature_scale(space: LatentSpace, dataset, feature_scale: str) -> LatentSpace:
-    """`space` with the synthetic humans' theta of `feature_scale` (`langpref.feedback.humans.FEATURE_SCALES`); the
-    methods' phi and psi are unchanged. `standardised` is the space as built."""
-    from langpref.feedback.humans import FEATURE_SCALES
-
+    """`space` with the synthetic humans' theta of `feature_scale` (one of `FEATURE_SCALES`); the methods' phi and
+    psi are unchanged. `standardised` is the space as built."""
     if feature_scale not in FEATURE_SCALES:
         raise LangprefError(f"unknown feature scale {feature_scale!r}: choose one of {', '.join(FEATURE_SCALES)}")
     if feature_scale == "standardised":
