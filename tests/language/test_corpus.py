@@ -6,17 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from langpref.language.corpus import (
-    DIRECTIONS,
-    KINDS,
-    build_corpus,
-    concept_split,
-    copies,
-    excluded_texts,
-    fingerprint,
-    generate,
-    load_lexicon,
-)
+from langpref.language.corpus import build_corpus, concept_split, copies, excluded_texts, fingerprint, generate
+from langpref.language.lexicon import DIRECTIONS, KINDS, load_lexicon
 from langpref.language.ties import name_words, tie_feature
 
 

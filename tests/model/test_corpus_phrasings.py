@@ -3,8 +3,9 @@
 import json
 
 from langpref.language.bank import normalise
-from langpref.language.corpus import _sentences, generate, load_lexicon
+from langpref.language.corpus import _sentences, generate
 from langpref.language.corpus_phrasings import tied_phrasings
+from langpref.language.lexicon import load_lexicon
 from langpref.model.train import Trainer, train
 from tests.factories import tiny_config
 

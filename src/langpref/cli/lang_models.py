@@ -169,7 +169,8 @@ def cmd_lang_model_build(args: argparse.Namespace) -> None:
     cfg = dataclasses.replace(preset(args.name), **{k: v for k, v in given.items() if v is not None})
     cfg.validate()
     if args.val_concepts:
-        from langpref.language.corpus import build_corpus, concept_split, load_lexicon
+        from langpref.language.corpus import build_corpus, concept_split
+        from langpref.language.lexicon import load_lexicon
 
         held = [c.strip() for c in args.val_concepts.split(",") if c.strip()]
         unknown = sorted(set(held) - set(load_lexicon()["concepts"]))

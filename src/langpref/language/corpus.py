@@ -18,16 +18,13 @@ The language model `comparative` (`langpref.language.pretrain`) is trained on th
 from __future__ import annotations
 
 import hashlib
-import json
 from collections.abc import Iterable
 from dataclasses import dataclass
-from importlib import resources
 from typing import Any
 
-from langpref.errors import LangprefError
+from langpref.language.lexicon import DIRECTIONS, KINDS, load_lexicon
+from langpref.language.ties import tie_feature
 
-DIRECTIONS = ("increase", "decrease")
-KINDS = ("requests", "adjectives", "acts", "indirect")
 BUILT_IN_BANKS = ("metaworld", "robosuite")
 DEFAULT_PER_MEANING = 160
 """Generated sentences per (concept, direction); sentences of an object concept spread over its objects."""
@@ -51,26 +48,6 @@ class Example:
         """The label sentences of one meaning share: concept/direction[/object]."""
         base = f"{self.concept}/{self.direction}"
         return f"{base}/{self.obj}" if self.obj else base
-
-
-def load_lexicon() -> dict[str, Any]:
-    """The shipped lexicon, checked: every concept has both directions and every kind."""
-    text = resources.files("langpref.language").joinpath("data/comparative_concepts.json").read_text("utf-8")
-    lex = json.loads(text)
-    for name, concept in lex["concepts"].items():
-        for direction in DIRECTIONS:
-            entry = concept.get(direction)
-            if not isinstance(entry, dict) or any(not entry.get(k) for k in KINDS):
-                raise LangprefError(f"comparative_concepts.json: {name}.{direction} lacks one of {', '.join(KINDS)}")
-        if concept.get("object") not in (None, *lex["objects"]):
-            raise LangprefError(f"comparative_concepts.json: {name}.object names no object list")
-    return lex
-
-
-def lexicon_version() -> str:
-    """A short checksum of the lexicon file: part of the built model's cache key."""
-    data = resources.files("langpref.language").joinpath("data/comparative_concepts.json").read_bytes()
-    return hashlib.sha256(data).hexdigest()[:12]
 
 
 def _sentence(text: str) -> str:
@@ -146,7 +123,6 @@ def bank_examples(tasks: Iterable[str] = BUILT_IN_BANKS) -> list[Example]:
     feature's object), or with `TASK/feature` where no concept ties."""
     import langpref.tasks  # noqa: F401  (registers the built-in tasks)
     from langpref.language.bank import load_bank
-    from langpref.language.ties import tie_feature
 
     out = []
     for task in tasks:
@@ -250,6 +226,4 @@ __all__ = [
     "excluded_texts",
     "fingerprint",
     "generate",
-    "lexicon_version",
-    "load_lexicon",
 ]

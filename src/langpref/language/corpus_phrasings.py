@@ -70,7 +70,8 @@ def tied_phrasings(
     """{feature: {direction: up to `per_meaning` corpus sentences}} for the tied features of a task (the utterance
     schema; untied features are absent). `exclude`: texts no sentence may copy (the task's val and test phrasings);
     `train`: the train phrasings, {feature: {direction: texts}}, whose other meanings no sentence may copy."""
-    from langpref.language.corpus import copies, load_lexicon
+    from langpref.language.corpus import copies
+    from langpref.language.lexicon import load_lexicon
     from langpref.language.near_copies import NEAR_COPY_RATIO, normalise
 
     exclude = list(exclude)

@@ -135,7 +135,7 @@ def comparative_dir(seed: int = 0, name: str = "comparative") -> Path:
     one."""
     from dataclasses import asdict
 
-    from langpref.language.corpus import lexicon_version
+    from langpref.language.lexicon import lexicon_version
     from langpref.language.pretrain import preset
 
     settings = asdict(preset(name, seed))

@@ -234,7 +234,8 @@ def pretrain(
 def build(out: Path, cfg: PretrainConfig, progress: bool = True) -> dict[str, Any]:
     """Build the language model into directory `out` (atomically: a crash leaves none): the corpus of `cfg.seed`,
     `pretrain`, the weights and tokenizer, and `BUILD_RECORD`. Returns the record."""
-    from langpref.language.corpus import build_corpus, fingerprint, lexicon_version
+    from langpref.language.corpus import build_corpus, fingerprint
+    from langpref.language.lexicon import lexicon_version
     from langpref.language.models import canonical_name
     from langpref.model.encoders import save_transformer
 

@@ -18,6 +18,8 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from langpref.language.lexicon import load_lexicon
+
 _LINKS = ("to", "from", "of", "with", "above", "near")
 
 
@@ -60,8 +62,6 @@ def _object(words: list[str], known: set[str], concept_words: set[str], objects:
 def tie_feature(name: str, lexicon: dict[str, Any] | None = None) -> Tie | None:
     """The concept a feature's name ties to, or None."""
     if lexicon is None:
-        from langpref.language.corpus import load_lexicon
-
         lexicon = load_lexicon()
     words = name_words(name)
     joined = "_".join(words)
@@ -92,8 +92,6 @@ def tie_feature(name: str, lexicon: dict[str, Any] | None = None) -> Tie | None:
 
 def tie_features(names: list[str] | tuple[str, ...]) -> dict[str, Tie | None]:
     """{feature: its tie or None} for a task's features."""
-    from langpref.language.corpus import load_lexicon
-
     lexicon = load_lexicon()
     return {name: tie_feature(name, lexicon) for name in names}
 
