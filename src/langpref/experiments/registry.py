@@ -136,6 +136,16 @@ for _experiment in (
         default_out=_OUT.format(name="prior") + ", ENV-mlp",
     ),
     Experiment(
+        "choose",
+        'the answer-model learner\'s prior scale and "no change" logit, each value against the default on the val '
+        "split with other humans (10 humans x 3 seeds, Q = 40)",
+        "langpref.experiments.choose:run_choose_experiment",
+        _LEARN,
+        (*_REWARD_FLAGS, "human.no_change_logit", "human.no_change_margin"),
+        {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}},
+        default_out=_OUT.format(name="choose"),
+    ),
+    Experiment(
         "active",
         "active queries: language x {random, lal-infogain, infogain} and comparisons x {random, infogain, "
         "volume-removal}, and both kinds chosen per query by information per modelled second (mixed), 10 humans x 3 "
