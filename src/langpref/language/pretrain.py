@@ -237,7 +237,7 @@ def build(out: Path, cfg: PretrainConfig, progress: bool = True) -> dict[str, An
     from langpref.language.corpus import build_corpus, fingerprint
     from langpref.language.lexicon import lexicon_version
     from langpref.language.models import canonical_name
-    from langpref.model.encoders import save_transformer
+    from langpref.language.transformer import save_transformer
 
     start = time.perf_counter()
     examples = build_corpus(cfg.seed, cfg.per_meaning)

@@ -1,6 +1,6 @@
 """The pretrained language model: load a registered sentence encoder by name (`langpref.language.models`: `minilm`,
 the offline default all-MiniLM-L6-v2, or `mpnet`) or any Hugging Face encoder (T5-family models as their encoder
-only), and embed sentences with it.
+only), and embed sentences with it; save one, as a built language model or a checkpoint's fine-tuned language side.
 
 It belongs to the language layer: the feedback gate reads its sentence embeddings directly, and the model layer's
 language encoder (`langpref.model.encoders.LanguageEncoder`) adds a trained head on top.
@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import torch
 from torch import nn
@@ -60,6 +61,14 @@ def load_transformer(name_or_path: str):
             "reachable from here (offline: a registered name, minilm or mpnet; `langpref lang-models` lists them)"
         ) from None
     return tokenizer, model
+
+
+def save_transformer(tokenizer, transformer: nn.Module, directory: Path) -> None:
+    """Write a transformer and its tokenizer into `directory` as `load_transformer` reads them back (safetensors):
+    a built language model, or the fine-tuned language side of a checkpoint."""
+    directory.mkdir(parents=True, exist_ok=True)
+    transformer.save_pretrained(directory, safe_serialization=True)
+    tokenizer.save_pretrained(directory)
 
 
 class SentenceEncoder(nn.Module):

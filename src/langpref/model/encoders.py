@@ -20,7 +20,6 @@ Language encoder: a pretrained Hugging Face encoder, the mean of its last hidden
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -131,9 +130,3 @@ def transformer_state_fingerprint(module: nn.Module) -> float:
     """A cheap checksum of a module's weights (tests use it to check the frozen stage leaves them alone)."""
     with torch.no_grad():
         return float(sum(p.double().sum().item() for p in module.parameters()))
-
-
-def save_transformer(tokenizer, transformer: nn.Module, directory: Path) -> None:
-    directory.mkdir(parents=True, exist_ok=True)
-    transformer.save_pretrained(directory, safe_serialization=True)
-    tokenizer.save_pretrained(directory)
