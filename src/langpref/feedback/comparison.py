@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -20,9 +20,6 @@ from langpref.feedback.bradley_terry import PairBatch
 from langpref.feedback.humans import HumanConfig, Seed, rng_of, true_reward
 from langpref.feedback.kind import FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace
-
-if TYPE_CHECKING:
-    from langpref.reward import RewardConfig
 
 
 @dataclass(frozen=True)
@@ -85,12 +82,10 @@ def make_human(
 
 
 def comparison_pairs(
-    space: LatentSpace,
-    answer: ComparisonAnswer,
-    cfg: RewardConfig | None = None,
-    rng: np.random.Generator | None = None,
+    space: LatentSpace, answer: ComparisonAnswer, cfg: Any = None, rng: np.random.Generator | None = None
 ) -> PairBatch:
-    """The one Bradley-Terry pair of a comparison: preferred beats rejected (`cfg` and `rng` are not needed)."""
+    """The one Bradley-Terry pair of a comparison: preferred beats rejected (the learner's settings `cfg` and `rng`
+    are not read)."""
     return PairBatch(space.phi[[answer.preferred]], space.phi[[answer.rejected]], np.ones(1))
 
 

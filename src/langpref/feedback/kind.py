@@ -7,7 +7,7 @@ learner (`langpref.reward`) fits whatever the kind.
     kind = get_kind("comparison")
     human = kind.make_human(w, space, space.split("train"), HumanConfig(), rng)
     answer = human.answer(random_query(kind, space.split("train"), rng))
-    batch = kind.pairs(space, answer, RewardConfig(), rng)
+    batch = kind.pairs(space, answer, settings, rng)  # the learner's settings, e.g. langpref.reward.RewardConfig()
 
 The two kinds of the paper are `langpref.feedback.language` and `langpref.feedback.comparison`; the package imports
 both, so they are in `KINDS` whenever `langpref.feedback` is imported. A new kind is one module that builds a
@@ -21,9 +21,10 @@ A kind that the study web app can ask people (`langpref study serve --kinds NAME
 and the question above the videos; `parse` checks what the widget sends and `pairs` is what the learner takes.
 
 A kind's active query selections are registered from the reward side (`langpref.reward.selection.register_strategy`:
-the paper's kinds' are there, so this package imports nothing of `langpref.reward` at run time); a kind of another
-package may also list its own in `strategies`. The reward loop and Study 2 ask
-`langpref.reward.selection.selector_factories(kind)`.
+the paper's kinds' are there); a kind of another package may also list its own in `strategies`. The reward loop and
+Study 2 ask `langpref.reward.selection.selector_factories(kind)`. This package imports nothing of `langpref.reward`,
+not even for type checkers: what a kind reads of the learner's settings it names in a Protocol of its own
+(`langpref.feedback.language.PairSettings`), and a selector is the reward side's type (`SelectorFactory`).
 """
 
 from __future__ import annotations
@@ -41,8 +42,6 @@ if TYPE_CHECKING:
     from langpref.feedback.bradley_terry import PairBatch
     from langpref.feedback.humans import HumanConfig
     from langpref.feedback.space import LatentSpace
-    from langpref.reward import RewardConfig
-    from langpref.reward.selection import Selector
 
 
 WIDGETS = ("text", "choice")
@@ -76,9 +75,10 @@ class Human(Protocol):
     def answer(self, query: Any) -> Any: ...
 
 
-SelectorFactory = Callable[["LatentSpace", Sequence[int], "RewardConfig", "int | None", int], "Selector"]
-"""(space, query pool, reward config, candidates or None for the whole pool, posterior samples) -> the selector of
-one active strategy (`langpref.reward.selection`)."""
+SelectorFactory = Callable[["LatentSpace", Sequence[int], Any, "int | None", int], Any]
+"""(space, query pool, the learner's settings, candidates or None for the whole pool, posterior samples) -> the
+selector of one active strategy. Settings and selector are the reward side's types (`langpref.reward.selection`):
+a kind stores its factories and calls none of them, so it needs nothing of either."""
 
 
 @dataclass(frozen=True)
@@ -95,9 +95,10 @@ class FeedbackKind:
     """How many trajectories a query shows (videos of a study step)."""
     make_human: Callable[[np.ndarray, LatentSpace, Sequence[int], HumanConfig, np.random.Generator], Human]
     """(w, space, candidates, config, rng) -> the synthetic human with true reward w . theta."""
-    pairs: Callable[[LatentSpace, Any, RewardConfig, np.random.Generator], PairBatch]
-    """(space, answer, reward config, rng) -> the answer's likelihood as weighted Bradley-Terry pairs of embeddings.
-    The pairs read only phi and psi, never the synthetic human's ground truth."""
+    pairs: Callable[[LatentSpace, Any, Any, np.random.Generator], PairBatch]
+    """(space, answer, the learner's settings, rng) -> the answer's likelihood as weighted Bradley-Terry pairs of
+    embeddings. The pairs read only phi and psi, never the synthetic human's ground truth, and of the settings only
+    what the kind names in its own Protocol (the language kind's `PairSettings`; the comparison kind reads none)."""
     answer_key: str
     """The field of an HTTP answer body that holds this kind's answer (docs/design.md#the-study-apps-http-contract)."""
     parse: Callable[[Any, Any], Any]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -33,11 +33,32 @@ from langpref.feedback.kind import FeedbackKind, StudyPage, register_kind
 from langpref.feedback.space import LatentSpace, PhraseTable
 from langpref.language.bank import DIRECTIONS, NO_CHANGE_FEEDBACK, VAGUE_FEEDBACK, is_no_change
 
-if TYPE_CHECKING:
-    from langpref.reward import RewardConfig
-
 PAPER_TIME_SAVING = 0.113
 """Language's time per query is 11.3% below that of comparisons (paper Sec. 5.2): its modelled `seconds`."""
+
+
+class PairSettings(Protocol):
+    """What the language kind's likelihood (`language_pairs`) reads of the learner's settings: which terms of Eq. 9
+    it fits, and how L_Implicit draws its negatives. The reward learner's config has these fields and is what it
+    passes; the kind names them here, so that it needs nothing of the reward side."""
+
+    @property
+    def loss(self) -> str:
+        """`both` (L_Explicit + L_Implicit), `explicit` or `implicit`."""
+
+    @property
+    def num_negatives(self) -> int:
+        """k, other utterances per answer for L_Implicit."""
+
+    @property
+    def negatives(self) -> str:
+        """`other_meaning` (of another meaning than the model's reading of the answer) or `any` (another text)."""
+
+    @property
+    def negative_split(self) -> str:
+        """The bank split the negatives are drawn from."""
+
+
 MAX_FEEDBACK = 500
 """Longest feedback a study participant may send, in characters."""
 MAX_FEEDBACK_RAW = 2 * MAX_FEEDBACK
@@ -208,7 +229,7 @@ def read_meaning(space: LatentSpace, psi: np.ndarray, split: str = "train") -> i
 def language_pairs(
     space: LatentSpace,
     answer: LanguageAnswer,
-    cfg: RewardConfig,
+    cfg: PairSettings,
     rng: np.random.Generator,
     psi: np.ndarray | None = None,
 ) -> PairBatch:
