@@ -20,7 +20,7 @@ def selection_timings(
     from langpref.feedback.humans import HumanConfig
     from langpref.reward import RewardConfig, RewardLearner
     from langpref.reward.selection import make_selector
-    from langpref.study.serve import limit_blas_threads
+    from langpref.study.server.serve import limit_blas_threads
 
     limit_blas_threads(1)  # as `langpref study serve` runs it (one BLAS thread per request)
 

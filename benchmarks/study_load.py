@@ -1,8 +1,8 @@
 """Load benchmark of the study server: `python -m benchmarks.study_load` (part of `make bench`).
 
-20 simulated participants (synthetic humans, `langpref.study.simulate`) run whole sessions of the paper's protocol
-(10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve` in
-its own process on loopback, on this machine's cores. Measured on the client: the latency of every answer, by kind
+20 simulated participants (synthetic humans, `langpref.study.server.simulate`) run whole sessions of the paper's
+protocol (10 improvement rounds at most, 20 queries per method, a rating every 5) at once against `langpref study serve`
+in its own process on loopback, on this machine's cores. Measured on the client: the latency of every answer, by kind
 and over all answers, and the machine's load average during each run (other work on the machine slows the server as
 much as the participants do). Two runs:
 
@@ -165,7 +165,7 @@ def run(
     query_selection: str = "random",
     learner: str = "paper",
 ) -> dict[str, Any]:
-    from langpref.study.simulate import SimConfig, simulate
+    from langpref.study.server.simulate import SimConfig, simulate
 
     extra = ("--query-selection", query_selection, "--learner", learner)
     proc, url = start_server(model, data, db, split, extra=extra)
@@ -292,7 +292,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.no_paced and args.no_burst:
         p.error("--no-paced and --no-burst leave nothing to run")
     from langpref.model.checkpoint import read_config
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     paced = burst = exported = None
     with tempfile.TemporaryDirectory() as tmp:

@@ -112,3 +112,47 @@ def test_feedback_and_datasets_import_nothing_of_reward_learning():
         if name.split(".")[0] in ONE_WAY
     }
     assert not {k: v for k, v in bad.items() if v}, "move the import to the downstream package, or pass the object in"
+
+
+STUDY_ONE_WAY = {
+    "study.protocol": ("study.session", "study.server", "study.analysis"),
+    "study.session": ("study.server", "study.analysis"),
+    "study.analysis": ("study.server", "study.session"),
+}
+"""A room of the study app -> the rooms above it that it must not import at run time (langpref/study/__init__.py):
+server -> session -> protocol and server -> analysis -> protocol, never back. The server alone may import the rooms
+below it. Imports under `if TYPE_CHECKING:` do not count, as for ONE_WAY."""
+
+
+def _runtime_imports_and_names(path: Path) -> set[str]:
+    """`_runtime_imports`, and each name a `from X import name` takes at run time as `X.name`: `from langpref.study
+    import server` imports the room."""
+    tree = ast.parse(path.read_text())
+    skip = {
+        id(node)
+        for block in ast.walk(tree)
+        if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
+        for stmt in block.body
+        for node in ast.walk(stmt)
+    }
+    named = {
+        f"{node.module}.{alias.name}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.module and id(node) not in skip
+        for alias in node.names
+    }
+    return _runtime_imports(path) | named
+
+
+def test_the_study_rooms_import_one_way():
+    bad = {}
+    for name, path in modules().items():
+        room = next((r for r in STUDY_ONE_WAY if name == r or name.startswith(f"{r}.")), None)
+        if room is None:
+            continue
+        above = [f"langpref.{r}" for r in STUDY_ONE_WAY[room]]
+        imported = _runtime_imports_and_names(path)
+        found = sorted(m for m in imported if any(m == a or m.startswith(f"{a}.") for a in above))
+        if found:
+            bad[name] = found
+    assert not bad, "move what both need down to the lower room, or pass it in (langpref/study/__init__.py)"

@@ -85,7 +85,7 @@ def test_every_legacy_flag_is_still_there_and_every_option_has_help():
 def test_flags_carry_the_dataclass_defaults_and_docstrings():
     from langpref.model.config import ModelConfig, TrainConfig
     from langpref.reward import LearnRewardConfig
-    from langpref.study.config import StudyConfig
+    from langpref.study.protocol.config import StudyConfig
 
     p = parsers()
     train = {a.option_strings[0]: a for a in p["train"]._actions if a.option_strings}
@@ -107,7 +107,7 @@ def test_flags_carry_the_dataclass_defaults_and_docstrings():
 def test_study_serve_takes_repeated_allowed_hosts_and_says_what_no_prerender_does():
     from langpref.cli import build_parser
     from langpref.cli_config import from_args
-    from langpref.study.config import ServeConfig
+    from langpref.study.server.settings import ServeConfig
 
     serve = {a.option_strings[0]: a for a in parsers()["study serve"]._actions if a.option_strings}
     assert serve["--no-prerender"].help.startswith("Do not render")  # it said what the default does
@@ -163,7 +163,7 @@ def test_help_imports_nothing_heavy():
 
 
 def test_the_study_server_does_not_import_the_cli():
-    code = "import sys, langpref.study.serve; print('langpref.cli' in sys.modules)"
+    code = "import sys, langpref.study.server.serve; print('langpref.cli' in sys.modules)"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert proc.returncode == 0 and proc.stdout.strip() == "False", proc.stderr
 

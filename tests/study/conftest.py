@@ -66,14 +66,15 @@ def study_model(study_data, tmp_path_factory, tiny_texts) -> Path:
 
 @pytest.fixture(scope="session")
 def engine(study_model, study_data):
-    from langpref.study.config import StudyConfig
-    from langpref.study.engine import StudyEngine
+    from langpref.study.protocol.config import StudyConfig
+    from langpref.study.session.engine import StudyEngine
 
     return StudyEngine.load(study_model, study_data, StudyConfig(**TINY))
 
 
 def serve_config(model: Path, data: Path, db: Path, **study):
-    from langpref.study.config import ServeConfig, StudyConfig
+    from langpref.study.protocol.config import StudyConfig
+    from langpref.study.server.settings import ServeConfig
 
     return ServeConfig(
         model=str(model),
@@ -88,7 +89,7 @@ def serve_config(model: Path, data: Path, db: Path, **study):
 
 @pytest.fixture
 def study_state(engine, study_model, study_data, tmp_path):
-    from langpref.study.serve import build_state
+    from langpref.study.server.serve import build_state
 
     state = build_state(serve_config(study_model, study_data, tmp_path / "study.sqlite"), engine=engine, progress=False)
     yield state
@@ -99,7 +100,7 @@ def study_state(engine, study_model, study_data, tmp_path):
 def client(study_state):
     from fastapi.testclient import TestClient
 
-    from langpref.study.app import create_app
+    from langpref.study.server.app import create_app
 
     with TestClient(create_app(study_state)) as c:
         yield c

@@ -55,7 +55,7 @@ def http(sock: socket.socket, method: str, path: str, body: bytes = b"", headers
 
 @pytest.fixture
 def live(engine, h, tmp_path):
-    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.server.serve import BackgroundServer, build_state
 
     state = build_state(h.serve_config(tmp_path / "bad.sqlite"), engine=engine, progress=False)
     with BackgroundServer(state) as url:

@@ -57,7 +57,7 @@ def browser():
 
 @pytest.fixture
 def server(engine, h, tmp_path):
-    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.server.serve import BackgroundServer, build_state
 
     cfg = h.serve_config(tmp_path / "browser.sqlite", pref_queries=2, rating_every=2, improve_max_iterations=2)
     cfg.video.width, cfg.video.height, cfg.video.stride = 160, 120, 3  # small; made only when a page asks for one
@@ -362,7 +362,7 @@ def test_the_participant_confirms_what_they_meant_with_one_click(browser, engine
     answers, and the study goes on to the next query."""
     import httpx
 
-    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.server.serve import BackgroundServer, build_state
 
     db = tmp_path / "confirm.sqlite"
     state = build_state(h.serve_config(db, confirm_margin=1.0), engine=engine, progress=False)

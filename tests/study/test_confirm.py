@@ -15,12 +15,12 @@ from fastapi.testclient import TestClient
 
 from langpref.feedback import LanguageAnswer, LanguageQuery
 from langpref.reward.answer_model import AnswerModelLearner
-from langpref.study import db as sdb
-from langpref.study.app import create_app
-from langpref.study.config import StudyConfig
-from langpref.study.engine import StudyRobot
-from langpref.study.flow import Participant
-from langpref.study.serve import build_state
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.protocol.flow import Participant
+from langpref.study.server.app import create_app
+from langpref.study.server.serve import build_state
+from langpref.study.session.engine import StudyRobot
 
 TINY = {"split": "all", "improve_max_iterations": 3, "pref_queries": 4, "rating_every": 2, "num_negatives": 5}
 TEXTS = ["Move faster.", "Go up more.", "Stay away from the button.", "Slow down.", "Get closer to the button."]
@@ -200,7 +200,7 @@ def test_a_malformed_confirm_body_is_a_one_line_4xx(serve, h, body, status):
 def test_the_export_reports_confirmations_and_writes_bank_additions(serve, h, tmp_path):
     from langpref.errors import LangprefError
     from langpref.language.bank import load_user_utterances
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     state, client = serve(confirm_margin=1.0)
     picks = iter([0, 3, 1, 0])  # option positions: the top reading, none of these, the second, the top

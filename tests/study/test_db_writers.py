@@ -7,7 +7,7 @@ from __future__ import annotations
 import threading
 import time
 
-from langpref.study import db as sdb
+from langpref.study.protocol import db as sdb
 
 
 def test_writers_of_one_process_take_turns_without_sqlites_busy_wait(tmp_path):

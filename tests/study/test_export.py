@@ -9,14 +9,15 @@ import sqlite3
 import numpy as np
 import pytest
 
-from langpref.study import db as sdb
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol import schema
 
 
 @pytest.fixture(scope="module")
 def simulated_db(engine, h, tmp_path_factory):
     """Four simulated participants (synthetic humans) through the real HTTP server."""
-    from langpref.study.serve import BackgroundServer, build_state
-    from langpref.study.simulate import SimConfig, simulate
+    from langpref.study.server.serve import BackgroundServer, build_state
+    from langpref.study.server.simulate import SimConfig, simulate
 
     db = tmp_path_factory.mktemp("export") / "study.sqlite"
     state = build_state(h.serve_config(db), engine=engine, progress=False)
@@ -27,11 +28,11 @@ def simulated_db(engine, h, tmp_path_factory):
 
 
 def test_export_writes_tables_report_and_figures(simulated_db, tmp_path):
-    from langpref.study.export import FIGURES, export
+    from langpref.study.analysis.export import FIGURES, export
 
     out = export(simulated_db, tmp_path / "out")
     assert out["participants"] == 4 and out["finished"] == 4
-    for table in sdb.TABLES:
+    for table in schema.TABLES:
         with open(tmp_path / "out" / "tables" / f"{table}.csv") as fh:
             rows = list(csv.DictReader(fh))
         # generated: Study 1 with --improve-candidates generated; confirmations: Study 2 with --confirm-margin
@@ -48,7 +49,7 @@ def test_export_writes_tables_report_and_figures(simulated_db, tmp_path):
 
 
 def test_summary_holds_the_papers_analyses(simulated_db, tmp_path):
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     export(simulated_db, tmp_path / "out")
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
@@ -114,7 +115,7 @@ def test_cli_export_and_its_errors(simulated_db, tmp_path, capsys):
 def test_a_stored_lone_surrogate_does_not_stop_the_export(simulated_db, tmp_path):
     """A server before issue 31 stored `"3\\ud800"` (JSON-escaped) from a survey answer: the export still writes
     every file, the character shown as U+FFFD."""
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     db = tmp_path / "bad.sqlite"
     conn = sqlite3.connect(db)
@@ -187,8 +188,8 @@ def test_the_report_shows_each_figure_in_its_section_linked_and_captioned(simula
     the participants' rewards written, also what each one wants, drawn and in words."""
     from html import escape
 
+    from langpref.study.analysis.export import export
     from langpref.study.analysis.figures import CAPTIONS
-    from langpref.study.export import export
 
     out = export(simulated_db, tmp_path / "out")
     html = (tmp_path / "out" / "report.html").read_text()

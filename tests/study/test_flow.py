@@ -8,8 +8,8 @@ import pytest
 
 from langpref.errors import LangprefError
 from langpref.feedback import ComparisonAnswer, ComparisonQuery, LanguageAnswer, LanguageQuery
-from langpref.study.config import StudyConfig
-from langpref.study.flow import (
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.protocol.flow import (
     Answer,
     AnswerError,
     Participant,
@@ -20,8 +20,8 @@ from langpref.study.flow import (
     parse_answer,
     progress,
 )
-from langpref.study.queries import Chosen
-from langpref.study.surveys import SURVEYS, validate_answers
+from langpref.study.protocol.queries import Chosen
+from langpref.study.protocol.surveys import SURVEYS, validate_answers
 
 
 class ScriptedRobot:

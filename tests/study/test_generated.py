@@ -11,10 +11,10 @@ import pytest
 from fastapi.testclient import TestClient
 
 from langpref.errors import LangprefError
-from langpref.study import db as sdb
-from langpref.study.app import create_app
-from langpref.study.config import StudyConfig
-from langpref.study.serve import build_state
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.server.app import create_app
+from langpref.study.server.serve import build_state
 
 GENERATED = {"improve_candidates": "generated", "improve_rollouts": 2, "improve_search_generations": 3}
 
@@ -114,7 +114,7 @@ def test_a_dataset_that_cannot_have_generated_candidates_is_refused_in_one_line(
     from types import SimpleNamespace
 
     from langpref.propose import cannot_generate
-    from langpref.study.generated import check_generation
+    from langpref.study.session.generated import check_generation
 
     even = SimpleNamespace(env="metaworld", root="data/even", meta=SimpleNamespace(lengths=None))
     uneven = SimpleNamespace(env="metaworld", root="data/uneven", meta=SimpleNamespace(lengths=[3, 4]))
@@ -139,7 +139,7 @@ def test_simulated_participants_answer_generated_trajectories_by_their_features(
     from langpref.feedback.humans import sample_weights
     from langpref.feedback.space import FeatureScale, phrase_table
     from langpref.language.bank import load_bank
-    from langpref.study.serve import BackgroundServer
+    from langpref.study.server.serve import BackgroundServer
 
     db = tmp_path / "sim.sqlite"
     state = build_state(h.serve_config(db, **GENERATED), engine=engine, progress=False)
@@ -177,7 +177,7 @@ def _queue_only():
     import threading
     from collections import deque
 
-    from langpref.study.generated import Generator
+    from langpref.study.session.generated import Generator
 
     g = Generator.__new__(Generator)
     g._cond, g._queue, g._made, g._running, g._known = threading.Condition(), deque(), {}, None, set()
@@ -188,7 +188,7 @@ def _queue_only():
 def test_a_later_round_is_made_before_sign_ups_first_feedback():
     """Made-up participants that each give one feedback queue one job each; a participant further into Study 1 is
     not held up behind them, nor is a new participant's first (the queue alone, without a simulator)."""
-    from langpref.study.generated import Job
+    from langpref.study.session.generated import Job
 
     g = _queue_only()
     for k in range(5):
@@ -204,7 +204,7 @@ def test_a_later_round_is_made_before_sign_ups_first_feedback():
 def test_a_new_participants_first_trajectory_comes_next_after_sign_ups_first_feedback():
     """Issue 44: 12 sign-ups that each gave one feedback (48 requests in 0.6 s) made a new participant wait 234 s
     for their first generated trajectory (12 jobs ahead). It is now the next made after the job in flight."""
-    from langpref.study.generated import Job
+    from langpref.study.session.generated import Job
 
     g = _queue_only()
     g._running = Job(99, "first", 1, 2, 1, 0, "Move faster.")

@@ -1,6 +1,6 @@
-"""What the server refuses before a request reaches the study (`langpref.study.guard`): bodies over the limit before
-they are read (by Content-Length, or counted as they stream in chunked), JSON nested too deeply, Host names that are
-not the study's (DNS rebinding), wrong resume codes per client, so that one client cannot lock resume for all, and
+"""What the server refuses before a request reaches the study (`langpref.study.server.guard`): bodies over the limit
+before they are read (by Content-Length, or counted as they stream in chunked), JSON nested too deeply, Host names that
+are not the study's (DNS rebinding), wrong resume codes per client, so that one client cannot lock resume for all, and
 sign-ups per client."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import threading
 
 import pytest
 
-from langpref.study.guard import MAX_BODY, HostCheck, RateLimiter, client_key, depth
+from langpref.study.server.guard import MAX_BODY, HostCheck, RateLimiter, client_key, depth
 
 RECV_S = 10.0
 """How long a test waits for the server's answer to a body it never finishes sending: without the guard the server
@@ -20,7 +20,7 @@ waits for the rest of the body, and the test fails at this timeout."""
 
 @pytest.fixture
 def live(engine, h, tmp_path):
-    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.server.serve import BackgroundServer, build_state
 
     state = build_state(h.serve_config(tmp_path / "guard.sqlite"), engine=engine, progress=False)
     with BackgroundServer(state) as url:
@@ -79,7 +79,7 @@ def test_a_chunked_body_is_refused_once_it_passes_the_limit(live):
 def test_a_content_length_that_is_no_number_is_refused():
     import asyncio
 
-    from langpref.study.guard import HttpError, read_body
+    from langpref.study.server.guard import HttpError, read_body
 
     class Request:
         def __init__(self, length: str):
@@ -116,7 +116,7 @@ def test_a_body_made_to_be_slow_is_refused_before_the_participant_lock(client, h
     """21,000 empty lists fit in 63 KB and took 210 ms to handle while holding the participant's lock stripe (which
     other participants share): such bodies are refused (one line) while that lock is held elsewhere, so none of their
     work happens under it; a valid answer is then taken."""
-    from langpref.study.guard import MAX_VALUES
+    from langpref.study.server.guard import MAX_VALUES
 
     pid, headers = h.join(client)
     step = client.get(f"/api/participants/{pid}/step", headers=headers).json()
@@ -145,7 +145,7 @@ def test_a_body_made_to_be_slow_is_refused_before_the_participant_lock(client, h
 
 
 def test_shape_is_checked_in_bounded_steps():
-    from langpref.study.guard import HttpError, check_shape
+    from langpref.study.server.guard import HttpError, check_shape
 
     with pytest.raises(HttpError, match="too many values"):
         check_shape([[] for _ in range(10**6)])  # refused by its length, none of its items looked at
@@ -163,7 +163,7 @@ def test_depth_is_measured_without_recursion():
 
 
 def test_clean_text_refuses_deep_values_without_recursion():
-    from langpref.study.flow import AnswerError, clean_text
+    from langpref.study.protocol.flow import AnswerError, clean_text
 
     value: dict = {}
     for _ in range(100_000):
@@ -200,9 +200,9 @@ def test_host_check_takes_the_bind_host_allowed_names_and_origins():
 
 
 def test_one_clients_wrong_codes_do_not_lock_the_others_out(client, h, study_state):
-    from langpref.study.guard import HttpError
-    from langpref.study.participants import resume
-    from langpref.study.state import MAX_RESUME_FAILURES
+    from langpref.study.server.guard import HttpError
+    from langpref.study.server.participants import resume
+    from langpref.study.server.state import MAX_RESUME_FAILURES
 
     pid, headers = h.join(client)
     code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]
@@ -225,7 +225,7 @@ def test_one_clients_wrong_codes_do_not_lock_the_others_out(client, h, study_sta
 
 
 def test_one_code_restores_a_bounded_number_of_sessions_a_minute(client, h, study_state):
-    from langpref.study.state import MAX_RESUMES_PER_CODE
+    from langpref.study.server.state import MAX_RESUMES_PER_CODE
 
     pid, headers = h.join(client)
     code = client.get(f"/api/participants/{pid}/step", headers=headers).json()["resume_code"]
@@ -236,9 +236,9 @@ def test_one_code_restores_a_bounded_number_of_sessions_a_minute(client, h, stud
 def test_sign_ups_are_limited_per_client(client, study_state):
     """Issue 44: 70 made-up participants from one client in 2.4 s took the robot's and the simulator's turns. One
     client starts at most `--signups-per-client` (20) in 10 minutes; other clients are not held back."""
-    from langpref.study.config import ServeConfig
-    from langpref.study.guard import HttpError
-    from langpref.study.participants import create_participant
+    from langpref.study.server.guard import HttpError
+    from langpref.study.server.participants import create_participant
+    from langpref.study.server.settings import ServeConfig
 
     limit = ServeConfig.signups_per_client
     statuses = [client.post("/api/participants", json={}).status_code for _ in range(limit + 3)]
@@ -281,8 +281,8 @@ def test_forwarded_addresses_count_only_from_the_proxies_the_lab_names(engine, h
     the client; with it, the address its proxy forwards is."""
     from dataclasses import replace
 
-    from langpref.study.serve import BackgroundServer, build_state
-    from langpref.study.state import MAX_RESUME_FAILURES
+    from langpref.study.server.serve import BackgroundServer, build_state
+    from langpref.study.server.state import MAX_RESUME_FAILURES
 
     rotating = [f"198.51.100.{i}" for i in range(30)]
     n = MAX_RESUME_FAILURES
@@ -306,7 +306,7 @@ def test_forwarded_addresses_count_only_from_the_proxies_the_lab_names(engine, h
 
 
 def test_trusted_proxies_name_the_client_only_from_a_named_proxy():
-    from langpref.study.guard import TrustedProxies
+    from langpref.study.server.guard import TrustedProxies
 
     none = TrustedProxies()
     assert none.client("127.0.0.1", ["10.1.2.3"]) == "127.0.0.1" and none.client(None, ["10.1.2.3"]) is None

@@ -33,8 +33,8 @@ def hooked(engine, h, tmp_path):
     """(state, TestClient) of a study whose --on-show is `command` (a factory: `hooked(command, timeout)`)."""
     from fastapi.testclient import TestClient
 
-    from langpref.study.app import create_app
-    from langpref.study.serve import build_state
+    from langpref.study.server.app import create_app
+    from langpref.study.server.serve import build_state
 
     made = []
 
@@ -183,8 +183,8 @@ def test_hook_runs_for_a_generated_trajectory_once_it_is_made(engine, h, tmp_pat
     trajectory's index in it; the next step showing it runs at once; a reload runs nothing."""
     from fastapi.testclient import TestClient
 
-    from langpref.study.app import create_app
-    from langpref.study.serve import build_state
+    from langpref.study.server.app import create_app
+    from langpref.study.server.serve import build_state
 
     out = tmp_path / "runs.jsonl"
     (tmp_path / "record.py").write_text(RECORD_MADE)
@@ -244,7 +244,7 @@ def wait_until(predicate, timeout: float = 30.0) -> None:
 def test_made_up_participants_cannot_take_the_robot():
     """Sign-ups that stop at their first step share the newcomers' places (the newest first); a participant who has
     answered takes a run's place only from one holding more; one participant holds at most `per_participant`."""
-    from langpref.study.hook import ShowHook
+    from langpref.study.server.hook import ShowHook
 
     hook = ShowHook("sleep 60", Dataset(), queue_size=8)
     try:
@@ -280,7 +280,7 @@ def test_a_real_participants_replays_come_next_however_many_sign_ups_came_first(
     """Issue 44: 70 sign-ups that stop at their first video step filled the 64 places; the next real participant's
     first replay was skipped and their next one started after 63 others (8 min 17 s). Now the first comes after the
     run in flight, and after answering it the next one right after."""
-    from langpref.study.hook import ShowHook
+    from langpref.study.server.hook import ShowHook
 
     monkeypatch.chdir(tmp_path)
     hook = ShowHook(shlex.join(["sh", "-c", WAIT_FOR_GO]), Dataset(), timeout_s=60)
@@ -319,7 +319,7 @@ SERVER = """import sys, time
 sys.path.insert(0, sys.argv[3])
 from pathlib import Path
 from types import SimpleNamespace
-from langpref.study.hook import ShowHook
+from langpref.study.server.hook import ShowHook
 
 class Dataset:
     root = Path(".")

@@ -28,7 +28,7 @@ def finish(client, h, pid, headers) -> None:
 
 
 def test_formulas_are_neutralised_in_every_csv(client, h, study_state, tmp_path):
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "language")
@@ -125,9 +125,9 @@ def test_time_per_query_uses_server_time_where_the_page_is_inconsistent(client, 
 
 def test_excluded_participants_are_left_out(client, h, study_state, tmp_path):
     from langpref.errors import LangprefError
+    from langpref.study.analysis.export import export
     from langpref.study.analysis.stats import analyse
     from langpref.study.analysis.tables import read_tables
-    from langpref.study.export import export
 
     people = [h.join(client) for _ in range(3)]
     for pid, headers in people:

@@ -12,11 +12,11 @@ from fastapi.testclient import TestClient
 
 from langpref.errors import LangprefError
 from langpref.reward.answer_model import AnswerModelLearner
-from langpref.study import db as sdb
-from langpref.study.app import create_app
-from langpref.study.config import StudyConfig
-from langpref.study.engine import StudyRobot
-from langpref.study.serve import build_state
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.server.app import create_app
+from langpref.study.server.serve import build_state
+from langpref.study.session.engine import StudyRobot
 
 FEEDBACK = ["Move faster.", "Go up more.", "Stay away from the button.", "Slow down.", "Get closer to the button."]
 
@@ -103,7 +103,7 @@ def test_a_rebuilt_answer_model_learner_chooses_the_same_next_query(engine, h, t
 
 @pytest.mark.parametrize("learner", ["paper", "answer-model"])
 def test_the_export_holds_every_participants_learned_reward(engine, h, tmp_path, learner):
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     db = tmp_path / f"{learner}.sqlite"
     state = build_state(h.serve_config(db, learner=learner), engine=engine, progress=False)
@@ -187,7 +187,7 @@ def test_a_learner_it_does_not_know_or_cannot_ask_with_is_one_line(study, says):
 
 
 def test_a_database_made_before_the_learner_option_continues_with_the_papers(engine, h, tmp_path):
-    from langpref.study.serve import resolve_study_config
+    from langpref.study.server.serve import resolve_study_config
 
     db = tmp_path / "older.sqlite"
     build_state(h.serve_config(db), engine=engine, progress=False).videos.close()
@@ -238,7 +238,7 @@ def test_good_as_it_is_is_a_study2_answer_and_not_a_study1_one(engine, h, tmp_pa
     text = conn.execute("SELECT text FROM feedback WHERE phase = 'pref_language'").fetchone()["text"]
     conn.close()
     assert text == NO_CHANGE_FEEDBACK
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     export(db, tmp_path / "export")  # the answer with no reading of a feature exports like any other
     assert NO_CHANGE_FEEDBACK in (tmp_path / "export" / "tables" / "feedback.csv").read_text()

@@ -8,7 +8,7 @@ import sqlite3
 
 
 def test_twenty_participants_at_once(h, tmp_path):
-    from langpref.study.simulate import SimConfig, simulate
+    from langpref.study.server.simulate import SimConfig, simulate
 
     db = tmp_path / "load.sqlite"
     proc, url = h.run_server(db, log=tmp_path / "server.log")

@@ -14,7 +14,7 @@ from test_plugin_kinds import answer, installed  # noqa: F401 (the fixture, shar
 def test_the_page_asks_plugin_kinds_by_their_widgets(installed, browser, engine, h, tmp_path):  # noqa: F811
     import httpx
 
-    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.server.serve import BackgroundServer, build_state
 
     cfg = h.serve_config(
         tmp_path / "widgets.sqlite", kinds=("best_of_three", "verdict"), pref_queries=2, improve_max_iterations=1

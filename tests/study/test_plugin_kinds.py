@@ -2,8 +2,8 @@
 `langpref.feedback`, faked by monkeypatching its entry points as tests/feedback/test_plugins.py does) run through
 Study 2 over HTTP with no edit in `langpref.study`: a choice among three shown trajectories and a typed verdict on
 one, beside the paper's language. Their pages, answers, storage, replay after a restart and export; a kind's own
-active query selection choosing its queries (`langpref.study.queries`), and a simulated participant answering with the
-kind's own synthetic human (`langpref.study.simulate`)."""
+active query selection choosing its queries (`langpref.study.protocol.queries`), and a simulated participant answering
+with the kind's own synthetic human (`langpref.study.server.simulate`)."""
 
 from __future__ import annotations
 
@@ -194,7 +194,7 @@ def walk(client, h, pid: str, headers: dict) -> list[dict]:
 
 @pytest.fixture
 def plugin_state(installed, engine, h, tmp_path):
-    from langpref.study.serve import build_state
+    from langpref.study.server.serve import build_state
 
     state = build_state(h.serve_config(tmp_path / "kinds.sqlite", kinds=STUDY), engine=engine, progress=False)
     yield state
@@ -205,14 +205,14 @@ def plugin_state(installed, engine, h, tmp_path):
 def plugin_client(plugin_state):
     from fastapi.testclient import TestClient
 
-    from langpref.study.app import create_app
+    from langpref.study.server.app import create_app
 
     with TestClient(create_app(plugin_state)) as c:
         yield c
 
 
 def test_an_installed_kind_is_a_study_kind_and_a_serve_flag(installed):
-    from langpref.study.config import StudyConfig
+    from langpref.study.protocol.config import StudyConfig
     from tests.factories import parsers
 
     cfg = StudyConfig(kinds=["verdict", "best_of_three"])
@@ -299,8 +299,8 @@ def test_plugin_answers_are_checked_by_their_kind(plugin_client, h):
 
 
 def test_plugin_answers_replay_after_a_restart_and_export(plugin_client, plugin_state, h, engine, tmp_path):
-    from langpref.study.export import export
-    from langpref.study.state import StudyApp
+    from langpref.study.analysis.export import export
+    from langpref.study.server.state import StudyApp
 
     pid, headers = h.join(plugin_client)
     walk(plugin_client, h, pid, headers)
@@ -322,8 +322,8 @@ def test_a_plugin_kinds_own_selection_chooses_its_study_queries(installed, engin
     """The kind's `highest` runs in Study 2 as the paper's strategies do: over the study set less what the participant
     already answered about (a query that shows one trajectory), from the participant's learner; each choice stored
     with its score. A strategy whose selector cannot score given rows is refused at start in one line."""
-    from langpref.study import db as sdb
-    from langpref.study.serve import build_state
+    from langpref.study.protocol import db as sdb
+    from langpref.study.server.serve import build_state
 
     _Highest.calls.clear()
     cfg = h.serve_config(tmp_path / "picky.sqlite", kinds=("language", "picky"), query_selection="picky=highest")
@@ -331,7 +331,7 @@ def test_a_plugin_kinds_own_selection_chooses_its_study_queries(installed, engin
     try:
         from fastapi.testclient import TestClient
 
-        from langpref.study.app import create_app
+        from langpref.study.server.app import create_app
 
         with TestClient(create_app(state)) as client:
             pid, headers = h.join(client)
@@ -363,8 +363,8 @@ def test_a_plugin_kinds_own_selection_chooses_its_study_queries(installed, engin
 def test_a_simulated_participant_answers_a_plugin_kind_with_its_own_human(installed, study_data):
     """Given the dataset, it answers with the kind's synthetic human (`make_human`) under its own reward; without it,
     at random by the kind's widget."""
-    from langpref.study import simulate as sim
-    from langpref.study.kinds import widget
+    from langpref.study.protocol.kinds import widget
+    from langpref.study.server import simulate as sim
 
     world = sim._World(study_data, "all")
     p = sim.SimParticipant("http://study.test", sim.SimConfig(), 0, world)

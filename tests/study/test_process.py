@@ -142,7 +142,7 @@ def test_sigkill_leaves_no_process_behind(h, tmp_path):
 
 def test_taken_port_and_directory_db_fail_before_the_model_loads(h, tmp_path, monkeypatch, capsys):
     from langpref.cli import main
-    from langpref.study import engine as sengine
+    from langpref.study.session import engine as sengine
 
     def no_load(*a, **k):
         raise AssertionError("the model was loaded before the checks")
@@ -167,7 +167,7 @@ def test_taken_port_and_directory_db_fail_before_the_model_loads(h, tmp_path, mo
 
 
 def test_network_host_warns_and_loopback_does_not():
-    from langpref.study.serve import network_warning
+    from langpref.study.server.serve import network_warning
 
     assert network_warning("127.0.0.1") is None and network_warning("::1") is None
     assert network_warning("localhost") is None
@@ -178,7 +178,7 @@ def test_network_host_warns_and_loopback_does_not():
 
 def test_admin_token_from_environment_or_file(tmp_path, monkeypatch):
     from langpref.errors import LangprefError
-    from langpref.study.config import ADMIN_TOKEN_ENV, ServeConfig
+    from langpref.study.server.settings import ADMIN_TOKEN_ENV, ServeConfig
 
     monkeypatch.delenv(ADMIN_TOKEN_ENV, raising=False)
     assert ServeConfig(model="m", data="d").resolve_admin_token() is None

@@ -100,8 +100,8 @@ def test_cross_site_posts_are_refused(client, h):
 
 
 def test_the_documented_nginx_proxy_serves_the_study_over_tls(nginx_bin, engine, h, tmp_path):
-    from langpref.study.serve import BackgroundServer, build_state
-    from langpref.study.state import MAX_RESUME_FAILURES
+    from langpref.study.server.serve import BackgroundServer, build_state
+    from langpref.study.server.state import MAX_RESUME_FAILURES
 
     cfg = replace(  # as documented: its public name, and nginx named as the proxy whose X-Forwarded-For counts
         h.serve_config(tmp_path / "p.sqlite"), allowed_hosts=("study.lab.example",), trusted_proxies=("127.0.0.1",)

@@ -12,10 +12,11 @@ import pytest
 from fastapi.testclient import TestClient
 
 from langpref.errors import LangprefError
-from langpref.study import db as sdb
-from langpref.study.app import create_app
-from langpref.study.config import StudyConfig
-from langpref.study.serve import build_state
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol import schema
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.server.app import create_app
+from langpref.study.server.serve import build_state
 
 FEEDBACK = ["Move faster.", "Go up more.", "Stay away from the button.", "Slow down.", "Get closer to the button."]
 
@@ -63,7 +64,7 @@ def _one_participant(engine, h, db, **study) -> list[tuple]:
 
 
 def test_each_query_stores_its_strategy_and_score_and_is_exported(engine, h, tmp_path):
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     db = tmp_path / "info.sqlite"
     rows = _one_participant(engine, h, db, query_selection="infogain")
@@ -160,7 +161,7 @@ def test_serve_refuses_a_bad_strategy_at_start_in_one_line(h, tmp_path):
 
 
 def test_a_database_keeps_its_query_selection(engine, h, tmp_path):
-    from langpref.study.serve import resolve_study_config
+    from langpref.study.server.serve import resolve_study_config
 
     db = tmp_path / "kept.sqlite"
     _state(engine, h, db, query_selection="infogain").videos.close()
@@ -173,7 +174,7 @@ def test_a_schema_2_database_gets_its_shown_queries_as_random(tmp_path):
     path = tmp_path / "old.sqlite"
     conn = sdb.connect(path)
     for v in (1, 2):
-        for statement in filter(str.strip, sdb.MIGRATIONS[v].split(";")):
+        for statement in filter(str.strip, schema.MIGRATIONS[v].split(";")):
             conn.execute(statement)
     conn.execute("INSERT INTO meta VALUES ('schema_version', '2')")
     conn.execute(
@@ -191,7 +192,7 @@ def test_a_schema_2_database_gets_its_shown_queries_as_random(tmp_path):
     sdb.init_db(path, {})
     conn = sdb.connect(path)
     rows = sdb.rows(conn, "SELECT seq, method, a, b, strategy, score FROM queries ORDER BY seq")
-    assert sdb.schema_version(conn) == sdb.SCHEMA_VERSION
+    assert sdb.schema_version(conn) == schema.SCHEMA_VERSION
     conn.close()
     assert rows == [
         {"seq": 9, "method": "language", "a": 4, "b": None, "strategy": "random", "score": None},
@@ -204,7 +205,7 @@ def test_a_study_made_before_the_new_options_continues_with_their_defaults(engin
     and the study set: the study continues, and giving the new options' defaults is no contradiction."""
     import json
 
-    from langpref.study.serve import resolve_study_config
+    from langpref.study.server.serve import resolve_study_config
 
     db = tmp_path / "older.sqlite"
     _state(engine, h, db).videos.close()

@@ -9,7 +9,7 @@ convex (its L2 prior), so both reach the same minimum; they agree to the optimis
 import numpy as np
 import torch
 
-from langpref.study.engine import StudyRobot
+from langpref.study.session.engine import StudyRobot
 
 FEEDBACK = ["Move faster.", "Go up more.", "Stay away from the button.", "Slow down.", "Get closer to the button."]
 

@@ -125,7 +125,7 @@ def recorded_model(recorded_data, tmp_path_factory) -> Path:
 @pytest.fixture
 def recorded_state(recorded_model, recorded_data, tmp_path, h):
     """A tiny study over the recorded dataset, its --on-show hook writing each run's environment to `runs.jsonl`."""
-    from langpref.study.serve import build_state
+    from langpref.study.server.serve import build_state
 
     script = tmp_path / "record_env.py"
     script.write_text(
@@ -149,7 +149,7 @@ def test_study_shows_the_recorded_videos(recorded_state, recorded_data, tmp_path
     from fastapi.testclient import TestClient
 
     from langpref.dataset.storage import load_dataset
-    from langpref.study.app import create_app
+    from langpref.study.server.app import create_app
 
     ds = load_dataset(recorded_data)
     assert ds.meta.videos and ds.meta.lengths is not None  # a recorded dataset, episodes of different lengths
@@ -204,8 +204,8 @@ def test_study_shows_the_recorded_videos(recorded_state, recorded_data, tmp_path
 
 def test_mp4_study_serves_the_recorded_file_as_is(recorded_data, tmp_path):
     from langpref.dataset.storage import load_dataset
-    from langpref.study.config import VideoConfig
-    from langpref.study.videos import VideoCache
+    from langpref.study.server.settings import VideoConfig
+    from langpref.study.server.videos import VideoCache
 
     ds = load_dataset(recorded_data)
     cache = VideoCache(recorded_data, tmp_path / "videos", VideoConfig(format="mp4", width=64), [0, 3], progress=False)
@@ -264,7 +264,7 @@ def test_every_command_runs_on_the_recorded_task(recorded_data, recorded_model, 
 
 def test_generated_candidates_need_a_simulator_one_line_before_the_model_loads(recorded_data, h, tmp_path):
     from langpref.errors import LangprefError
-    from langpref.study.serve import build_state
+    from langpref.study.server.serve import build_state
 
     cfg = replace(
         h.serve_config(tmp_path / "gen.sqlite", improve_candidates="generated"),

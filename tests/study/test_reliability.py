@@ -6,12 +6,12 @@ import json
 
 import pytest
 
-from langpref.study import db as sdb
+from langpref.study.protocol import schema
 
 
 def snapshot(state) -> dict:
     conn = state.connect()
-    return {t: conn.execute(f"SELECT * FROM {t} ORDER BY rowid").fetchall() for t in sdb.TABLES if t != "meta"}
+    return {t: conn.execute(f"SELECT * FROM {t} ORDER BY rowid").fetchall() for t in schema.TABLES if t != "meta"}
 
 
 def is_error(r, status: int) -> None:
@@ -174,7 +174,7 @@ def test_admin_needs_the_token(client, h):
 
 
 def test_script_in_feedback_is_stored_verbatim_and_escaped_in_reports(client, h, study_state, tmp_path):
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
 
     pid, headers = h.join(client)
     step = to_kind(client, h, pid, headers, "language")

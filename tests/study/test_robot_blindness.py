@@ -1,6 +1,6 @@
 """Blindness of the study robot: what it learns and shows depends on the answers, never on the true features.
 
-Synthetic answers (those a synthetic human with weights w gives, `langpref.study.simulate`'s kind) are recorded
+Synthetic answers (those a synthetic human with weights w gives, `langpref.study.server.simulate`'s kind) are recorded
 once; then a robot whose engine holds scrambled true features (dataset features and the space's theta shuffled among
 the trajectories, as a w permuted after the answers were recorded would see them) gets the same answers. Its reward
 learners, its best trajectories and its Study-1 moves must be the same bit for bit.
@@ -13,8 +13,8 @@ import numpy as np
 
 from langpref.feedback import LanguageQuery, get_kind
 from langpref.feedback.humans import HumanConfig, sample_weights
-from langpref.study.engine import StudyRobot
-from langpref.study.flow import Participant
+from langpref.study.protocol.flow import Participant
+from langpref.study.session.engine import StudyRobot
 
 
 def _scrambled(engine):

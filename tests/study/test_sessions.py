@@ -70,11 +70,12 @@ def test_unknown_participant_ids_leave_no_memory_behind(client):
 
 def test_a_schema_1_database_gets_resume_codes(tmp_path):
     """A study database of the previous schema is migrated on start: its participants get resume codes."""
-    from langpref.study import db as sdb
+    from langpref.study.protocol import db as sdb
+    from langpref.study.protocol import schema
 
     path = tmp_path / "old.sqlite"
     conn = sdb.connect(path)
-    for statement in filter(str.strip, sdb.MIGRATIONS[1].split(";")):
+    for statement in filter(str.strip, schema.MIGRATIONS[1].split(";")):
         conn.execute(statement)
     conn.execute("INSERT INTO meta VALUES ('schema_version', '1')")
     conn.execute(
@@ -86,4 +87,4 @@ def test_a_schema_1_database_gets_resume_codes(tmp_path):
     conn = sdb.connect(path)
     code, excluded = conn.execute("SELECT resume_code, excluded FROM participants").fetchone()
     assert sdb.normalise_resume_code(code) == code and excluded == 0
-    assert sdb.schema_version(conn) == sdb.SCHEMA_VERSION
+    assert sdb.schema_version(conn) == schema.SCHEMA_VERSION

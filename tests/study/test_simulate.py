@@ -1,6 +1,6 @@
-"""Simulated participants (`langpref.study.simulate`) against a scripted server (httpx's MockTransport, no sockets):
-an answer refused with 503 is sent again after exactly the Retry-After it named (never past the deadline), a 503
-without one is an error, and a generated trajectory without the server's database is one clear error."""
+"""Simulated participants (`langpref.study.server.simulate`) against a scripted server (httpx's MockTransport, no
+sockets): an answer refused with 503 is sent again after exactly the Retry-After it named (never past the deadline), a
+503 without one is an error, and a generated trajectory without the server's database is one clear error."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import time
 import httpx
 import pytest
 
-from langpref.study import simulate as sim
+from langpref.study.server import simulate as sim
 
 DONE = {"kind": "done", "videos": [], "seq": 2}
 
@@ -74,7 +74,7 @@ def test_a_generated_trajectory_without_the_servers_database_is_a_clear_error(mo
 
 def test_the_study_of_a_database_names_its_dataset_and_split(tmp_path):
     from langpref.errors import LangprefError
-    from langpref.study import db as sdb
+    from langpref.study.protocol import db as sdb
 
     db = tmp_path / "s.sqlite"
     sdb.init_db(db, {"data": "/data/mw", "study": {"split": "all"}})

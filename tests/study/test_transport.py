@@ -1,5 +1,5 @@
-"""The study server sends a response's headers and body in one send (`langpref.study.transport`): the writes of one
-event-loop step are joined, in order, and sent right after it; a close sends what is held first, an abort drops it;
+"""The study server sends a response's headers and body in one send (`langpref.study.server.transport`): the writes of
+one event-loop step are joined, in order, and sent right after it; a close sends what is held first, an abort drops it;
 a real server answers over it as before."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import socket
 
 import httpx
 
-from langpref.study.transport import JoinedWrites
+from langpref.study.server.transport import JoinedWrites
 
 
 class FakeTransport:
@@ -73,7 +73,7 @@ def test_an_abort_drops_what_is_held():
 
 def test_the_server_answers_a_response_in_one_segment(study_state):
     """Over a real socket: one recv gets the whole response (status line, headers and body), keep-alive works."""
-    from langpref.study.serve import BackgroundServer
+    from langpref.study.server.serve import BackgroundServer
 
     with BackgroundServer(study_state) as url:
         host, port = url.removeprefix("http://").split(":")

@@ -11,8 +11,8 @@ import httpx
 
 
 def test_unrendered_videos_do_not_freeze_the_server(engine, h, tmp_path):
-    from langpref.study import participants as sapp
-    from langpref.study.serve import BackgroundServer, build_state
+    from langpref.study.server import participants as sapp
+    from langpref.study.server.serve import BackgroundServer, build_state
 
     cfg = h.serve_config(tmp_path / "v.sqlite")
     cfg.video.width, cfg.video.height, cfg.video.stride = 64, 48, 3
@@ -83,7 +83,7 @@ def test_video_names_take_ascii_digits_and_nothing_after(study_state, client):
 def test_a_failed_job_is_one_line_and_a_broken_worker_pool_is_dropped():
     from types import SimpleNamespace
 
-    from langpref.study.videos import job_failure
+    from langpref.study.session.workers import job_failure
 
     live, broken = SimpleNamespace(_broken=False), SimpleNamespace(_broken="a worker died")
     assert job_failure(ValueError("bad row"), live) == ("ValueError: bad row", live)

@@ -17,7 +17,7 @@ from langpref.dataset.splits import SPLITS
     "serve a study in the browser (Study 1: improvement, Study 2: language vs comparisons)",
     [
         config(
-            "langpref.study.config:ServeConfig",
+            "langpref.study.server.settings:ServeConfig",
             {
                 "study": None,
                 "video": None,
@@ -46,7 +46,7 @@ from langpref.dataset.splits import SPLITS
             common=("model", "data", "db", "host", "port", "admin_token", "on_show", "trusted_proxies"),
         ),
         config(
-            "langpref.study.config:StudyConfig",
+            "langpref.study.protocol.config:StudyConfig",
             lambda: {
                 "study.split": {"choices": (*SPLITS, "all")},
                 "study.improve_candidates": {"choices": ("split", "generated")},
@@ -57,8 +57,10 @@ from langpref.dataset.splits import SPLITS
             common=("study.split", "study.kinds", "study.pref_queries", "study.learner", "study.confirm_margin"),
         ),
         config(
-            "langpref.study.config:VideoConfig",
-            lambda: {"video.format": {"choices": importlib.import_module("langpref.study.config").VIDEO_FORMATS}},
+            "langpref.study.server.settings:VideoConfig",
+            lambda: {
+                "video.format": {"choices": importlib.import_module("langpref.study.server.settings").VIDEO_FORMATS}
+            },
             prefix="video.",
             flag_prefix="video-",
             common=(),
@@ -69,10 +71,10 @@ from langpref.dataset.splits import SPLITS
 )
 def cmd_study_serve(args: argparse.Namespace) -> None:
     from langpref.extras import needs
-    from langpref.study.config import ServeConfig
+    from langpref.study.server.settings import ServeConfig
 
     with needs("study", "langpref study serve"):
-        from langpref.study.serve import exit_now, resolve_study_config, serve
+        from langpref.study.server.serve import exit_now, resolve_study_config, serve
     if serve(from_args(ServeConfig, args, study=resolve_study_config(args.db, cc.args_of(args, "study.")))):
         exit_now(0)  # stopped by SIGTERM and cleaned up: the interpreter's own teardown would take seconds
 
@@ -82,10 +84,10 @@ def cmd_study_serve(args: argparse.Namespace) -> None:
     "simulated participants (synthetic humans) run whole sessions against a study server",
     [
         config(
-            "langpref.study.config:SimulateConfig",
+            "langpref.study.server.settings:SimulateConfig",
             {"split": {"choices": (*SPLITS, "all")}, "data": {"metavar": "DIR"}, "generated": {"metavar": "DIR"}},
         ),
-        config("langpref.study.simulate:SimConfig", {"think_ms": {"metavar": "LO,HI"}}),
+        config("langpref.study.server.simulate:SimConfig", {"think_ms": {"metavar": "LO,HI"}}),
         JSON,
     ],
     "Load tests, demo data, a dry run of a protocol. They answer like the library's synthetic humans over the study's "
@@ -95,12 +97,12 @@ def cmd_study_serve(args: argparse.Namespace) -> None:
 )
 def cmd_study_simulate(args: argparse.Namespace) -> None:
     from langpref.extras import needs
-    from langpref.study.config import SimulateConfig
+    from langpref.study.server.settings import SimulateConfig
 
     with needs("study", "langpref study simulate"):
         import httpx  # noqa: F401 (the participants' HTTP client)
 
-        from langpref.study.simulate import SimConfig, simulate, study_of
+        from langpref.study.server.simulate import SimConfig, simulate, study_of
     cfg = from_args(SimulateConfig, args)
     stored = study_of(cfg.db) if cfg.db else {}
     split = cfg.split or stored.get("split") or "test"
@@ -119,7 +121,7 @@ def cmd_study_simulate(args: argparse.Namespace) -> None:
     "study export",
     "CSV tables, analyses and figures of a study (HTML report + JSON)",
     [
-        config("langpref.study.config:ExportConfig"),
+        config("langpref.study.analysis.settings:ExportConfig"),
         opt(
             "--force",
             action="store_true",
@@ -133,8 +135,8 @@ def cmd_study_simulate(args: argparse.Namespace) -> None:
     "and a pooled one, for `langpref.reward.load`, `label` and the Gymnasium wrapper).",
 )
 def cmd_study_export(args: argparse.Namespace) -> None:
-    from langpref.study.config import ExportConfig
-    from langpref.study.export import export
+    from langpref.study.analysis.export import export
+    from langpref.study.analysis.settings import ExportConfig
 
     cfg = from_args(ExportConfig, args)
     out = export(

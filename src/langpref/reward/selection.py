@@ -183,7 +183,7 @@ class Selector:
     def score_rows(self, learner: RewardLearner | None, rows: np.ndarray, rng: np.random.Generator) -> Scored:
         """The queries over exactly `rows` (dataset indices, drawn by the caller) scored from the learner's fit:
         `score` without its own draw of candidates. The study chooses its active queries with it
-        (`langpref.study.queries`), so a kind's strategy runs there with no edit in the study."""
+        (`langpref.study.protocol.queries`), so a kind's strategy runs there with no edit in the study."""
         raise NotImplementedError(f"the {self.name!r} selector cannot score rows it is given (Selector.score_rows)")
 
     def select_batch(self, learner: RewardLearner, rng: np.random.Generator, k: int) -> list[Selection]:

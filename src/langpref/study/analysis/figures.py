@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from langpref.study.config import METHODS
-from langpref.study.surveys import METHOD_LABELS
+from langpref.study.protocol.config import METHODS
+from langpref.study.protocol.surveys import METHOD_LABELS
 
 COLORS = {"language": "#1f77b4", "comparison": "#ff7f0e"}
 STUDY1_COLOR = "#2ca02c"

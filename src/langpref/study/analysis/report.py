@@ -9,7 +9,7 @@ import json
 from typing import Any
 
 from langpref.study.analysis.figures import CAPTIONS
-from langpref.study.learned import confirmations_html
+from langpref.study.analysis.learned import confirmations_html
 
 Summary = dict[str, Any]
 

@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 
 from langpref.feedback.kind import get_kind
-from langpref.study import db as sdb
+from langpref.study.analysis.learned import confirmations
 from langpref.study.analysis.tables import Tables, resolve_exclusions, survey_answers, without
-from langpref.study.config import METHODS
-from langpref.study.learned import confirmations
-from langpref.study.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM, PREF_LIKERT
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import METHODS
+from langpref.study.protocol.surveys import ASPECTS, IMPROVE, METHOD_LABELS, NONE_OF_THEM, PREF_LIKERT
 
 
 def describe(values: Iterable[float | None]) -> dict[str, Any]:

@@ -14,8 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
-from langpref.study import db as sdb
-from langpref.study.flow import SURROGATES
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol import schema
+from langpref.study.protocol.flow import SURROGATES
 
 Tables = dict[str, list[dict[str, Any]]]
 """Table name -> its rows, each a dict of column -> value."""
@@ -28,9 +29,9 @@ FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 def read_tables(conn) -> Tables:
     """Every table as a list of rows (dicts), without the `PRIVATE` columns; the tables of kinds beyond the paper's
-    (`langpref.study.db.kind_tables`) after the schema's."""
+    (`langpref.study.protocol.db.kind_tables`) after the schema's."""
     out = {}
-    for table in (*sdb.TABLES, *sdb.kind_tables(conn)):
+    for table in (*schema.TABLES, *sdb.kind_tables(conn)):
         rows = sdb.rows(conn, f"SELECT * FROM {table}")
         for r in rows:
             for col in PRIVATE.get(table, ()):
@@ -70,7 +71,7 @@ def survey_answers(tables: Tables, survey: str) -> dict[str, dict[str, Any]]:
 def free_texts(tables: Tables, excluded: Collection[str]) -> list[tuple[str, str, str]]:
     """Every non-empty answer to a free-text survey question, as (participant, question, text), in stored order,
     without the `excluded` participants (the report's last table)."""
-    from langpref.study.surveys import SURVEYS
+    from langpref.study.protocol.surveys import SURVEYS
 
     text_ids = {(s, q["id"]) for s, qs in SURVEYS.items() for q in qs if q["type"] == "text"}
     return [

@@ -7,11 +7,12 @@ dataset and (for rendered videos) the render settings, so a cache folder never s
 Videos are made in one worker process (MuJoCo on EGL, or PyAV's encoder, apart from the server's threads) that keeps
 its env between trajectories. At start every study trajectory is queued (`prerender`), and a video asked for before
 its turn goes to the front of the queue (`request`); no server thread waits for it: the app answers 503 with
-Retry-After, or waits asynchronously for a short while (`langpref.study.participants`). The worker exits by itself
-when the server process dies (it watches its parent), and `close` kills it rather than waiting for a render to finish.
+Retry-After, or waits asynchronously for a short while (`langpref.study.server.participants`). The worker exits by
+itself when the server process dies (it watches its parent), and `close` kills it rather than waiting for a render to
+finish.
 
-Study 1 with generated candidates (`langpref.study.generated`, `attach`): a generated trajectory's video is named
-`gen000123-<tag>.webm` (the tag also hashes the folder of the generated dataset, so a video folder shared by two
+Study 1 with generated candidates (`langpref.study.session.generated`, `attach`): a generated trajectory's video is
+named `gen000123-<tag>.webm` (the tag also hashes the folder of the generated dataset, so a video folder shared by two
 studies never mixes their generated trajectories); until the trajectory is made, `request` says `generating`, then
 it is rendered from the generated dataset like any other.
 """
@@ -31,7 +32,8 @@ from typing import Any
 
 from langpref.dataset.storage import load_dataset
 from langpref.errors import LangprefError
-from langpref.study.config import VideoConfig
+from langpref.study.server.settings import VideoConfig
+from langpref.study.session.workers import job_failure, stop_worker, worker_init
 
 MEDIA_TYPES = {"webm": "video/webm", "mp4": "video/mp4"}
 _NAME = re.compile(r"(traj|gen)([0-9]{6})-([0-9a-f]{10})\.(webm|mp4)", re.ASCII)
@@ -53,28 +55,10 @@ def _close_worker_envs() -> None:
     _WORKER_STATE.clear()
 
 
-def _watch_parent(parent: int, interval: float = 0.5) -> None:
-    """Exit this worker as soon as `parent` (the server) is gone: a SIGKILLed server leaves no render worker."""
-    import os
-    import time
-
-    while True:
-        time.sleep(interval)
-        if os.getppid() != parent:
-            os._exit(0)
-
-
 def _worker_init(parent: int | None = None) -> None:
-    """The video worker yields the CPU to the server's requests, closes its envs at exit and dies with its parent."""
-    import os
-
+    """The video worker closes its envs at exit, yields the CPU to the server's requests and dies with its parent."""
     atexit.register(_close_worker_envs)
-    if parent is not None:
-        threading.Thread(target=_watch_parent, args=(parent,), name="parent-watch", daemon=True).start()
-    try:
-        os.nice(10)
-    except (AttributeError, OSError):
-        pass
+    worker_init(parent)
 
 
 def make_video(
@@ -131,11 +115,12 @@ class VideoCache:
         self._stopped = False
         self._rendering: int | None = None
         self._active = False  # a render thread is running (changed only under `_cond`)
-        self.generated = None  # langpref.study.generated.Generator, with `attach`
+        self.generated = None  # langpref.study.session.generated.Generator, with `attach`
         self.gen_tag = ""
 
     def attach(self, generated) -> None:
-        """Serve the trajectories of a `langpref.study.generated.Generator` too; each is rendered once it is made."""
+        """Serve the trajectories of a `langpref.study.session.generated.Generator` too; each is rendered once it is
+        made."""
         self.generated = generated
         ident = {"tag": self.tag, "store": str(Path(generated.store.root).resolve())}
         self.gen_tag = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:10]
@@ -332,25 +317,3 @@ class VideoCache:
             self._cond.notify_all()
         stop_worker(self._pool, self._thread, timeout)
         self._pool = None
-
-
-def job_failure(exc: BaseException, pool: ProcessPoolExecutor | None) -> tuple[str, ProcessPoolExecutor | None]:
-    """A failed job's one-line reason (300 characters at most), and the worker pool to go on with: None when the
-    failure broke it (its worker died), so that the next job starts a fresh one instead of failing too."""
-    broken = pool is not None and getattr(pool, "_broken", False)
-    return f"{type(exc).__name__}: {exc}"[:300], None if broken else pool
-
-
-def stop_worker(pool: Any, thread: threading.Thread | None, timeout: float) -> None:
-    """Kill `pool`'s worker processes at once (a job in flight is lost: its caller requeues or rewrites it), let the
-    thread feeding it end within `timeout` seconds, and shut the pool down without waiting."""
-    if pool is not None:
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            try:
-                proc.kill()
-            except (OSError, AttributeError):
-                pass
-    if thread is not None:
-        thread.join(timeout=timeout)
-    if pool is not None:
-        pool.shutdown(wait=False, cancel_futures=True)

@@ -21,11 +21,11 @@ from starlette.datastructures import Headers, MutableHeaders
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from langpref.study.admin import admin_router
-from langpref.study.guard import HttpError, cross_site
-from langpref.study.pages import STATIC, page_router
-from langpref.study.participants import participant_router
-from langpref.study.state import StudyApp
+from langpref.study.server.admin import admin_router
+from langpref.study.server.guard import HttpError, cross_site
+from langpref.study.server.pages import STATIC, page_router
+from langpref.study.server.participants import participant_router
+from langpref.study.server.state import StudyApp
 
 __all__ = ["SECURITY_HEADERS", "RequestGuard", "StudyApp", "create_app"]
 

@@ -23,12 +23,12 @@ Where things live and how a restart continues:
 - A made trajectory is appended to a dataset (`langpref.propose.GeneratedStore`, one split `generated`, default
   `DB.generated/` beside the database) that replays, renders and loads like any other, and its row in the database
   table `generated` (id, round, where the search started, scores, its parameters and phi, its index in that dataset)
-  says what it is. Its video is then rendered like any other (`langpref.study.videos`).
-- Until then its video is answered 503 with Retry-After (`langpref.study.participants`), and the page says the
+  says what it is. Its video is then rendered like any other (`langpref.study.server.videos`).
+- Until then its video is answered 503 with Retry-After (`langpref.study.server.participants`), and the page says the
   robot is making a new trajectory; an answer about a trajectory that is not made yet is answered 503 the same way
   (`NotReady`).
-- The `--on-show` hook (`langpref.study.hook`) runs for a generated trajectory once it is made, given its index in
-  the generated dataset; simulated participants (`langpref.study.simulate`) read its features from there.
+- The `--on-show` hook (`langpref.study.server.hook`) runs for a generated trajectory once it is made, given its index
+  in the generated dataset; simulated participants (`langpref.study.server.simulate`) read its features from there.
 """
 
 from __future__ import annotations
@@ -50,12 +50,13 @@ import numpy as np
 
 from langpref.errors import LangprefError
 from langpref.improve import cosine_objective
-from langpref.study import db as sdb
-from langpref.study.config import StudyConfig
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.session.workers import job_failure, stop_worker, worker_init
 
 if TYPE_CHECKING:
-    from langpref.study.engine import StudyEngine
-    from langpref.study.flow import Participant
+    from langpref.study.protocol.flow import Participant
+    from langpref.study.session.engine import StudyEngine
 
 log = logging.getLogger("langpref.study")
 
@@ -86,9 +87,7 @@ _WORKER: dict[str, Any] = {}
 
 def _worker_init(model_dir: str, data_dir: str, units: np.ndarray, phi: np.ndarray, propose: dict, parent: int) -> None:
     """Load the model's trajectory encoder and open the simulator once, in the worker process."""
-    from langpref.study.videos import _worker_init as video_worker_init
-
-    video_worker_init(parent)  # lower priority than the server's requests; dies with the server
+    worker_init(parent)  # lower priority than the server's requests; dies with the server
     import torch
 
     from langpref.dataset.storage import load_dataset
@@ -365,8 +364,6 @@ class Generator:
             try:
                 self._make(job)
             except Exception as exc:  # noqa: BLE001 (reported per trajectory; asking for its video retries it)
-                from langpref.study.videos import job_failure
-
                 with self._cond:
                     self._failed[job.id], self._pool = job_failure(exc, self._pool)
                     self._retry[job.id] = job
@@ -453,7 +450,5 @@ class Generator:
             self._queue.clear()
             self._cond.notify_all()
             pool = self._pool
-        from langpref.study.videos import stop_worker
-
         stop_worker(pool, self._thread, timeout)
         self._pool = None

@@ -8,13 +8,13 @@ With `--confirm-margin`, a Study-2 language answer whose reading is uncertain is
 model's top readings and "none of these", one click) before the robot learns from it.
 
 Nothing here touches the database or the model: `advance` gets the current `Step`, a parsed `Answer` and a `Robot`
-(the learning side, `langpref.study.engine`), and returns the next `Step` with the rows to store. The app writes both
-in one transaction. Every step fixes what it shows when it is made, so showing it again (a reload, a restart)
+(the learning side, `langpref.study.session.engine`), and returns the next `Step` with the rows to store. The app writes
+both in one transaction. Every step fixes what it shows when it is made, so showing it again (a reload, a restart)
 shows the same thing.
 
 The robot's feedback goes one way for every kind: the kind (`langpref.feedback.kind`) parses the answer into its
 typed answer, says what of it is stored, and the robot learns from it; each Study-2 method is the kind of its name,
-and the kinds a study runs are its config's (`StudyConfig.kinds`, `langpref.study.kinds`).
+and the kinds a study runs are its config's (`StudyConfig.kinds`, `langpref.study.protocol.kinds`).
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
-from langpref.study import kinds as study_kinds
-from langpref.study.config import METHODS, StudyConfig
-from langpref.study.surveys import survey_questions, validate_answers
+from langpref.study.protocol import kinds as study_kinds
+from langpref.study.protocol.config import METHODS, StudyConfig
+from langpref.study.protocol.surveys import survey_questions, validate_answers
 
 if TYPE_CHECKING:
-    from langpref.study.queries import Chosen
+    from langpref.study.protocol.queries import Chosen
 
 MAX_CLIENT_MS = 24 * 3600 * 1000
 NONE_OF_THESE = "none of these"
@@ -60,7 +60,8 @@ class Participant:
 @dataclass(frozen=True)
 class Confirmed:
     """What a participant confirmed a language answer meant: `meaning` (an index of the engine's meanings,
-    `langpref.study.learners.Meanings`), or None for "none of these" (the answer is stored and not learned from)."""
+    `langpref.study.session.learners.Meanings`), or None for "none of these" (the answer is stored and not learned
+    from)."""
 
     meaning: int | None
 

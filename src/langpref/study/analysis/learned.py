@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.study import db as sdb
-from langpref.study.flow import SURROGATES
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.flow import SURROGATES
 
 Tables = dict[str, list[dict[str, Any]]]
 

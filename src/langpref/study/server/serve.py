@@ -21,14 +21,15 @@ from typing import Any
 from langpref import __version__
 from langpref.errors import LangprefError
 from langpref.feedback.kind import get_kind
-from langpref.study import db as sdb
-from langpref.study.app import create_app
-from langpref.study.config import ServeConfig, StudyConfig
-from langpref.study.engine import StudyEngine
-from langpref.study.generated import Generator, check_generation
-from langpref.study.hook import ShowHook
-from langpref.study.state import StudyApp
-from langpref.study.videos import VideoCache
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.server.app import create_app
+from langpref.study.server.hook import ShowHook
+from langpref.study.server.settings import ServeConfig
+from langpref.study.server.state import StudyApp
+from langpref.study.server.videos import VideoCache
+from langpref.study.session.engine import StudyEngine
+from langpref.study.session.generated import Generator, check_generation
 
 
 def _file_sha(path: Path) -> str:
@@ -145,7 +146,7 @@ def bind(host: str, port: int) -> socket.socket:
 def _uvicorn_server(app, log_level: str = "warning"):
     import uvicorn
 
-    from langpref.study.transport import OneSendH11Protocol
+    from langpref.study.server.transport import OneSendH11Protocol
 
     class StudyServer(uvicorn.Server):
         def handle_exit(self, sig, frame) -> None:  # SIGTERM, SIGINT: the requests waiting for a video answer now

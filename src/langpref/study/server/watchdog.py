@@ -1,5 +1,5 @@
 """The `--on-show` hook's watchdog: a small process that kills the replays in flight when the server ends, even by
-`kill -9` (`langpref.study.hook`), and the kill of one run's process group."""
+`kill -9` (`langpref.study.server.hook`), and the kill of one run's process group."""
 
 from __future__ import annotations
 

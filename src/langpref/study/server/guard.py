@@ -4,8 +4,9 @@
   as it streams in, stopping at the limit (`read_body`), so a large upload never sits in memory;
 - JSON nested deeper than `MAX_DEPTH` or holding more than `MAX_VALUES` values (`decode_json`; measured without
   recursion, the count stopping at the limit), and text with lone UTF-16 surrogates (they cannot be stored as UTF-8;
-  `langpref.study.flow.clean_text` refuses them). An answer's body is decoded and checked before the participant's
-  lock is taken, so a body made to be slow (21,000 empty lists fit in 64 KiB) holds no other participant up;
+  `langpref.study.protocol.flow.clean_text` refuses them). An answer's body is decoded and checked before the
+  participant's lock is taken, so a body made to be slow (21,000 empty lists fit in 64 KiB) holds no other participant
+up;
 - a `Host` header that is not one of this study's names (`HostCheck`): a page of another site that a DNS-rebinding
   attack points at the server would otherwise reach it as "same origin";
 - a POST whose `Origin` (or `Referer`) is another site's page (`cross_site`);

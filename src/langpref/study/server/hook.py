@@ -68,11 +68,11 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from langpref.study.watchdog import Watchdog, kill_group
+from langpref.study.server.watchdog import Watchdog, kill_group
 
 if TYPE_CHECKING:
     from langpref.dataset.storage import Dataset
-    from langpref.study.generated import Generator
+    from langpref.study.session.generated import Generator
 
 log = logging.getLogger("langpref.study")
 STATUSES = ("ok", "failed", "timeout", "error", "skipped")

@@ -13,14 +13,14 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from langpref.study import db as sdb
-from langpref.study.config import StudyConfig
-from langpref.study.engine import StudyEngine, StudyRobot
-from langpref.study.flow import Confirmed, Participant, Step
-from langpref.study.generated import Generator
-from langpref.study.guard import HostCheck, HttpError, RateLimiter, TrustedProxies
-from langpref.study.hook import ShowHook
-from langpref.study.videos import VideoCache
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.protocol.flow import Confirmed, Participant, Step
+from langpref.study.server.guard import HostCheck, HttpError, RateLimiter, TrustedProxies
+from langpref.study.server.hook import ShowHook
+from langpref.study.server.videos import VideoCache
+from langpref.study.session.engine import StudyEngine, StudyRobot
+from langpref.study.session.generated import Generator
 
 LOCK_STRIPES = 64
 """Locks that answers of one participant take (by hash of the id): a fixed number, so memory stays bounded."""

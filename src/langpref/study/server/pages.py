@@ -9,12 +9,13 @@ from pathlib import Path
 from fastapi import APIRouter
 from fastapi.responses import HTMLResponse
 
-from langpref.study.config import StudyConfig
-from langpref.study.kinds import label, study_kind
-from langpref.study.state import StudyApp
-from langpref.study.surveys import task_text
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.protocol.kinds import label, study_kind
+from langpref.study.protocol.surveys import task_text
+from langpref.study.server.state import StudyApp
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).parents[1]
+"""`langpref/study/`, where the pages (`templates/`) and their scripts (`static/`) are shipped."""
 STATIC = HERE / "static"
 PAGES = (("/", "index.html"), ("/study", "study.html"), ("/admin", "admin.html"))
 """Route -> template in `templates/`."""

@@ -5,12 +5,12 @@
   feedback on the robot's motion is refused first (`langpref.language.relevance.FeedbackGate`);
 - the improvement step of Study 1 (paper Eq. 4, its cosine reading: `langpref.improve.improvement_step`) over the
   study set;
-- one reward learner per participant and method (`StudyConfig.learner`, `langpref.study.learners`): the paper's
+- one reward learner per participant and method (`StudyConfig.learner`, `langpref.study.session.learners`): the paper's
   (`langpref.reward.RewardLearner`, fed by the method's feedback kind: its `pairs`, explicit + implicit losses for
   language, Bradley-Terry for comparisons) or the answer-model learner, refit after every answer; a language answer
   whose meaning the participant confirmed (`--confirm-margin`) teaches that meaning;
-- which trajectories each query shows (`langpref.study.queries`: random, as in the paper, or an active strategy of
-  `langpref.reward.selection` over the participant's learner; fixed by the study and participant seeds).
+- which trajectories each query shows (`langpref.study.protocol.queries`: random, as in the paper, or an active strategy
+  of `langpref.reward.selection` over the participant's learner; fixed by the study and participant seeds).
 
 The database is the only state that counts: a learner lost with a restart is rebuilt by replaying the participant's
 stored answers (`history`), with the same seeds, so it learns what it had learned.
@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -37,19 +37,28 @@ from langpref.language.relevance import FeedbackGate
 from langpref.reward import RewardConfig, RewardLearner
 from langpref.reward.answer_model import CONFIRM_OPTIONS, AnswerModelConfig, AnswerModelLearner
 from langpref.reward.learners import LearnerSettings, get_learner
-from langpref.study.config import StudyConfig
-from langpref.study.flow import Confirmed, Participant
-from langpref.study.learners import Meanings, learned_reward
-from langpref.study.queries import Chosen, QueryChooser
-
-if TYPE_CHECKING:
-    from langpref.study.generated import Generator
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.protocol.flow import Confirmed, Participant
+from langpref.study.protocol.queries import Chosen, QueryChooser
+from langpref.study.session.learners import Meanings, learned_reward
 
 History = Callable[[str, str], list[Any]]
 """(participant id, method) -> the participant's stored answers of that method, in order, as the kind's answers."""
 Confirmations = Callable[[str, str], dict[int, Confirmed]]
 """(participant id, method) -> {query number: what the participant confirmed its answer meant}."""
 Learner = RewardLearner | AnswerModelLearner
+
+
+class Candidates(Protocol):
+    """Study 1's generated candidates as the robot uses them (`langpref.study.session.generated.Generator`, which is
+    built over a `StudyEngine` and so stands above this module): the id of the trajectory made for a round, and phi
+    of a trajectory (NotReady while it is being made)."""
+
+    def id_for(self, p: Participant, round_: int) -> int: ...
+
+    def phi(self, index: int) -> np.ndarray: ...
+
+
 NO_CHANGE_READING: dict[str, Any] = {"feature": None, "direction": None, "confidence": 1.0, "no_change": True}
 """How "that's good, no change" (a button, never read by the model) is shown back and stored."""
 
@@ -188,7 +197,7 @@ class StudyRobot:
         history: History,
         max_cached: int = 512,
         cfg: StudyConfig | None = None,
-        generated: Generator | None = None,
+        generated: Candidates | None = None,
         confirmations: Confirmations | None = None,
     ):
         self.engine = engine
@@ -212,8 +221,8 @@ class StudyRobot:
         return int(self._rng(p, 0).choice(self.engine.failed))
 
     def query(self, p: Participant, method: str, number: int) -> Chosen:
-        """What query `number` (1-based) of `method` shows, and why (`langpref.study.queries`); an active strategy
-        reads the learner that has seen the first `number - 1` answers."""
+        """What query `number` (1-based) of `method` shows, and why (`langpref.study.protocol.queries`); an active
+        strategy reads the learner that has seen the first `number - 1` answers."""
         return self.chooser.choose(
             method,
             number,
@@ -232,7 +241,7 @@ class StudyRobot:
 
     def improve(self, p: Participant, shown: int, text: str, round_: int) -> tuple[int, dict[str, Any]]:
         """Round `round_` of Study 1: Eq. 4 over the study set, or (generated candidates) the id of the trajectory
-        the simulator will make for it (`langpref.study.generated`; NotReady while `shown` is being made)."""
+        the simulator will make for it (`langpref.study.session.generated`; NotReady while `shown` is being made)."""
         if self.generated is None:
             return self.engine.improve(shown, text), self.engine.understand(text)
         self.generated.phi(shown)
@@ -348,7 +357,8 @@ class StudyRobot:
         return int(self.engine.study[int(np.argmax(reward))])
 
     def reward(self, p: Participant, method: str) -> dict[str, Any]:
-        """The reward learned so far (`langpref.study.learners.learned_reward`), as stored after every answer."""
+        """The reward learned so far (`langpref.study.session.learners.learned_reward`), as stored after every
+        answer."""
         return learned_reward(self._current(p, method), self.engine.space, self.engine.study, self.cfg.learner)
 
     def forget(self, participant_id: str) -> None:

@@ -108,7 +108,7 @@ class _World:
         set's task and horizon (`GeneratedStore` refuses others), so the study set's metadata reads them (its own
         meta.json is rewritten as it grows, a trajectory file never is)."""
         from langpref.dataset.storage import load_trajectory
-        from langpref.study import db as sdb
+        from langpref.study.protocol import db as sdb
 
         if self.db is None or self.generated_dir is None:
             raise LangprefError(
@@ -247,7 +247,7 @@ class SimParticipant:
 
     def _body(self, step: dict[str, Any], received: float, shown: list[int]) -> dict[str, Any]:
         """The answer to a step; `shown` are the world's rows of its trajectories (empty without a world)."""
-        from langpref.study.kinds import asks_feedback
+        from langpref.study.protocol.kinds import asks_feedback
 
         kind, rng, world = step["kind"], self.rng, self.world
         if kind == "survey":
@@ -270,7 +270,7 @@ class SimParticipant:
         """The answer field of a feedback step: the kind's synthetic human's answer about the `shown` rows, as a
         client sends it (`FeedbackKind.value`); without a world, a random one by the kind's widget."""
         from langpref.feedback.kind import get_kind
-        from langpref.study.kinds import widget
+        from langpref.study.protocol.kinds import widget
 
         if self.world is not None:
             kind = get_kind(step["kind"])
@@ -317,7 +317,7 @@ class SimParticipant:
 
 def study_of(db: str | Path) -> dict[str, Any]:
     """The dataset directory (`data`) and study split (`split`) the study in `db` was created with."""
-    from langpref.study import db as sdb
+    from langpref.study.protocol import db as sdb
 
     conn = sdb.open_existing(db)
     try:

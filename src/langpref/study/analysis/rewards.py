@@ -27,9 +27,9 @@ import numpy as np
 from langpref.errors import LangprefError
 from langpref.feedback.answers import answer_record, write_answers
 from langpref.feedback.kind import get_kind
-from langpref.study import db as sdb
-from langpref.study.config import StudyConfig
-from langpref.study.kinds import kind_answer
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.config import StudyConfig
+from langpref.study.protocol.kinds import kind_answer
 
 Tables = dict[str, list[dict[str, Any]]]
 POOLED = "pooled"

@@ -14,8 +14,8 @@ from functools import cache
 from typing import Any
 
 from langpref.errors import LangprefError
-from langpref.study.config import METHODS
-from langpref.study.kinds import label
+from langpref.study.protocol.config import METHODS
+from langpref.study.protocol.kinds import label
 from langpref.tasks import get_task
 
 NONE_OF_THEM = "None of them"

@@ -40,7 +40,7 @@ from langpref.reward import RewardConfig
 from langpref.reward.batch import Scored
 from langpref.reward.learners import get_learner
 from langpref.reward.selection import DEFAULT_SAMPLES, Selector, candidate_rows, selector_factories
-from langpref.study.config import StudyConfig
+from langpref.study.protocol.config import StudyConfig
 
 ANSWER_MODEL_SAMPLES = 64
 """Draws of a learner's belief per active query it scores itself (as `AnswerModelInfoGain` in `langpref.reward`)."""

@@ -11,8 +11,8 @@ data: Study 2 asks each in turn, and everything it needs of one is the kind's ow
 
 A kind from an installed package (entry-point group `langpref.feedback`) runs with no edit here. Study 1 stays the
 paper's improvement with language (`STUDY1`: Eq. 4 reads a sentence). A kind's own active query selections
-(`FeedbackKind.strategies`) choose its queries (`langpref.study.queries`, through `Selector.score_rows`); a learner
-reads the kinds it says it reads (`LearnerType.reads`: the answer-model learner, those with a reading in
+(`FeedbackKind.strategies`) choose its queries (`langpref.study.protocol.queries`, through `Selector.score_rows`); a
+learner reads the kinds it says it reads (`LearnerType.reads`: the answer-model learner, those with a reading in
 `FeedbackKind.readings`); a study of any other kind under it is refused before it starts (`StudyConfig.validate`). The
 paper's two keep their own pages and the analyses (`langpref.study.analysis`) compare them.
 """
@@ -26,6 +26,7 @@ from typing import Any
 
 from langpref.errors import LangprefError
 from langpref.feedback.kind import FeedbackKind, get_kind
+from langpref.study.protocol.schema import KIND_TABLES, TABLES
 
 STUDY1 = "language"
 """The kind of Study 1's feedback steps (phase `improve`), whatever kinds Study 2 runs."""
@@ -35,9 +36,6 @@ OWN_KEYS = {"answers": "survey", "meaning": "confirm", "satisfied": "satisfactio
 """Answer fields of the study's own steps (docs/design.md#the-study-apps-http-contract)."""
 RESERVED_KEYS = frozenset({*OWN_KEYS, "seq", "client_ms"})
 """Fields a kind's `answer_key` cannot be: the study's own."""
-KIND_TABLES = ("feedback", "comparisons")
-"""The schema's tables of feedback answers, a column per field (the paper's kinds'); any other kind's table holds its
-answer as JSON (`kind_row`)."""
 NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 """What a kind's name and table must look like for the study (a step kind, a phase, an SQL table)."""
 
@@ -45,8 +43,6 @@ NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 def study_kind(name: str) -> FeedbackKind:
     """The registered kind `name` (a plugin's too), checked for what the study needs: a page, a name usable as a step
     kind, an answer field of its own and a table name (one of the schema's feedback tables, or a new one)."""
-    from langpref.study.db import TABLES
-
     kind = get_kind(name)
     if kind.page is None:
         raise LangprefError(

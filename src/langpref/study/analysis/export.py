@@ -3,11 +3,11 @@ report with PNG figures (Sec. 5.2, Fig. 7-9, Table 1 and Appendix E's time-per-q
 
     DIR/tables/*.csv     one per database table (token hashes left out)
     DIR/summary.json     the numbers of the report
-    DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`langpref.study.learned`)
-    DIR/answers.jsonl    every Study-2 answer, DIR/rewards/ every participant's reward (`langpref.study.rewards`)
-    DIR/report.html      tables and figures, self-contained apart from the PNGs beside it
-    DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time, and
-                         study2_rewards (what each participant's reward wants) where the rewards were written
+    DIR/learned_rewards.json  every participant's learned reward per Study-2 method (`langpref.study.analysis.learned`)
+    DIR/answers.jsonl    every Study-2 answer, DIR/rewards/ every participant's reward
+    (`langpref.study.analysis.rewards`) DIR/report.html      tables and figures, self-contained apart from the PNGs
+    beside it DIR/*.png            study1_attributes, study1_iterations, study2_attributes, study2_ratings, study2_time,
+                         and study2_rewards (what each participant's reward wants) where the rewards were written
 
 The work is done in `langpref.study.analysis` (tables, stats, figures, report); this module writes it to disk.
 """
@@ -20,13 +20,13 @@ from pathlib import Path
 from typing import Any
 
 from langpref.errors import LangprefError
-from langpref.study import db as sdb
 from langpref.study.analysis.figures import FIGURES, figures, rewards_figure
+from langpref.study.analysis.learned import bank_additions, learned_rewards
 from langpref.study.analysis.report import report_html
+from langpref.study.analysis.rewards import write_study_rewards
 from langpref.study.analysis.stats import analyse
 from langpref.study.analysis.tables import free_texts, read_tables, resolve_exclusions, table_columns, write_csvs
-from langpref.study.learned import bank_additions, learned_rewards
-from langpref.study.rewards import write_study_rewards
+from langpref.study.protocol import db as sdb
 
 __all__ = ["FIGURES", "export"]
 
@@ -44,7 +44,7 @@ def export(
     With `bank_additions_file`, also the confirmed phrasings as a file to review there (`bank_additions`; no bank
     reader takes it before `langpref bank review`): an existing file
     only with `force`, and never the database itself (or its journal) nor a file the export writes. Also the answers
-    and rewards of `langpref.study.rewards` (its model: `model`, else where the study ran)."""
+    and rewards of `langpref.study.analysis.rewards` (its model: `model`, else where the study ran)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise LangprefError(f"--out {out} is a file; pass a directory (it is created if missing)")

@@ -13,10 +13,11 @@ from typing import Any
 from fastapi import APIRouter, Depends, Request
 from starlette.concurrency import run_in_threadpool
 
-from langpref.study import db as sdb
-from langpref.study.flow import AnswerError, clean_text, progress
-from langpref.study.guard import HttpError, decode_json, read_body
-from langpref.study.state import StudyApp
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol import schema
+from langpref.study.protocol.flow import AnswerError, clean_text, progress
+from langpref.study.server.guard import HttpError, decode_json, read_body
+from langpref.study.server.state import StudyApp
 
 MAX_REASON = 300
 """Characters of the reason given for leaving a participant out."""
@@ -125,9 +126,9 @@ def set_excluded(state: StudyApp, pid: str, body: bytes) -> dict[str, Any]:
 def export_all(state: StudyApp) -> dict[str, Any]:
     """The study's meta, every table, the analyses and the learned rewards, as `langpref study export` computes
     them (no files)."""
+    from langpref.study.analysis.learned import learned_rewards
     from langpref.study.analysis.stats import analyse
     from langpref.study.analysis.tables import read_tables, resolve_exclusions
-    from langpref.study.learned import learned_rewards
 
     conn = state.connect()
     tables = read_tables(conn)
@@ -142,7 +143,7 @@ def export_all(state: StudyApp) -> dict[str, Any]:
 def server_status(state: StudyApp) -> dict[str, Any]:
     """Rows per table and the progress of the videos, the engine, the hook and the generated trajectories."""
     conn = state.connect()
-    counts = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in sdb.TABLES}
+    counts = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in schema.TABLES}
     return {
         "videos": {**state.videos.progress(), "waiting_requests": state.video_waiters},
         "rows": counts,

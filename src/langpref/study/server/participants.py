@@ -21,13 +21,22 @@ from starlette.concurrency import run_in_threadpool
 
 from langpref.errors import LangprefError
 from langpref.feedback.language import LanguageAnswer
-from langpref.study import db as sdb
-from langpref.study.flow import AnswerError, Participant, Step, advance, first_step, parse_answer, progress, questions
-from langpref.study.generated import NotReady
-from langpref.study.guard import HttpError, client_key, decode_json, read_body
-from langpref.study.kinds import label, method_order, widget
-from langpref.study.state import StudyApp, sha256
-from langpref.study.surveys import SURVEY_TITLES
+from langpref.study.protocol import db as sdb
+from langpref.study.protocol.flow import (
+    AnswerError,
+    Participant,
+    Step,
+    advance,
+    first_step,
+    parse_answer,
+    progress,
+    questions,
+)
+from langpref.study.protocol.kinds import label, method_order, widget
+from langpref.study.protocol.surveys import SURVEY_TITLES
+from langpref.study.server.guard import HttpError, client_key, decode_json, read_body
+from langpref.study.server.state import StudyApp, sha256
+from langpref.study.session.generated import NotReady
 
 TIME_TOLERANCE_MS = 1000.0
 """A client time per query may exceed the server's (step shown -> answer received) by this much (clock grain)."""
