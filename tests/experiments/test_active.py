@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from scipy import stats
 
 from langpref.experiments.active import MIXED, per_second, run_seconds
 from langpref.reward import LearnRewardConfig, RewardConfig
@@ -75,9 +76,16 @@ def test_active_experiment_writes_curves_intervals_and_targets(tmp_path, make_sy
     data = make_synthetic_dataset(tmp_path / "d", n=40)
     cfg = LearnRewardConfig(queries=3, candidates=10, reward=RewardConfig(num_negatives=3, max_iter=20))
     res = run_active_experiment(
-        "metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=2, seeds=1, progress=False
+        "metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, humans=3, seeds=2, progress=False
     )
     assert set(res["methods"]) == set(ACTIVE_METHODS) and len(res["targets"]) == 11
+    # the contrasts' unit is the human: each human's two seeds averaged, a t-interval over the 3 humans
+    a, b = (
+        np.array(res["per_run_auc"][m]).reshape(3, 2).mean(axis=1) for m in ("language-infogain", "language-random")
+    )
+    got = res["contrasts"]["language-infogain - language-random"]["auc_true_reward"]
+    half = stats.t.ppf(0.975, 2) * (a - b).std(ddof=1) / np.sqrt(3)
+    assert np.isclose(got["mean"], (a - b).mean()) and np.isclose(got["high"] - got["mean"], half)
     assert all(len(r["true_reward_of_best"]) == 4 for r in res["methods"].values())
     assert "language-infogain - language-lal-infogain" in res["contrasts"]
     assert (tmp_path / "a" / "active.png").read_bytes()[:4] == b"\x89PNG"

@@ -24,7 +24,7 @@ def test_experiments_reward_and_ablation_write_and_resume(tmp_path, monkeypatch)
     assert set(res["methods"]) == {"language", "comparison"} and len(res["targets"]) == 3
     assert (
         len(res["ce_difference"]["mean"]) == 5
-        and "paired by human and seed" in (tmp_path / "r" / "reward.md").read_text()
+        and "paired by human (each human's seeds averaged)" in (tmp_path / "r" / "reward.md").read_text()
     )
     abl = run_ablation_experiment("metaworld", data, None, tmp_path / "a", perfect=True, config=cfg, progress=False)
     assert set(abl["methods"]) == {"both", "explicit", "implicit"}

@@ -31,7 +31,14 @@ from typing import Any
 import numpy as np
 
 from langpref.experiments.common import Inputs, figure_link, space_experiment
-from langpref.experiments.reward import curves_table, paired_difference, run_methods, save_summary, section_head
+from langpref.experiments.reward import (
+    curves_table,
+    paired_difference,
+    per_human,
+    run_methods,
+    save_summary,
+    section_head,
+)
 from langpref.extras import pyplot, save_figure
 from langpref.feedback.kind import MIXED as BOTH
 from langpref.feedback.kind import PAPER_KINDS
@@ -100,8 +107,9 @@ def _per_run(runs: dict, method: str, keys: list[str], key: str) -> np.ndarray:
     return np.array([[float(np.mean(runs[f"{method}/{k}"][key]))] for k in keys])
 
 
-def _interval(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
-    d = paired_difference(a, b)
+def _interval(a: np.ndarray, b: np.ndarray, seeds: int) -> dict[str, float]:
+    """The paired difference of two methods' per-run areas with its t-interval over the humans (`per_human`)."""
+    d = paired_difference(per_human(a, seeds), per_human(b, seeds))
     return {k: float(v[0]) for k, v in d.items()}
 
 
@@ -158,7 +166,7 @@ def run_active_experiment(run: Inputs, humans: int | None = None, seeds: int | N
     results, runs, space, run = run_methods("active", run, methods)
     keys = [f"{h}/{s}" for h in range(base.humans) for s in range(base.seeds)]
     timed = per_second(runs, methods, keys)
-    auc, auc_s, contrasts = _contrasts(runs, methods, keys, timed)
+    auc, auc_s, contrasts = _contrasts(runs, methods, keys, timed, base.seeds)
     targets = {**paper_learner_targets(results, contrasts, base.queries), **answer_model_targets(results, contrasts)}
     title = f"Active queries, {run.env}" + (" (perfect latent)" if run.model is None else "")
     figure = plot_active(results, timed, run.out / "active.png", title)
@@ -177,19 +185,20 @@ def run_active_experiment(run: Inputs, humans: int | None = None, seeds: int | N
     return save_summary("active", run, space, base, fields, _markdown)
 
 
-def _contrasts(runs: dict[str, dict], methods: dict[str, Any], keys: list[str], timed: dict[str, Any]):
+def _contrasts(runs: dict[str, dict], methods: dict[str, Any], keys: list[str], timed: dict[str, Any], seeds: int):
     """Per method the per-run areas (true reward of the best, per query and per modelled second), and the paired
-    intervals of `CONTRASTS` on all four areas (cross-entropy too)."""
+    intervals of `CONTRASTS` on all four areas (cross-entropy too), over the humans (`keys` ordered human by human,
+    `seeds` runs each)."""
     auc = {m: _per_run(runs, m, keys, "true_reward_of_best") for m in methods}
     auc_ce = {m: _per_run(runs, m, keys, "cross_entropy") for m in methods}
     auc_s = {m: np.array(timed["methods"][m]["per_run"]["true_reward_of_best"])[:, None] for m in methods}
     auc_ce_s = {m: np.array(timed["methods"][m]["per_run"]["cross_entropy"])[:, None] for m in methods}
     contrasts = {
         f"{a} - {b}": {
-            "auc_true_reward": _interval(auc[a], auc[b]),
-            "auc_cross_entropy": _interval(auc_ce[a], auc_ce[b]),
-            "auc_true_reward_per_second": _interval(auc_s[a], auc_s[b]),
-            "auc_cross_entropy_per_second": _interval(auc_ce_s[a], auc_ce_s[b]),
+            "auc_true_reward": _interval(auc[a], auc[b], seeds),
+            "auc_cross_entropy": _interval(auc_ce[a], auc_ce[b], seeds),
+            "auc_true_reward_per_second": _interval(auc_s[a], auc_s[b], seeds),
+            "auc_cross_entropy_per_second": _interval(auc_ce_s[a], auc_ce_s[b], seeds),
         }
         for a, b in CONTRASTS
     }
@@ -288,7 +297,8 @@ def _markdown(summary: dict[str, Any]) -> str:
     lines += ["", *_time_table(summary)]
     lines += [
         "",
-        "Paired differences over runs (same human and seed), 95% t-intervals; per query (over query counts 0..Q) "
+        "Paired differences, 95% t-intervals over the humans (each human's seeds averaged first); per query (over "
+        "query counts 0..Q) "
         "and per modelled second (over 0..T):",
         "",
         "| contrast | AUC best | mean CE | AUC best per second | mean CE per second |",

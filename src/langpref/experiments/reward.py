@@ -175,9 +175,17 @@ def _reward_job(space, job) -> tuple[str, dict]:
     return key, asdict(run_reward_learning(space, w, cfg, (*stream, h, s)))
 
 
+def per_human(x: np.ndarray, seeds: int) -> np.ndarray:
+    """(humans, ...) the mean over each human's seeds of per-run rows ordered human by human (the keys HUMAN/SEED of
+    `run_methods`): the unit of an interval, since a human's seeds share its weights and are not more people."""
+    x = np.asarray(x, dtype=np.float64)
+    return x.reshape(len(x) // seeds, seeds, *x.shape[1:]).mean(axis=1)
+
+
 def paired_difference(a: np.ndarray, b: np.ndarray, confidence: float = 0.95) -> dict[str, list]:
-    """Mean of a - b per column over paired rows (runs of the same human and seed), with the two-sided t-interval
-    at `confidence`: how far one method's curve lies from another's, and whether that is more than run-to-run noise."""
+    """Mean of a - b per column over paired rows (the same synthetic human, its seeds averaged: `per_human`), with
+    the two-sided t-interval at `confidence`: how far one method's curve lies from another's, and whether that is
+    more than the spread between humans."""
     from scipy import stats
 
     d = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
@@ -196,7 +204,8 @@ def _ce_difference_line(diff: dict[str, list]) -> str:
     q = len(mean)
     worst = int(np.argmax(mean)) + 1
     return (
-        f"Language minus comparison CE, paired by human and seed, 95% t-interval per query count: language "
+        f"Language minus comparison CE, paired by human (each human's seeds averaged), 95% t-interval over the "
+        f"humans per query count: language "
         f"significantly lower at {int((high < 0).sum())} of {q}, comparisons significantly lower at "
         f"{int((low > 0).sum())} of {q}; most in comparisons' favour at q = {worst} "
         f"({mean[worst - 1]:+.3f}, interval {low[worst - 1]:+.3f} to {high[worst - 1]:+.3f})."
@@ -351,7 +360,7 @@ def run_reward_experiment(run: Inputs) -> dict[str, Any]:
         space,
         base,
         targets,
-        ce_difference=paired_difference(ce["language"], ce["comparison"]),
+        ce_difference=paired_difference(per_human(ce["language"], base.seeds), per_human(ce["comparison"], base.seeds)),
         ce_language_lower=ce_lower_count(lang, comp),
     )
 
