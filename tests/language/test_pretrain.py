@@ -6,13 +6,15 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
 from langpref.language.corpus import generate
-from langpref.language.pretrain import PretrainConfig, build, contrastive_loss, pretrain, read_record
+from langpref.language.pretrain import build, contrastive_loss, pretrain
+from langpref.language.recipes import PretrainConfig, read_record
 
 TINY = PretrainConfig(steps=4, concepts_per_step=2, sentences_per_meaning=2, lr=1e-4, max_length=12)
 
@@ -36,7 +38,8 @@ def _loss_on(encoder, examples, temperature: float) -> float:
 
 
 def test_a_tiny_build_runs_and_lowers_its_loss(tiny_corpus):
-    from langpref.language.transformer import SentenceEncoder, load_transformer
+    from langpref.language.loading import load_transformer
+    from langpref.language.transformer import SentenceEncoder
 
     before = SentenceEncoder(*load_transformer(TINY.base), TINY.max_length).eval()
     cfg = PretrainConfig(**{**asdict(TINY), "steps": 8})
@@ -58,9 +61,9 @@ def test_the_build_is_deterministic_from_its_seed(tiny_corpus):
 
 def test_a_checkpoint_names_the_language_model_it_started_from(tmp_path, monkeypatch):
     """A built language model carries its record; a checkpoint made on it names it and the model it started from."""
-    import langpref.language.corpus as corpus
-
-    monkeypatch.setattr(corpus, "build_corpus", lambda seed, per_meaning: generate(seed, 4, ["speed", "height"]))
+    monkeypatch.setattr(
+        "langpref.language.pretrain.build_corpus", lambda seed, per_meaning: generate(seed, 4, ["speed", "height"])
+    )
     built = tmp_path / "lm"
     record = build(built, TINY, progress=False)
     assert read_record(built) == record and record["built_from"] == "minilm"
@@ -86,7 +89,9 @@ def test_a_checkpoint_names_the_language_model_it_started_from(tmp_path, monkeyp
 
 
 def test_comparative_is_registered_and_builds_into_the_cache_when_missing(tmp_path, monkeypatch):
+    """The registry names where the built model lies; loading it by name builds it there first, once."""
     from langpref.language import models
+    from langpref.language.pretrain import ensure_built
 
     monkeypatch.setenv("LANGPREF_CACHE", str(tmp_path))
     calls = []
@@ -99,5 +104,8 @@ def test_comparative_is_registered_and_builds_into_the_cache_when_missing(tmp_pa
     monkeypatch.setattr("langpref.language.pretrain.build", fake_build)
     assert models.canonical_name("comparative") == "comparative"
     path = models.resolve("comparative")
-    assert path.startswith(str(tmp_path)) and calls == [PretrainConfig()]
+    assert path.startswith(str(tmp_path)) and calls == []  # the registry builds nothing
+    ensure_built("comparative")
+    assert calls == [PretrainConfig()] and (Path(path) / "model.safetensors").is_file()
+    ensure_built("comparative")
     assert models.resolve("comparative") == path and len(calls) == 1  # cached: built once

@@ -8,8 +8,9 @@ from dataclasses import asdict, replace
 import torch
 
 from langpref.language.corpus import Example, generate
-from langpref.language.pretrain import PretrainConfig, pretrain
+from langpref.language.pretrain import pretrain
 from langpref.language.pretrain_aligned import AlignedTarget, aligned_loss, concept_axes, synthetic_deltas
+from langpref.language.recipes import PretrainConfig
 
 
 def test_the_axes_are_orthonormal_and_fixed_by_the_seed():

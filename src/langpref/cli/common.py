@@ -99,8 +99,8 @@ def bank_embedder(args: argparse.Namespace, task: str) -> tuple[Callable[[list[s
     (psi) with --model, else the pretrained sentence encoder --lang-model. A checkpoint of another task is refused,
     since its psi never learned this bank's words."""
     if args.model is None:
+        from langpref.language.loading import sentence_embedder
         from langpref.language.models import canonical_name
-        from langpref.language.transformer import sentence_embedder
 
         return sentence_embedder(args.lang_model), f"pretrained {canonical_name(args.lang_model)}"
     from langpref.model.checkpoint import load_model

@@ -146,7 +146,7 @@ def _bank_check(dataset: Path) -> dict:
     status("checking the bank with the pretrained language model minilm (10-30 s; --no-bank-check skips it)")
     from langpref.language.banksource import open_bank
     from langpref.language.check import leave_one_out
-    from langpref.language.transformer import sentence_embedder
+    from langpref.language.loading import sentence_embedder
 
     source = open_bank(dataset)
     result = leave_one_out(

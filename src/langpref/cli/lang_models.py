@@ -77,9 +77,9 @@ def cmd_lang_models(args: argparse.Namespace) -> None:
 
 
 def _measure(spec, sources, repeats: int, time) -> dict:
+    from langpref.language.loading import sentence_embedder
     from langpref.language.measure import bank_accuracy, latency_ms, package_bytes, unpacked_bytes
     from langpref.language.models import resolve
-    from langpref.language.transformer import sentence_embedder
 
     start = time.perf_counter()
     local = resolve(spec.name)
@@ -156,7 +156,8 @@ def cmd_lang_model_build(args: argparse.Namespace) -> None:
     import time
 
     from langpref.language.models import comparative_dir
-    from langpref.language.pretrain import build, preset, pretrain, read_record
+    from langpref.language.pretrain import build, pretrain
+    from langpref.language.recipes import preset, read_record
 
     given = {"seed": args.seed, "steps": args.steps, "lr": args.lr, "temperature": args.temperature}
     given.update(per_meaning=args.per_meaning, objective=args.objective, head_lr=args.head_lr)

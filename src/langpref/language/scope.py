@@ -145,8 +145,9 @@ def scope_embedder() -> tuple[Embed, str]:
     import torch
 
     from langpref.language.coalesce import REMEMBERED, Coalesced
+    from langpref.language.loading import load_transformer
     from langpref.language.models import resolve
-    from langpref.language.transformer import SentenceEncoder, load_transformer
+    from langpref.language.transformer import SentenceEncoder
 
     tokenizer, transformer = load_transformer(SCOPE_LANG_MODEL)
     encoder = SentenceEncoder(tokenizer, transformer).eval()

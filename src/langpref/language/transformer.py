@@ -1,6 +1,7 @@
-"""The pretrained language model: load a registered sentence encoder by name (`langpref.language.models`: `minilm`,
-the offline default all-MiniLM-L6-v2, or `mpnet`) or any Hugging Face encoder (T5-family models as their encoder
-only), and embed sentences with it; save one, as a built language model or a checkpoint's fine-tuned language side.
+"""A Hugging Face transformer as the language side reads it: opened from a directory or a hub name (T5-family models as
+their encoder only), saved back, and its sentence embedding (`SentenceEncoder`). Names are not its business: a
+registered name (`minilm`, `comparative`) is resolved, and built where langpref makes it, by
+`langpref.language.loading.load_transformer`, which opens what this module is given.
 
 It belongs to the language layer: the feedback gate reads its sentence embeddings directly, and the model layer's
 language encoder (`langpref.model.encoders.LanguageEncoder`) adds a trained head on top.
@@ -19,23 +20,15 @@ from torch import nn
 from langpref.errors import LangprefError
 
 
-def resolve_lang_model(name: str) -> str:
-    """A name or path `from_pretrained` can load: a registered model's local directory (`langpref.language.models`:
-    `minilm`, `mpnet` and their aliases), else `name` as given (a hub name or a local directory)."""
-    from langpref.language.models import resolve
-
-    return resolve(name)
-
-
-def load_transformer(name_or_path: str):
-    """(tokenizer, encoder module) of a Hugging Face model. T5-family models load as their encoder only."""
+def open_transformer(path: str, name_or_path: str):
+    """(tokenizer, encoder module) of the Hugging Face model at `path` (a local directory or a hub name), which the
+    user called `name_or_path` (what messages say). T5-family models load as their encoder only."""
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
     import transformers
     from transformers import AutoConfig, AutoModel, AutoTokenizer
 
     transformers.utils.logging.set_verbosity_error()
     transformers.utils.logging.disable_progress_bar()
-    path = resolve_lang_model(name_or_path)
     if sys.stderr.isatty():  # a person at a terminal sees why the next seconds pass; logs and pipes stay clean
         print(f"loading the language model {name_or_path} ...", file=sys.stderr, flush=True)
     try:
@@ -64,7 +57,7 @@ def load_transformer(name_or_path: str):
 
 
 def save_transformer(tokenizer, transformer: nn.Module, directory: Path) -> None:
-    """Write a transformer and its tokenizer into `directory` as `load_transformer` reads them back (safetensors):
+    """Write a transformer and its tokenizer into `directory` as `open_transformer` reads them back (safetensors):
     a built language model, or the fine-tuned language side of a checkpoint."""
     directory.mkdir(parents=True, exist_ok=True)
     transformer.save_pretrained(directory, safe_serialization=True)
@@ -117,16 +110,3 @@ class SentenceEncoder(nn.Module):
         for idx, c in chunks:
             out[torch.tensor(idx, device=self.device)] = c
         return out
-
-
-def sentence_embedder(name_or_path: str):
-    """texts -> (N, hidden) numpy embeddings of the pretrained model `name_or_path`, frozen, in eval mode: what
-    `langpref bank check` reads a bank with before any model is trained."""
-    tokenizer, transformer = load_transformer(name_or_path)
-    encoder = SentenceEncoder(tokenizer, transformer).eval()
-
-    def embed(texts: Sequence[str]):
-        with torch.no_grad():
-            return encoder.pooled_texts(list(texts)).double().cpu().numpy()
-
-    return embed

@@ -32,7 +32,8 @@ import torch
 from langpref import __version__
 from langpref.errors import LangprefError
 from langpref.language.lab_default import AUTO, lang_model_for
-from langpref.language.transformer import load_transformer, save_transformer
+from langpref.language.loading import load_transformer
+from langpref.language.transformer import save_transformer
 from langpref.model.config import ModelConfig
 from langpref.model.encoders import LanguageEncoder, TrajectoryEncoder, step_input_dim
 from langpref.model.inputs import numeric_dim, sees_images
