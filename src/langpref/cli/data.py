@@ -54,6 +54,7 @@ def cmd_generate(args: argparse.Namespace) -> None:
                 "splits": {"metavar": "TRAIN,VAL,TEST"},
                 "frames.frame_size": {"metavar": "WIDTH,HEIGHT"},
             },
+            common=("src", "task", "out", "force", "frames.images"),
         ),
         JSON,
         RERUN,

@@ -374,11 +374,16 @@ def cmd_experiment_seeds(args: argparse.Namespace) -> None:
     "experiment observations",
     EXPERIMENTS["observations"].help,
     [
-        config(EXPERIMENTS["observations"].config, {"env": {"metavar": "TASK"}}),
+        config(
+            EXPERIMENTS["observations"].config,
+            {"env": {"metavar": "TASK"}},
+            common=("env", "data", "out", "kinds", "heldout", "device", "force"),
+        ),
         config(
             "langpref.model.config:TrainConfig",
             {"train.stage1_epochs": "--epochs", "train.stage2_epochs": "--finetune-epochs"},
             prefix="train.",
+            common=("train.stage1_epochs", "train.stage2_epochs"),
             only=(
                 "train.stage1_epochs",
                 "train.stage2_epochs",

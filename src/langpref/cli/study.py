@@ -43,7 +43,7 @@ from langpref.dataset.splits import SPLITS
                     "needs it (they may then wait for it)."
                 },
             },
-            common=("model", "data", "db", "host", "port", "admin_token", "on_show", "trusted_proxies"),
+            common=("model", "data", "db", "host", "port", "admin_token", "on_show"),
         ),
         config(
             "langpref.study.protocol.config:StudyConfig",

@@ -108,7 +108,11 @@ def _generation(args: argparse.Namespace, space):
     "iterative trajectory improvement with a synthetic language human (Eq. 4)",
     [
         *_space_options(),
-        config("langpref.improve:ImproveConfig", lambda: {**_use_opts(), "human.rationality": None}),
+        config(
+            "langpref.improve:ImproveConfig",
+            lambda: {**_use_opts(), "human.rationality": None},
+            common=("iterations", "seeds", "candidate_split", "strategy"),
+        ),
         PROPOSE,
         path("--figure", default=None, help="also draw the curve into this PNG"),
         JSON,
@@ -169,11 +173,13 @@ def _space_and_episodes(args: argparse.Namespace, cfg: Any) -> tuple[Any, Any]:
             _use_opts,
             common=("feedback", "queries", "humans", "seeds", "learner", "query_selection"),
         ),
-        opt(
-            "--optimize",
-            action="store_true",
-            help="after the last query, generate r_xi's optimum in the simulator (`langpref.propose`): adds "
-            "optimized_true_reward (above 1: better than the eval split's best) and recorded_true_reward",
+        cc.rare(
+            opt(
+                "--optimize",
+                action="store_true",
+                help="after the last query, generate r_xi's optimum in the simulator (`langpref.propose`): adds "
+                "optimized_true_reward (above 1: better than the eval split's best) and recorded_true_reward",
+            )
         ),
         PROPOSE,
         path(
@@ -190,8 +196,10 @@ def _space_and_episodes(args: argparse.Namespace, cfg: Any) -> tuple[Any, Any]:
             help="learn from real people's recorded answers (JSON Lines: a `study export`'s answers.jsonl, or the "
             "answers format of docs/api/reward.md), one reward per participant, instead of synthetic humans",
         ),
-        opt("--participant", default=None, metavar="P", help="with --answers: only this participant's answers"),
-        opt("--pooled", action="store_true", help="with --answers: one reward from every participant's answers"),
+        cc.rare(
+            opt("--participant", default=None, metavar="P", help="with --answers: only this participant's answers"),
+            opt("--pooled", action="store_true", help="with --answers: one reward from every participant's answers"),
+        ),
         path(
             "--figure",
             default=None,
@@ -338,9 +346,14 @@ def _experiment_options(experiment: Experiment) -> list[cc.Options]:
         TASK,
         *_space_options(experiment=True),
         path("--out", default=None, help=f"output directory (default {experiment.default_out})"),
-        config(experiment.config, lambda e=experiment: {**_use_opts(True), **e.options}, only=experiment.flags),
+        config(
+            experiment.config,
+            lambda e=experiment: {**_use_opts(True), **e.options},
+            only=experiment.flags,
+            common=experiment.common,
+        ),
         opt("--force", action="store_true", help="discard finished runs in --out and start over"),
-        config("langpref.experiments.common:SweepConfig"),
+        config("langpref.experiments.common:SweepConfig", common=("workers",)),
         RERUN,
         JSON,
     ]

@@ -54,6 +54,8 @@ class Experiment:
     `own`: it trains its own models."""
     default_out: str = ""
     """Where its results go without `--out`, as `--help` says it."""
+    common: tuple[str, ...] | None = None
+    """Of `flags`, those `--help` shows (the size of the run, as a rule); the others only `--help-all`. None: all."""
 
     def config_class(self) -> type:
         if self.config is None:
@@ -76,6 +78,8 @@ get_experiment = REGISTRY.get
 
 _PHRASING = ("human.phrasing_split", "human.phrasings", "human.feature_scale", "human.direction")
 _REWARD_FLAGS = ("seeds", "humans", "queries", "reward.model", *_PHRASING)
+_SIZE = ("queries", "humans", "seeds")
+"""The flags of a reward experiment's size, which its `--help` shows."""
 _IMPROVE, _LEARN = "langpref.improve:ImproveConfig", "langpref.reward:LearnRewardConfig"
 _OUT = "results/{name}/ENV, or ENV-perfect"
 
@@ -110,6 +114,7 @@ for _experiment in (
         _IMPROVE,
         ("iterations", "seeds", *_PHRASING),
         default_out=_OUT.format(name="improve"),
+        common=("iterations", "seeds"),
     ),
     Experiment(
         "reward",
@@ -118,6 +123,7 @@ for _experiment in (
         _LEARN,
         _REWARD_FLAGS,
         default_out=_OUT.format(name="reward") + ", ENV-mlp",
+        common=_SIZE,
     ),
     Experiment(
         "ablation",
@@ -126,6 +132,7 @@ for _experiment in (
         _LEARN,
         _REWARD_FLAGS,
         default_out=_OUT.format(name="ablation") + ", ENV-mlp",
+        common=_SIZE,
     ),
     Experiment(
         "prior",
@@ -134,6 +141,7 @@ for _experiment in (
         _LEARN,
         _REWARD_FLAGS,
         default_out=_OUT.format(name="prior") + ", ENV-mlp",
+        common=_SIZE,
     ),
     Experiment(
         "choose",
@@ -144,6 +152,7 @@ for _experiment in (
         (*_REWARD_FLAGS, "human.no_change_logit", "human.no_change_margin"),
         {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}},
         default_out=_OUT.format(name="choose"),
+        common=_SIZE,
     ),
     Experiment(
         "active",
@@ -164,6 +173,7 @@ for _experiment in (
         ),
         {"humans": {"default": 10, "help": "synthetic humans (reward weights w), drawn from --seed (default 10)"}},
         default_out=_OUT.format(name="active") + ", ENV-mlp, ENV-nochangeC, ENV-nochange-marginM",
+        common=_SIZE,
     ),
     Experiment(
         "generate",
@@ -196,6 +206,7 @@ for _experiment in (
             "reward.model",
         ),
         default_out="results/rl/ENV",
+        common=("steps", *_SIZE),
     ),
     Experiment(
         "verdict",
