@@ -5,7 +5,7 @@ the fact (theta's rows shuffled among the trajectories and its columns permuted,
 reward of every trajectory changes) while a stand-in human replays the recorded answers. What the method does (the
 queries it asks, the reward it learns, the trajectories it moves to) must be the same, bit for bit: anything that
 read the truth would change. Only the metrics, which are meant to read the truth, may differ. The study robot's test
-is in tests/study/test_robot_blindness.py.
+is in tests/study/session/test_robot_blindness.py.
 """
 
 from dataclasses import replace

@@ -16,7 +16,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-CONF = Path(__file__).resolve().parents[2] / "src" / "langpref" / "study" / "deploy" / "nginx-study.conf"
+CONF = Path(__file__).resolve().parents[3] / "src" / "langpref" / "study" / "deploy" / "nginx-study.conf"
 
 
 def free_port() -> int:

@@ -8,7 +8,7 @@ import re
 import tracemalloc
 from pathlib import Path
 
-STATIC = Path(__file__).resolve().parents[2] / "src" / "langpref" / "study" / "static"
+STATIC = Path(__file__).resolve().parents[3] / "src" / "langpref" / "study" / "static"
 
 
 def test_resume_code_restores_the_session(client, h, study_state):

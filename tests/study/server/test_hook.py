@@ -340,7 +340,7 @@ def test_a_replay_in_flight_ends_when_the_server_is_killed(tmp_path):
 
     from benchmarks.common import alive
 
-    src = str(Path(__file__).resolve().parents[2] / "src")
+    src = str(Path(__file__).resolve().parents[3] / "src")
 
     pids = tmp_path / "pids"
     (tmp_path / "keep_going.py").write_text(KEEP_GOING)

@@ -1,6 +1,6 @@
 """The participant page draws a plugin kind's query from the step's `widget` with no edit in the study's JS: a choice
 among three trajectories (buttons and keys) and a typed verdict, in Debian's Chromium
-(as tests/study/test_browser.py)."""
+(as tests/study/server/test_browser.py)."""
 
 from __future__ import annotations
 
