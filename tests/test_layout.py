@@ -114,6 +114,39 @@ def test_feedback_and_datasets_import_nothing_of_reward_learning():
     assert not {k: v for k, v in bad.items() if v}, "move the import to the downstream package, or pass the object in"
 
 
+PIPELINE = ("tasks", "dataset", "language", "model", "feedback", "reward")
+"""The packages of docs/design.md's pipeline, upstream first. A package imports none downstream of it, nor any of the
+rest of langpref above them (improve, propose, experiments, study, cli, demo), by any import at all: at run time,
+inside a function, or under `if TYPE_CHECKING:` (a reader and a type checker see that one too). Stronger than
+ONE_WAY: what a package needs of one downstream it names in a Protocol of its own, or is passed."""
+ABOVE_PIPELINE = ("improve", "propose", "experiments", "study", "cli", "demo")
+
+
+def _every_import(path: Path) -> set[str]:
+    """Every module a file imports anywhere, and each `from X import name` as `X.name` too (`from langpref import
+    reward` imports the package)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found |= {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+    return found
+
+
+def test_the_pipeline_imports_one_way_even_for_type_checkers():
+    bad = {}
+    for name, path in modules().items():
+        package = name.split(".")[0]
+        if package not in PIPELINE:
+            continue
+        downstream = [f"langpref.{p}" for p in (*PIPELINE[PIPELINE.index(package) + 1 :], *ABOVE_PIPELINE)]
+        found = sorted(m for m in _every_import(path) if any(m == d or m.startswith(f"{d}.") for d in downstream))
+        if found:
+            bad[name] = found
+    assert not bad, f"upstream imports downstream (docs/design.md, Pipeline): move it down, or pass it in: {bad}"
+
+
 STUDY_ONE_WAY = {
     "study.protocol": ("study.session", "study.server", "study.analysis"),
     "study.session": ("study.server", "study.analysis"),
