@@ -127,6 +127,9 @@ class FeedbackKind:
     learner weighs information against, and the time axis of the learning curves."""
     says_no_change: bool = False
     """Whether an answer may be "that's good, no change" (`answer.no_change`), which the curves count."""
+    sentence: str | None = None
+    """The field of its answer that holds what the person typed, which the model reads (the study shows back how it
+    read it, asks when unsure, and refuses text that is no feedback); None: its answers hold no sentence."""
     mixed: bool = False
     """Whether `--feedback mixed` asks this kind beside the others that say so (each needs an `infogain` selection
     whose selector scores candidates, `scored`)."""

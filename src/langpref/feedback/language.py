@@ -328,6 +328,7 @@ LANGUAGE = register_kind(
         to_line=to_line,
         seconds=1.0 - PAPER_TIME_SAVING,
         says_no_change=True,
+        sentence="text",
         mixed=True,
         page=StudyPage(
             widget="text",

@@ -1,5 +1,5 @@
 """Reward learners as parts: what `--learner NAME` names, built and taught the same way by `learn-reward`, recorded
-answers (`langpref.reward.recorded`) and Study 2 (`langpref.study.engine`), and saved the same way
+answers (`langpref.reward.recorded`) and Study 2 (`langpref.study.session.engine`), and saved the same way
 (`langpref.reward.saved`).
 
 A learner (`RewardLearner` of the paper, `AnswerModelLearner`) is taught answers one at a time and refit with `fit`;
@@ -12,7 +12,8 @@ A learner (`RewardLearner` of the paper, `AnswerModelLearner`) is taught answers
 - `saved(learner)`: (reward model kind, parameters, settings) as a saved reward holds them;
 - what else is its own: the config field it reads (`own_config`), its check of a run's config (`check`), the kinds it
   can read (`reads`), its active query selection in `learn-reward` (`selector`) and in the study (`scores`), asking a
-  person to confirm what they meant (`confirm`), and a check of its belief after a run (`credible`).
+  person to confirm what they meant (`confirm`), a check of its belief after a run (`credible`), and whether a caller
+  that teaches it one answer at a time fits it after each (`fits_each_answer`).
 
 No caller compares a learner's name: each asks its type.
 
@@ -93,6 +94,10 @@ class LearnerType:
     """(learner, true weights w) -> whether w lies in its belief's credible region (a calibration check)."""
     feature_weights: Callable[[Any, LatentSpace], dict[str, float]] | None = None
     """(learner, space) -> its reward's weight per task feature, where it has them (the study export's)."""
+    fits_each_answer: bool = False
+    """Whether a caller that teaches it answers one at a time (Study 2, replays included) fits it after each: its
+    belief depends on when it is fit (the answer-model learner resamples); False: one fit after the last is the same
+    (Eq. 9's convex loss)."""
 
 
 def meaning_psi(space: LatentSpace, split: str, meaning: Meaning) -> np.ndarray:
@@ -262,5 +267,6 @@ register_learner(
         confirm=_confirm_answer_model,
         credible=lambda learner, w: learner.credible(np.asarray(w)[learner.features]),
         feature_weights=_answer_model_feature_weights,
+        fits_each_answer=True,
     )
 )

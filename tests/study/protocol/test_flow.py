@@ -254,3 +254,15 @@ def test_text_is_cleaned_and_only_contract_fields_are_kept():
     answers["robot_interaction"] = "\u2066Never\u2069"
     a = parse_answer({"answers": answers, "seq": 0, "extra": {"a": 1}}, survey)
     assert a.body["answers"]["robot_interaction"] == "Never" and set(a.body) == {"seq", "answers"}
+
+
+def test_said_is_the_typed_sentence_of_a_kind_that_holds_one():
+    """What the model reads of an answer is the kind's own (`FeedbackKind.sentence`), no type checked by the study."""
+    from langpref.feedback import get_kind
+    from langpref.language.bank import NO_CHANGE_FEEDBACK
+    from langpref.study.protocol.kinds import said
+
+    language, comparison = get_kind("language"), get_kind("comparison")
+    assert said(language, LanguageAnswer(LanguageQuery(3), "Go higher.")) == "Go higher."
+    assert said(language, LanguageAnswer(LanguageQuery(3), NO_CHANGE_FEEDBACK)) is None  # a button, not read
+    assert said(comparison, ComparisonAnswer(ComparisonQuery(1, 2), 0)) is None

@@ -119,6 +119,14 @@ def widget(name: str) -> dict[str, Any]:
     }
 
 
+def said(kind: FeedbackKind, answer: Any) -> str | None:
+    """What the person typed in `answer` (the kind's `sentence` field), which the model reads; None when the kind's
+    answers hold no sentence, or this one is "that's good, no change" (a button, never read)."""
+    if kind.sentence is None or (kind.says_no_change and answer.no_change):
+        return None
+    return getattr(answer, kind.sentence)
+
+
 def kind_row(kind: FeedbackKind, answer: Any, read: dict[str, Any] | None = None) -> dict[str, Any]:
     """The columns of `kind.table` that store `answer` and how the robot `read` it (language; the study adds the
     query number and times)."""

@@ -20,7 +20,7 @@ from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
 from langpref.errors import LangprefError
-from langpref.feedback.language import LanguageAnswer
+from langpref.feedback.kind import get_kind
 from langpref.study.protocol import db as sdb
 from langpref.study.protocol.flow import (
     AnswerError,
@@ -32,7 +32,7 @@ from langpref.study.protocol.flow import (
     progress,
     questions,
 )
-from langpref.study.protocol.kinds import label, method_order, widget
+from langpref.study.protocol.kinds import asks_feedback, label, method_order, said, widget
 from langpref.study.protocol.surveys import SURVEY_TITLES
 from langpref.study.server.guard import HttpError, client_key, decode_json, read_body
 from langpref.study.server.state import StudyApp, sha256
@@ -246,9 +246,10 @@ def answer(state: StudyApp, pid: str, token: str | None, body: bytes) -> dict[st
             ans = parse_answer(data, step, state.cfg.kinds)
         except AnswerError as exc:
             raise HttpError(exc.status, str(exc)) from None
-        said = ans.value  # typed feedback passes the gate; "no change" is a button, not a text to read
-        if isinstance(said, LanguageAnswer) and not said.no_change:
-            _check_feedback(state.engine.gate, said.text)
+        # typed feedback passes the gate; "no change" is a button, not a text to read
+        typed = said(get_kind(step.kind), ans.value) if asks_feedback(step.kind) else None
+        if typed is not None:
+            _check_feedback(state.engine.gate, typed)
         if state.generated is not None and step.phase == "improve":
             try:
                 for index in step.shown:  # an answer about a trajectory still being made is not taken yet

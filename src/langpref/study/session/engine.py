@@ -29,8 +29,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from langpref.errors import LangprefError
-from langpref.feedback.kind import get_kind
-from langpref.feedback.language import LanguageAnswer
+from langpref.feedback.kind import FeedbackKind, get_kind
 from langpref.improve import improvement_step
 from langpref.language.coalesce import REMEMBERED, Coalesced
 from langpref.language.relevance import FeedbackGate
@@ -39,6 +38,7 @@ from langpref.reward.answer_model import CONFIRM_OPTIONS, AnswerModelConfig, Ans
 from langpref.reward.learners import LearnerSettings, get_learner
 from langpref.study.protocol.config import StudyConfig
 from langpref.study.protocol.flow import Confirmed, Participant
+from langpref.study.protocol.kinds import said
 from langpref.study.protocol.queries import Chosen, QueryChooser
 from langpref.study.session.learners import Meanings, learned_reward
 
@@ -228,14 +228,15 @@ class StudyRobot:
             number,
             lambda *keys: self._rng(p, *keys),
             lambda: self._learner(p, method, number - 1),
-            lambda: [self.as_read(answer) for answer in self._answers(p, method, number - 1)],
+            lambda: [self.as_read(get_kind(method), answer) for answer in self._answers(p, method, number - 1)],
         )
 
-    def as_read(self, answer: Any) -> Any:
-        """`answer` as the learners read it: language with its whitespace collapsed, as the text cache keys it."""
-        if isinstance(answer, LanguageAnswer):
-            return replace(answer, text=self.engine.normalise(answer.text))
-        return answer
+    def as_read(self, kind: FeedbackKind, answer: Any) -> Any:
+        """`answer` as the learners read it: a typed sentence (`FeedbackKind.sentence`) with its whitespace collapsed,
+        as the text cache keys it."""
+        if kind.sentence is None:
+            return answer
+        return replace(answer, **{kind.sentence: self.engine.normalise(getattr(answer, kind.sentence))})
 
     # ---- Study 1 ----
 
@@ -267,12 +268,10 @@ class StudyRobot:
         if confirmed is not None:
             m = int(confirmed.meaning)
             meaning = (int(self.engine.meanings.features[m // 2]), m % 2)
-        engine = self.engine
+        engine, kind, learner_type = self.engine, get_kind(method), get_learner(self.cfg.learner)
         rng = self._rng(p, 4, number)
-        get_learner(self.cfg.learner).teach(
-            learner, engine.space, get_kind(method), self.as_read(answer), engine.settings, rng, meaning
-        )
-        if isinstance(learner, AnswerModelLearner):
+        learner_type.teach(learner, engine.space, kind, self.as_read(kind, answer), engine.settings, rng, meaning)
+        if learner_type.fits_each_answer:
             learner.fit()
 
     def _learner(self, p: Participant, method: str, answered: int) -> Learner:
@@ -319,18 +318,20 @@ class StudyRobot:
         self._add(learner, p, method, number, answer, confirmed)
         learner.fit()
         self._keep(p, method, learner, [*past, answer])
-        if not isinstance(answer, LanguageAnswer):
+        kind = get_kind(method)
+        if kind.sentence is None:
             return None
-        return dict(NO_CHANGE_READING) if answer.no_change else self.engine.understand(answer.text)
+        text = said(kind, answer)
+        return dict(NO_CHANGE_READING) if text is None else self.engine.understand(text)
 
     def confirm(self, p: Participant, method: str, answer: Any) -> dict[str, Any] | None:
-        """What to ask about a language answer whose reading is uncertain (`flow.Robot.confirm`): None unless the
-        margin between its top two meanings is below `confirm_margin` (1: always)."""
-        limit = self.cfg.confirm_margin
-        if limit is None or not isinstance(answer, LanguageAnswer) or answer.no_change:
+        """What to ask about a typed answer (language's) whose reading is uncertain (`flow.Robot.confirm`): None
+        unless the margin between its top two meanings is below `confirm_margin` (1: always)."""
+        limit, text = self.cfg.confirm_margin, said(get_kind(method), answer)
+        if limit is None or text is None:
             return None
         meanings = self.engine.meanings
-        reading = meanings.reading(self.engine.psi(answer.text))
+        reading = meanings.reading(self.engine.psi(text))
         margin = meanings.margin(reading)
         if margin >= limit and limit < 1:
             return None
@@ -344,7 +345,7 @@ class StudyRobot:
             }
             for m in meanings.top(reading, CONFIRM_OPTIONS)
         ]
-        return {"options": options, "margin": round(margin, 4), "understood": self.engine.understand(answer.text)}
+        return {"options": options, "margin": round(margin, 4), "understood": self.engine.understand(text)}
 
     def _current(self, p: Participant, method: str) -> Learner:
         with self._lock:
