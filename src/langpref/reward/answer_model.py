@@ -92,13 +92,15 @@ class AnswerModelConfig:
     """beta of a comparison's Bradley-Terry likelihood in the same belief."""
     no_change_logit: float = 0.0
     """c, the logit of "that's good, no change" beside the feature logits v_f (z_f(tau*) - z_f(tau)) / T: at the
-    belief's optimum, where every feature logit is 0, it has 1 / (F + 1). 0 was chosen on the val protocol of all
-    three tasks with active language, against not modelling it (c = -30) and 1, 2: the best or near-best AUC for both
-    the paper's human and one who says it (docs/results.md, "That's good, no change")."""
+    belief's optimum, where every feature logit is 0, it has 1 / (F + 1). 0 was chosen on val with other humans than
+    the test runs' (`langpref experiment choose`, Meta-World and the drawer), against not modelling it (c = -30) and
+    1, 2: the lowest or level cross-entropy for the paper's human and for one who says it (docs/results.md, "Val with
+    other humans")."""
     prior_scale: float = 0.5
-    """Standard deviation of the Gaussian prior on each reward weight. 0.5 was chosen on the val protocol of all three
-    tasks (Meta-World, robosuite, the drawer; language and comparisons): it has the lowest or near-lowest mean CE in
-    each, where 1.0 made the learned reward overconfident (docs/results.md, "The answer model's prior scale")."""
+    """Standard deviation of the Gaussian prior on each reward weight. 0.5 was chosen on val with other humans than
+    the test runs' (`langpref experiment choose`; Meta-World and the drawer, language and comparisons): the lowest
+    mean CE in every row, where 1.0 made the learned reward overconfident (docs/results.md, "Val with other
+    humans")."""
     move_steps: int = 4
     """Metropolis steps per particle after each resampling."""
 
