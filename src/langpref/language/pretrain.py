@@ -11,6 +11,9 @@ apart from "No need to rush."), and other objects of the same concept are negati
 Settings are chosen on a val part of the corpus that holds whole concepts out (`corpus.concept_split`): how well the
 embeddings of concepts never trained on sort their sentences into meaning and direction (`read_val`), never on any
 bank's test phrasings or held-out texts.
+
+The settings, and the record a built model carries, are `langpref.language.recipes`. `build` writes a model into a
+directory; `ensure_built` into the cache, before the model's first load by name (`langpref.language.loading`).
 """
 
 from __future__ import annotations
