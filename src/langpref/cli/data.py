@@ -137,25 +137,24 @@ def cmd_label(args: argparse.Namespace) -> None:
 
 
 def _bank_check(dataset: Path) -> dict:
-    """`langpref bank check DATASET` with the pretrained language model: its one-line summary, what chance and good
-    are, a warning per meaning weak for a reason training does not fix (read as another feature) and a note on those
-    read as their own opposite direction (expected before training), on stderr; overall accuracy and weak meanings
-    for the --json summary."""
+    """`langpref bank check DATASET` with the language model `train` starts from (`bank_reader_for`): its one-line
+    summary, what chance and good are, a warning per meaning weak for a reason training does not fix (read as another
+    feature) and a note on those read as their own opposite direction (expected before training), on stderr; overall
+    accuracy and weak meanings for the --json summary."""
     from langpref.cli.bank import before_training_note, chance_line, opposite_only
     from langpref.cli.outputs import status
-
-    status("checking the bank with the pretrained language model minilm (10-30 s; --no-bank-check skips it)")
     from langpref.language.banksource import open_bank
+    from langpref.language.lab_default import bank_reader_for
+    from langpref.language.models import canonical_name
+
+    source = open_bank(dataset)
+    name = canonical_name(bank_reader_for(source.task))
+    status(f"checking the bank with {name}, which training starts from (10-30 s; --no-bank-check skips it)")
     from langpref.language.check import leave_one_out
     from langpref.language.loading import sentence_embedder
 
-    source = open_bank(dataset)
     result = leave_one_out(
-        source.split("train"),
-        source.features,
-        sentence_embedder("minilm"),
-        task=source.task,
-        encoder="pretrained minilm",
+        source.split("train"), source.features, sentence_embedder(name), task=source.task, encoder=f"pretrained {name}"
     )
     print(result.summary(), file=sys.stderr)
     print(chance_line(result), file=sys.stderr)

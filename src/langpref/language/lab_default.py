@@ -47,4 +47,22 @@ def lang_model_for_data(requested: str | None, data: str | Path) -> str:
     return AUTO_LANG_MODEL if (Path(data) / TASK_JSON).is_file() else PAPER_LANG_MODEL
 
 
-__all__ = ["AUTO", "AUTO_LANG_MODEL", "PAPER_LANG_MODEL", "lang_model_for", "lang_model_for_data"]
+def bank_reader_for(task: str) -> str:
+    """The pretrained language model a bank of `task` is checked with when none is named (`bank check`, and the
+    check after `import`): the one `train` starts from (`lang_model_for`), so the check reads the bank as training
+    will begin to; the paper's `minilm` where that one is a built model not built yet (a build takes minutes)."""
+    from langpref.language.models import built_record, lookup
+
+    name = lang_model_for(None, task)
+    spec = lookup(name)
+    return PAPER_LANG_MODEL if spec is not None and spec.built and built_record(name) is None else name
+
+
+__all__ = [
+    "AUTO",
+    "AUTO_LANG_MODEL",
+    "PAPER_LANG_MODEL",
+    "bank_reader_for",
+    "lang_model_for",
+    "lang_model_for_data",
+]
