@@ -26,9 +26,7 @@ HORIZON = 30
 @pytest.fixture(scope="module")
 def generation(real_data):
     space = perfect_latent_space(real_data)
-    return space, Generation.open(
-        real_data, space, None, ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2)
-    )
+    return space, Generation.open(real_data, space, ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2))
 
 
 def test_surrogate_fits_a_hand_built_map():

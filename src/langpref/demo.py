@@ -126,9 +126,9 @@ def _improvement_stage(out: Path, data: Path, model_dir: Path, made: dict):
 
 def _reward_stage(out: Path, space, made: dict) -> dict:
     """Stage 6: reward learning from language and from comparisons; each kind's `learn_reward` result."""
-    from langpref.experiments.reward import plot_reward_curves
     from langpref.feedback.kind import PAPER_KINDS
     from langpref.reward import LearnRewardConfig, learn_reward
+    from langpref.reward.figures import plot_reward_curves
 
     _banner("6. Reward learning: comparative language vs pairwise comparisons (2 humans x 2 seeds, 20 queries)")
     rewards = {

@@ -1,7 +1,7 @@
 """New trajectories made in the simulator: search the scripted controller's parameters for the rollout whose
 embedding best meets a latent objective.
 
-    gen = Generation.open(dataset, space, model, ProposeConfig())   # the dataset's parameters, phi, encoder, settings
+    gen = Generation.open(dataset, space, ProposeConfig())  # the dataset's parameters, the space's phi and phi_of
     proposer = gen.proposer(key=(0, 7))                    # one per run: its own surrogate, its own seeds
     proposal = proposer.propose(objective, start_unit, step=(3,))   # objective: (n, D) phi -> (n,) scores
 
@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.feedback.rollouts import AffineScale, TrajectoryEncoder, model_trajectory_encoder
 
 Objective = Callable[[np.ndarray], np.ndarray]
 """(n, D) embeddings -> (n,) scores, higher is better."""
@@ -111,50 +112,17 @@ class Surrogate:
 
 
 def model_embedder(model) -> Embedder:
-    """phi of a rollout from a trained `LatentModel`'s trajectory encoder (as `encode_dataset` embeds the dataset; a
-    model that sees images renders the rollout's frames from its simulator states, in the process's live env of the
-    task (`_env`), not a new one per rollout)."""
-
-    def embed(traj) -> np.ndarray:
-        env = _env(model.info.env, traj.horizon) if model.sees_images else None
-        phi = model.encode_rollouts([traj], env=env)
-        return phi.detach().cpu().numpy().astype(np.float64)[0]
-
-    return embed
+    """phi of a rollout from a trained `LatentModel`'s trajectory encoder, as the model's latent space embeds one
+    (`langpref.feedback.rollouts.model_trajectory_encoder`; `LatentSpace.phi_of`), for a caller holding the model
+    but no space (a study session)."""
+    return embedder_of(model_trajectory_encoder(model))
 
 
-def oracle_embedder(scale, offset: float = 3.0) -> Embedder:
-    """phi of a rollout in the perfect latent space (ORACLE: phi = (normalised features, offset), as
-    `perfect_latent_space`): for the oracle upper bound only."""
-
-    def embed(traj) -> np.ndarray:
-        return np.append(scale(traj.features), float(offset))
-
-    return embed
-
-
-@dataclass(frozen=True)
-class AffineScale:
-    """theta_f = a_f feature_f + b_f per feature, fitted exactly on a dataset: how a space turned the dataset's
-    features into its theta (standardised, or the paper's sum over steps), applied to a new rollout's features."""
-
-    a: np.ndarray
-    b: np.ndarray
-
-    @classmethod
-    def fit(cls, features: np.ndarray, target: np.ndarray) -> AffineScale:
-        a, b = np.ones(features.shape[1]), np.zeros(features.shape[1])
-        for f in range(features.shape[1]):
-            a[f], b[f] = np.polyfit(features[:, f], target[:, f], 1)
-        if not np.allclose(features * a + b, target, rtol=1e-6, atol=1e-6 * (1 + np.abs(target).max())):
-            raise LangprefError(
-                "the space's theta is not a per-feature affine map of the dataset's features (one "
-                "horizon); generated trajectories cannot be scored on its scale"
-            )
-        return cls(a, b)
-
-    def __call__(self, features: np.ndarray) -> np.ndarray:
-        return np.asarray(features, dtype=np.float64) * self.a + self.b
+def embedder_of(encode: TrajectoryEncoder) -> Embedder:
+    """One rollout at a time through a space's trajectory encoder (`LatentSpace.encode_trajectories`), as
+    `LatentSpace.phi_of` embeds it; the closure holds the encoder alone, not the space (whose theta is the synthetic
+    humans' view, which a proposer must not reach)."""
+    return lambda traj: encode([traj])[0]
 
 
 # ---- the dataset's controller parameters -------------------------------------------------------------------------
@@ -193,16 +161,11 @@ def rollout_seed(key: tuple[int, ...]) -> int:
     return int(np.random.SeedSequence([abs(int(k)) for k in key] + [8191]).generate_state(1)[0])
 
 
-_ENVS: dict[tuple[str, int], Any] = {}
-
-
 def _env(name: str, horizon: int):
-    """One live simulator per (task, horizon) per process, reused by every proposer."""
-    from langpref.tasks import get_simulator
+    """One live simulator per (task, horizon) per process, reused by every proposer (`langpref.tasks.live_env`)."""
+    from langpref.tasks import live_env
 
-    if (name, horizon) not in _ENVS:
-        _ENVS[(name, horizon)] = get_simulator(name).make_env(horizon)
-    return _ENVS[(name, horizon)]
+    return live_env(name, horizon)
 
 
 # ---- the proposer -------------------------------------------------------------------------------------------------
@@ -352,19 +315,18 @@ class Generation:
     source: str = ""
 
     @classmethod
-    def open(cls, dataset, space, model=None, cfg: ProposeConfig | None = None) -> Generation:
-        """From a simulated dataset, its latent space, the model that made the space (None: the oracle space) and
-        the search settings."""
+    def open(cls, dataset, space, cfg: ProposeConfig | None = None) -> Generation:
+        """From a simulated dataset (already open), its latent space (new rollouts are embedded by its trajectory
+        encoder, `LatentSpace.phi_of`: a trained model's, or the oracle's) and the search settings. Reads no file
+        but the dataset's trajectories, for their controller parameters; loads no model."""
         why = cannot_generate(dataset)
         if why is not None:
             raise LangprefError(f"{why}: new trajectories are generated for simulated tasks of one horizon")
+        if space.encode_trajectories is None:
+            raise LangprefError(f"the latent space ({space.description}) cannot embed new trajectories")
         feats = np.asarray(dataset.features, dtype=np.float64)
         scale = AffineScale.fit(feats, space.theta)  # the humans' theta, whatever its scale (standardised, paper)
-        embed = (
-            oracle_embedder(AffineScale.fit(feats, space.phi[:, :-1]), float(space.phi[0, -1]))
-            if model is None
-            else model_embedder(model)
-        )
+        embed = embedder_of(space.encode_trajectories)
         cfg = cfg or ProposeConfig()
         cfg.validate()
         _env(dataset.env, dataset.meta.horizon)  # start the simulator now, not in the first generation step
@@ -388,16 +350,10 @@ class Generation:
         return self.scale(traj.features)
 
 
-def open_generation(data: str | Path, model: str | Path | None, space, cfg: ProposeConfig | None = None) -> Generation:
-    """`Generation.open` from a dataset directory and a checkpoint directory (None: the oracle space)."""
-    from langpref.dataset.storage import load_dataset
-
-    dataset = load_dataset(data)
-    if model is None:
-        return Generation.open(dataset, space, None, cfg)
-    from langpref.model.checkpoint import load_model
-
-    return Generation.open(dataset, space, load_model(model, dataset=dataset), cfg)
+def open_generation(dataset, space, cfg: ProposeConfig | None = None) -> Generation:
+    """`Generation.open`: what a command calls with the dataset and the space it opened once
+    (`langpref.feedback.space.open_space`), so that neither the dataset nor the model is read again."""
+    return Generation.open(dataset, space, cfg)
 
 
 # ---- storage ------------------------------------------------------------------------------------------------------

@@ -18,14 +18,12 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
     import json
     from dataclasses import replace
 
-    from langpref import propose
+    from langpref import propose, tasks
     from langpref.experiments import generate as experiment
     from langpref.reward import LearnRewardConfig
 
     small, real_open = ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2), propose.open_generation
-    monkeypatch.setattr(
-        propose, "open_generation", lambda data, model, space, cfg=None: real_open(data, model, space, small)
-    )
+    monkeypatch.setattr(propose, "open_generation", lambda dataset, space, cfg=None: real_open(dataset, space, small))
     monkeypatch.setattr(experiment, "REWARD_RUNS", {"humans": 1, "seeds": 4, "queries": 3})
     base = ImproveConfig(seeds=4, iterations=2)
     out = tmp_path / "out"
@@ -33,7 +31,7 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
     run("metaworld", real_data.root, None, out, perfect=True, config=base, progress=False)
     together = json.loads((out / "runs.json").read_text())["runs"]
 
-    monkeypatch.setattr(propose, "_ENVS", {})  # a fresh simulator, as a new process has
+    monkeypatch.setattr(tasks, "_LIVE_ENVS", {})  # a fresh simulator, as a new process has
     state = experiment._worker(real_data.root, None, "metaworld", True, base.human.phrasings)
     alone = replace(base, seeds=3)
     jobs = [
@@ -50,7 +48,7 @@ def test_a_generate_experiment_run_depends_on_its_seed_only(real_data, tmp_path,
                 assert len(run.pop("step_s")) == len(together[key].pop("step_s"))
             assert run == together[key], key
     finally:
-        for env in propose._ENVS.values():
+        for env in tasks._LIVE_ENVS.values():
             env.close()
     assert any(together["paper-generated/2"]["generated"] + together["history-generated/2"]["generated"])
     assert together["reward/0/2"]["optimized_true_reward"] is not None
@@ -71,9 +69,7 @@ def test_experiment_generate_from_the_command_line(real_data, tmp_path, monkeypa
     from langpref.experiments import generate as experiment
 
     small, real_open = ProposeConfig(rollouts=2, search_generations=5, optimize_rounds=2), propose.open_generation
-    monkeypatch.setattr(
-        propose, "open_generation", lambda data, model, space, cfg=None: real_open(data, model, space, small)
-    )
+    monkeypatch.setattr(propose, "open_generation", lambda dataset, space, cfg=None: real_open(dataset, space, small))
     monkeypatch.setattr(experiment, "REWARD_RUNS", {"humans": 2, "seeds": 1, "queries": 3})
     out = tmp_path / "out"
     argv = ["experiment", "generate", "--env", "metaworld", "--data", str(real_data.root), "--perfect-latent"]

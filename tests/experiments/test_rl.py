@@ -64,14 +64,14 @@ def _recorder():
 
 
 def test_the_policy_is_paid_the_learned_reward_not_the_envs(tmp_path, make_synthetic_dataset):
-    from langpref.feedback.space import load_space
+    from langpref.feedback.space import open_space
     from langpref.reward import load
 
     data = make_synthetic_dataset(tmp_path / "d", n=24)
-    space = load_space(data, None, env="metaworld", perfect=True)
+    dataset, space = open_space(data, None, env="metaworld", perfect=True)
     cfg = RLConfig.tiny(sources=("language",), reward=SMALL)
     store = RunFiles(tmp_path / "runs", cfg.key())
-    judge = judges(data, space, cfg)
+    judge = judges(dataset, space, cfg)
     learn_rewards(space, cfg, _checkpoint(tmp_path, space.dim), tmp_path, store, judge, None)
     (job,) = policy_jobs(space, cfg, store, judge, tmp_path)
     assert job.reward_path and job.scale > 0 and job.scale != 1.0  # normalised by its spread over the dataset

@@ -78,10 +78,12 @@ def _space_options(experiment: bool = False) -> list[cc.Options]:
     ]
 
 
-def _space(args: argparse.Namespace):
-    from langpref.feedback.space import load_space
+def _opened(args: argparse.Namespace) -> tuple[Any, Any]:
+    """(the dataset of `--data`, the latent space through `--model` or `--perfect-latent`): the command's one load
+    of each, passed on as objects (to the generation, to the value-order metric), never reopened from paths."""
+    from langpref.feedback.space import open_space
 
-    return load_space(
+    return open_space(
         args.data,
         args.model,
         perfect=args.perfect_latent,
@@ -90,17 +92,21 @@ def _space(args: argparse.Namespace):
     )
 
 
+def _space(args: argparse.Namespace):
+    """The latent space of `_opened`, for a command that needs no more of the dataset."""
+    return _opened(args)[1]
+
+
 PROPOSE = config("langpref.propose:ProposeConfig", prefix="propose.", common=())
 """The simulator search's knobs, behind `--help-all`."""
 
 
-def _generation(args: argparse.Namespace, space):
-    """The simulator search of `langpref.propose` over the dataset's controllers, with the search flags."""
+def _generation(args: argparse.Namespace, dataset, space):
+    """The simulator search of `langpref.propose` over the dataset's controllers, with the search flags: new
+    rollouts are embedded by the space's own trajectory encoder (`LatentSpace.phi_of`)."""
     from langpref.propose import ProposeConfig, open_generation
 
-    return open_generation(
-        args.data, None if args.perfect_latent else args.model, space, from_args(ProposeConfig, args, "propose.")
-    )
+    return open_generation(dataset, space, from_args(ProposeConfig, args, "propose."))
 
 
 @command(
@@ -128,8 +134,8 @@ def cmd_improve(args: argparse.Namespace) -> None:
 
     cfg = from_args(ImproveConfig, args)
     cfg.validate()
-    space = _space(args)
-    result = improve(space, cfg, generation=_generation(args, space) if cfg.generated else None)
+    dataset, space = _opened(args)
+    result = improve(space, cfg, generation=_generation(args, dataset, space) if cfg.generated else None)
     if args.figure:
         result["figure"] = str(plot_improvement({cfg.strategy: result}, args.figure, f"strategy {cfg.strategy}"))
         record(args, beside(args.figure), cfg, data=args.data, model=args.model, perfect=args.perfect_latent)
@@ -145,22 +151,23 @@ def cmd_improve(args: argparse.Namespace) -> None:
     )
 
 
-def _space_and_episodes(args: argparse.Namespace, cfg: Any) -> tuple[Any, Any]:
-    """(the latent space of `--data` through `--model`, the eval split's successful episodes step by step for the
-    value-order metric, None with --perfect-latent), each announced at a terminal before its seconds pass."""
+def _space_and_episodes(args: argparse.Namespace, cfg: Any) -> tuple[Any, Any, Any]:
+    """(the dataset of `--data`, its latent space through `--model`, the eval split's successful episodes step by
+    step for the value-order metric, None with --perfect-latent), each announced at a terminal before its seconds
+    pass; the dataset is read once, for all three."""
     from langpref.cli.outputs import status
 
     status(
         f"loading torch and the dataset {args.data}"
         + ("" if args.perfect_latent else f", then reading it and the bank's phrasings through the model {args.model}")
     )
-    space = _space(args)
+    dataset, space = _opened(args)
     if args.perfect_latent:
-        return space, None
+        return dataset, space, None
     from langpref.reward.steps import success_prefixes
 
     status(f"reading the {cfg.eval_split} split's successful episodes step by step through the model")
-    return space, success_prefixes(args.data, args.model, cfg.eval_split, cfg.human.feature_scale)
+    return dataset, space, success_prefixes(dataset, args.model, cfg.eval_split, cfg.human.feature_scale)
 
 
 @command(
@@ -224,17 +231,17 @@ def cmd_learn_reward(args: argparse.Namespace) -> None:
         return _learn_from_answers(args, cfg)
     if args.figure:
         require("plots", "learn-reward --figure")  # before the runs, not after them
-    space, episodes = _space_and_episodes(args, cfg)
+    dataset, space, episodes = _space_and_episodes(args, cfg)
     result = learn_reward(
         space,
         cfg,
-        generation=_generation(args, space) if args.optimize else None,
+        generation=_generation(args, dataset, space) if args.optimize else None,
         save_reward=args.save_reward,
         model=None if args.perfect_latent else args.model,
         episodes=episodes,
     )
     if args.figure:
-        from langpref.experiments.reward import plot_reward_curves
+        from langpref.reward.figures import plot_reward_curves
 
         result["figure"] = str(plot_reward_curves({cfg.feedback: result}, args.figure, f"{cfg.feedback} feedback"))
         record(args, beside(args.figure), cfg, data=args.data, model=args.model, perfect=args.perfect_latent)

@@ -46,11 +46,12 @@ REWARD_RUNS = {"humans": 10, "seeds": 3, "queries": 40}
 
 
 def _worker(data, model, env, perfect, phrasings):
-    from langpref.feedback.space import load_space
+    """A worker's state: the latent space and the generation over it, from one load of the dataset and the model."""
+    from langpref.feedback.space import open_space
     from langpref.propose import open_generation
 
-    space = load_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
-    return space, open_generation(data, model, space)
+    dataset, space = open_space(data, model, env=env, perfect=perfect, phrasings=phrasings)
+    return space, open_generation(dataset, space)
 
 
 def _job(state, job) -> tuple[str, dict]:
@@ -217,12 +218,12 @@ def step_latency(
     """Wall time of one generation step as Study 1 waits for it (Eq. 4's objective for a test phrasing, from a
     random dataset trajectory), `steps` times, at `horizon` (default the dataset's): p50, p95 and max in seconds.
     The simulator is started before the first step, as a server does at start-up."""
-    from langpref.feedback.space import load_space
+    from langpref.feedback.space import open_space
     from langpref.improve import cosine_objective
     from langpref.propose import Proposer, open_generation
 
-    space = load_space(data, model)
-    gen = open_generation(data, model, space)
+    dataset, space = open_space(data, model)
+    gen = open_generation(dataset, space)
     table, rng, times = space.table("test"), np.random.default_rng(seed), []
     for k in range(steps):
         cur, psi = int(rng.integers(len(space.phi))), table.psi[int(rng.integers(len(table)))]

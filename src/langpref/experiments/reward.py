@@ -17,7 +17,6 @@ from __future__ import annotations
 import datetime
 import json
 from dataclasses import asdict, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -41,32 +40,6 @@ PAPER_FIG5 = (
     "fewer queries with language, especially in Meta-World."
 )
 PAPER_FIG6 = "Fig. 6 (no numbers printed): L_Explicit + L_Implicit beats each alone on both metrics."
-
-
-def plot_reward_curves(results: dict[str, dict], out: str | Path, title: str = "") -> Path:
-    """Fig. 5/6 analogue: (a) cross-entropy and (b) normalised true reward of the best test trajectory per query."""
-    from langpref.extras import pyplot, save_figure
-
-    plt = pyplot("the reward-learning figure")
-
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for ax, key, label in (
-        (axes[0], "cross_entropy", "(a) cross-entropy CE(P_w, P_xi)"),
-        (axes[1], "true_reward_of_best", "(b) true reward of the best test trajectory"),
-    ):
-        for name, res in results.items():
-            mean, std = np.array(res[key]), np.array(res[f"{key}_std"])
-            x = np.arange(len(mean))
-            ax.plot(x, mean, label=name)
-            ax.fill_between(x, mean - std, mean + std, alpha=0.2)
-        ax.set_xlabel("queries")
-        ax.set_title(label, fontsize=10)
-        ax.legend(fontsize=8)
-    axes[1].set_ylim(-0.05, 1.05)
-    fig.suptitle(title)
-    return save_figure(fig, out, dpi=120, trim=False)
 
 
 def run_methods(
@@ -325,6 +298,8 @@ def _finish(
     kind: str, title: str, paper: str, run: Inputs, results, space, base, targets, **extra: Any
 ) -> dict[str, Any]:
     """The figure and the summary of the reward experiment or the ablation."""
+    from langpref.reward.figures import plot_reward_curves
+
     title_at = f"{title}, {run.env}" + title_suffix(run.model is None, base.human)
     figure = plot_reward_curves(results, run.out / f"{kind}.png", title_at)
     fields = {"methods": results, "targets": targets, "figure": str(figure), "paper": paper, **extra}

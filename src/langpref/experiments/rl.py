@@ -170,14 +170,12 @@ class RunFiles:
         tmp.replace(self._path(name))
 
 
-def judges(data: Path, space, cfg: RLConfig) -> list[Judge]:
+def judges(dataset, space, cfg: RLConfig) -> list[Judge]:
     """The experimenter's scorer of each synthetic human (weights, the train split's feature scale, the test
-    split's range of true rewards)."""
-    from langpref.dataset.storage import load_dataset
+    split's range of true rewards), from the dataset the space was opened on."""
     from langpref.feedback.space import FeatureScale
     from langpref.reward import human_weights
 
-    dataset = load_dataset(data, env=space.env)
     scale = FeatureScale.fit(np.asarray(dataset.features, dtype=np.float64)[dataset.split("train")])
     out = []
     for h in range(cfg.humans):
@@ -252,7 +250,7 @@ def run_rl_experiment(run: Inputs) -> dict[str, Any]:
     """Every source x human x seed of `config` on `env` (see the module docstring); writes rl.json/.png/.md and
     returns the summary."""
     from langpref.experiments.rl_report import write_report
-    from langpref.feedback.space import load_space
+    from langpref.feedback.space import open_space
 
     cfg: RLConfig = run.config or RLConfig()
     cfg.validate()
@@ -262,14 +260,14 @@ def run_rl_experiment(run: Inputs) -> dict[str, Any]:
         from langpref.reward.saved import check_saveable
 
         check_saveable(model)  # a learned reward needs a trajectory encoder: one line, before any work
-    space = load_space(data, model, env=run.env, perfect=run.perfect, phrasings=cfg.human.phrasings)
+    dataset, space = open_space(data, model, env=run.env, perfect=run.perfect, phrasings=cfg.human.phrasings)
     store = RunFiles(out / "runs", {**cfg.key(), "data": str(data), "model": str(model)}, run.force)
-    judge = judges(data, space, cfg)
+    judge = judges(dataset, space, cfg)
     generation = None
     if cfg.cmaes and not all(_have_reward(store, out, name) for name in _reward_names(cfg)):  # only if needed
         from langpref.propose import open_generation
 
-        generation = open_generation(data, model, space)
+        generation = open_generation(dataset, space)
     if learned:
         learn_rewards(space, cfg, Path(model), out, store, judge, generation)
     jobs = policy_jobs(space, cfg, store, judge, out)

@@ -2,6 +2,8 @@
 
     space = build_latent_space(model, dataset)            # phi from the trained model, psi of the bank's phrasings
     space = perfect_latent_space(dataset)                 # oracle: phi = (normalised features, 3), psi = (+-e_f, 0)
+    dataset, space = open_space(data, model)              # a command's one load of the dataset and the model
+    space.psi_of(text), space.phi_of(trajectory)          # embeddings of a new utterance, of a new trajectory
 
 `theta` holds every trajectory's features normalised with the train split's mean and standard deviation (so a true
 reward R = w . theta weighs features in units of their spread); `load_space(..., feature_scale="paper")` puts the
@@ -16,11 +18,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal, get_args
+from typing import Any, Literal, get_args
 
 import numpy as np
 
 from langpref.errors import LangprefError
+from langpref.feedback.rollouts import TrajectoryEncoder, model_trajectory_encoder, oracle_trajectory_encoder
 from langpref.language.bank import DIRECTIONS, VAGUE_FEEDBACK, Bank, load_bank, load_user_utterances
 
 BANK_SPLITS = ("train", "val", "test")
@@ -147,6 +150,9 @@ class LatentSpace:
     encode: Encoder | None = field(default=None, compare=False)
     """Embeds free-form text not in a table (e.g. a study participant's); None when only the tables exist."""
     description: str = ""
+    encode_trajectories: TrajectoryEncoder | None = field(default=None, compare=False)
+    """Embeds new trajectories (rollouts in memory) as `phi` embeds the dataset's (`phi_of`); None when only the
+    dataset's exist (a toy space)."""
 
     def __post_init__(self) -> None:
         if self.theta.ndim != 2 or self.phi.ndim != 2 or len(self.theta) != len(self.phi):
@@ -201,6 +207,13 @@ class LatentSpace:
             raise LangprefError(f"no embedding for {text!r}: it is in no embedded bank split and no encoder is set")
         return _as_numpy(self.encode([text]))[0]
 
+    def phi_of(self, trajectory) -> np.ndarray:
+        """phi (D,) of a trajectory not in the dataset (a new rollout, `Trajectory`), embedded with
+        `encode_trajectories`: what a generation step needs to score what it made."""
+        if self.encode_trajectories is None:
+            raise LangprefError(f"this space ({self.description}) has no trajectory encoder to embed new trajectories")
+        return _as_numpy(self.encode_trajectories([trajectory]))[0]
+
 
 def _normalised_theta(dataset) -> np.ndarray:
     feats = np.asarray(dataset.features, dtype=np.float64)
@@ -248,6 +261,7 @@ def build_latent_space(model, dataset, bank_splits: Sequence[str] = BANK_SPLITS,
         tables,
         encode=lambda texts: _as_numpy(model.encode_texts(list(texts))),
         description=f"{name} on {dataset.root}",
+        encode_trajectories=model_trajectory_encoder(model),
     )
 
 
@@ -311,7 +325,37 @@ def perfect_latent_space(
         tables,
         encode=encode,
         description=f"perfect latent space (oracle: phi = normalised features) on {dataset.root}",
+        encode_trajectories=oracle_trajectory_encoder(np.asarray(dataset.features, dtype=np.float64), phi),
     )
+
+
+def open_space(
+    data: str | Path,
+    model: str | Path | None = None,
+    *,
+    env: str | None = None,
+    perfect: bool = False,
+    bank_splits: Sequence[str] = BANK_SPLITS,
+    phrasings: str | Path | None = None,
+    feature_scale: str = "standardised",
+) -> tuple[Any, LatentSpace]:
+    """(the dataset, the latent space a command runs in), from one load of each: the trained `model`'s space, or
+    with `perfect` the oracle `perfect_latent_space` (labelled as such), with the phrasings of the utterance file
+    `phrasings` when given, and the synthetic humans' theta of `feature_scale` (`with_feature_scale`). A command
+    passes both objects on (to `langpref.propose`, to the value-order metric) instead of their paths, so neither is
+    read twice. Fails with one line when the model's env differs from the data's."""
+    from langpref.dataset.storage import load_dataset
+
+    dataset = load_dataset(data, env=env)
+    if perfect:
+        space = perfect_latent_space(dataset, bank_splits, phrasings=phrasings)
+        return dataset, with_feature_scale(space, dataset, feature_scale)
+    if model is None:
+        raise LangprefError("give --model MODEL (a `langpref train` checkpoint) or --perfect-latent (the oracle space)")
+    from langpref.model.checkpoint import load_model
+
+    space = build_latent_space(load_model(model, dataset=dataset), dataset, bank_splits, name=f"model {model}")
+    return dataset, with_feature_scale(space.with_file(phrasings) if phrasings else space, dataset, feature_scale)
 
 
 def load_space(
@@ -324,23 +368,9 @@ def load_space(
     phrasings: str | Path | None = None,
     feature_scale: str = "standardised",
 ) -> LatentSpace:
-    """Open a dataset and the latent space a command runs in: the trained `model`'s, or with `perfect` the oracle
-    `perfect_latent_space` (labelled as such), with the phrasings of the utterance file `phrasings` when given, and
-    the synthetic humans' theta of `feature_scale` (`with_feature_scale`). Fails with one line when the model's env
-    differs from the data's."""
-    from langpref.dataset.storage import load_dataset
-
-    dataset = load_dataset(data, env=env)
-    if perfect:
-        return with_feature_scale(
-            perfect_latent_space(dataset, bank_splits, phrasings=phrasings), dataset, feature_scale
-        )
-    if model is None:
-        raise LangprefError("give --model MODEL (a `langpref train` checkpoint) or --perfect-latent (the oracle space)")
-    from langpref.model.checkpoint import load_model
-
-    space = build_latent_space(load_model(model, dataset=dataset), dataset, bank_splits, name=f"model {model}")
-    return with_feature_scale(space.with_file(phrasings) if phrasings else space, dataset, feature_scale)
+    """The latent space of `open_space` (same arguments), for a caller that needs no more of the dataset."""
+    options = {"env": env, "perfect": perfect, "bank_splits": bank_splits, "phrasings": phrasings}
+    return open_space(data, model, **options, feature_scale=feature_scale)[1]
 
 
 def toy_latent_space(

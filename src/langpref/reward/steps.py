@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -114,20 +115,21 @@ class SuccessEpisodes:
 
 
 def success_prefixes(
-    data: str | Path, model: str | Path, split: str = "test", feature_scale: str = "standardised"
+    data: str | Path | Any, model: str | Path, split: str = "test", feature_scale: str = "standardised"
 ) -> SuccessEpisodes | None:
-    """Every successful episode of `split` of the dataset `data`, step by step: phi_t embedded by the state model
-    `model`, and theta_t, the per-step features averaged up to step t and standardised as the space's theta
-    (`feature_scale` "standardised"), or summed up to t (the paper's scale). None when the model sees camera
-    frames (its steps cannot be embedded one by one from the state), the recording has no success labels (an
-    import without them) or none of the split succeeded."""
+    """Every successful episode of `split` of the dataset `data` (a directory, or the dataset a command already
+    opened, so it is not read again), step by step: phi_t embedded by the state model `model` (its trajectory
+    encoder's weights as numpy, `StepEncoder`, as a saved reward reads them), and theta_t, the per-step features
+    averaged up to step t and standardised as the space's theta (`feature_scale` "standardised"), or summed up to
+    t (the paper's scale). None when the model sees camera frames (its steps cannot be embedded one by one from the
+    state), the recording has no success labels (an import without them) or none of the split succeeded."""
     from langpref.dataset.storage import load_dataset
     from langpref.feedback.space import FeatureScale
     from langpref.model.checkpoint import read_config
 
     if (read_config(model)["model"].get("observations") or "state") != "state":
         return None
-    dataset = load_dataset(data)
+    dataset = load_dataset(data) if isinstance(data, str | Path) else data
     if not dataset.meta.config.get("success_known", True):
         return None
     episodes = [t for t in map(dataset.load, dataset.split(split)) if t.success]

@@ -93,6 +93,18 @@ def make_env(name: str, horizon: int | None = None) -> SimEnv:
     return sim.make_env(horizon or sim.default_horizon)
 
 
+_LIVE_ENVS: dict[tuple[str, int], SimEnv] = {}
+
+
+def live_env(name: str, horizon: int) -> SimEnv:
+    """One live simulator per (task, horizon) per process, kept open: the env new trajectories are rolled out in
+    (`langpref.propose`) and an image model renders their frames in (`LatentSpace.phi_of`), made once, not per
+    rollout."""
+    if (name, horizon) not in _LIVE_ENVS:
+        _LIVE_ENVS[(name, horizon)] = get_simulator(name).make_env(horizon)
+    return _LIVE_ENVS[(name, horizon)]
+
+
 __all__ = [
     "ENTRY_POINT_GROUP",
     "Controller",
@@ -102,6 +114,7 @@ __all__ = [
     "Task",
     "get_simulator",
     "get_task",
+    "live_env",
     "make_env",
     "register_task",
     "task_names",
