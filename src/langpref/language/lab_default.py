@@ -58,11 +58,4 @@ def bank_reader_for(task: str) -> str:
     return PAPER_LANG_MODEL if spec is not None and spec.built and built_record(name) is None else name
 
 
-__all__ = [
-    "AUTO",
-    "AUTO_LANG_MODEL",
-    "PAPER_LANG_MODEL",
-    "bank_reader_for",
-    "lang_model_for",
-    "lang_model_for_data",
-]
+__all__ = ["AUTO", "AUTO_LANG_MODEL", "PAPER_LANG_MODEL", "bank_reader_for", "lang_model_for", "lang_model_for_data"]
