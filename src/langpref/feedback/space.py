@@ -358,19 +358,10 @@ def open_space(
     return dataset, with_feature_scale(space.with_file(phrasings) if phrasings else space, dataset, feature_scale)
 
 
-def load_space(
-    data: str | Path,
-    model: str | Path | None = None,
-    *,
-    env: str | None = None,
-    perfect: bool = False,
-    bank_splits: Sequence[str] = BANK_SPLITS,
-    phrasings: str | Path | None = None,
-    feature_scale: str = "standardised",
-) -> LatentSpace:
-    """The latent space of `open_space` (same arguments), for a caller that needs no more of the dataset."""
-    options = {"env": env, "perfect": perfect, "bank_splits": bank_splits, "phrasings": phrasings}
-    return open_space(data, model, **options, feature_scale=feature_scale)[1]
+def load_space(data: str | Path, model: str | Path | None = None, **options: Any) -> LatentSpace:
+    """The latent space of `open_space` (the same keywords: env, perfect, bank_splits, phrasings, feature_scale), for
+    a caller that needs no more of the dataset."""
+    return open_space(data, model, **options)[1]
 
 
 def toy_latent_space(
