@@ -84,8 +84,8 @@ ONE_WAY = {"feedback": "reward", "dataset": "reward"}
 reaches back upstream). Imports under `if TYPE_CHECKING:` are for type checkers only and do not count."""
 
 
-def _runtime_imports(path: Path) -> set[str]:
-    """Every module a file imports outside `if TYPE_CHECKING:` blocks, at any depth (function-level imports too)."""
+def _tree_and_type_only(path: Path) -> tuple[ast.Module, set[int]]:
+    """A file's syntax tree and the ids of its nodes under `if TYPE_CHECKING:` (for type checkers only)."""
     tree = ast.parse(path.read_text())
     skip = {
         id(node)
@@ -94,6 +94,12 @@ def _runtime_imports(path: Path) -> set[str]:
         for stmt in block.body
         for node in ast.walk(stmt)
     }
+    return tree, skip
+
+
+def _runtime_imports(path: Path) -> set[str]:
+    """Every module a file imports outside `if TYPE_CHECKING:` blocks, at any depth (function-level imports too)."""
+    tree, skip = _tree_and_type_only(path)
     found = set()
     for node in ast.walk(tree):
         if id(node) in skip:
@@ -160,14 +166,7 @@ below it. Imports under `if TYPE_CHECKING:` do not count, as for ONE_WAY."""
 def _runtime_imports_and_names(path: Path) -> set[str]:
     """`_runtime_imports`, and each name a `from X import name` takes at run time as `X.name`: `from langpref.study
     import server` imports the room."""
-    tree = ast.parse(path.read_text())
-    skip = {
-        id(node)
-        for block in ast.walk(tree)
-        if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
-        for stmt in block.body
-        for node in ast.walk(stmt)
-    }
+    tree, skip = _tree_and_type_only(path)
     named = {
         f"{node.module}.{alias.name}"
         for node in ast.walk(tree)
