@@ -53,11 +53,10 @@ def paired(a: list[float], b: list[float], humans: int = 0) -> dict[str, float |
     """Mean of a - b over paired runs (same human and seed; ordered human by human, as `_pairs`) with its two-sided
     95% t-interval over humans: each human's seeds are averaged first, so the unit is the human and correlated seeds
     never count as more people (`humans` 0: every run its own unit). None: one human, no interval."""
-    from langpref.experiments.reward import paired_difference
+    from langpref.experiments.reward import paired_difference, per_human
 
-    units = humans or len(a)
-    a_h, b_h = (np.asarray(x, dtype=np.float64).reshape(units, -1).mean(axis=1) for x in (a, b))
-    d = paired_difference(a_h[:, None], b_h[:, None])
+    seeds = len(a) // (humans or len(a))
+    d = paired_difference(per_human(np.asarray(a)[:, None], seeds), per_human(np.asarray(b)[:, None], seeds))
     return {k: float(v[0]) if np.isfinite(v[0]) else None for k, v in d.items()}  # None: one unit, no interval
 
 
